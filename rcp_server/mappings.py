@@ -1,0 +1,100 @@
+"""Displacement mappings: what ``I_{n-1}`` says about where each pixel's camera moves next.
+
+A mapping turns the previous iteration's per-pixel data into a unitless world-space field ``D``
+(n, 3); the painting scales it into ``V_p = lambda_p * p * D_target`` (``p`` the pixel pitch, so
+``lambda_p`` counts pixels) and ``V_e = lambda_e * D_eye`` (scene units). Each mapping declares the
+channels it reads so that the renderer records only those.
+
+Register your own ``W`` with :func:`register_mapping`::
+
+    @register_mapping("swirl", reads={"color"})
+    def swirl(data: MappingInput) -> np.ndarray:
+        return np.cross(data.forward, data.color_field())
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+CHANNELS = frozenset({"color", "depth", "normal", "direction"})
+
+
+@dataclass(frozen=True)
+class MappingInput:
+    """Per-pixel data of ``I_{n-1}`` for n pixels, plus the frame camera's basis.
+
+    color : (n, 3) float32 displayed color in [0, 1];  depth : (n,) float32 view depth (z_max on a miss)
+    normal : (n, 3) float32 world normal (0 on a miss);  direction : (n, 3) float32 previous ray direction
+    right, up, forward : (3,) float64;  z0 : focus depth;  i, j : (n,) pixel column and row
+    A channel the mapping did not declare is None.
+    """
+
+    color: np.ndarray
+    depth: np.ndarray | None
+    normal: np.ndarray | None
+    direction: np.ndarray | None
+    right: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+    z0: float
+    i: np.ndarray
+    j: np.ndarray
+
+    def color_field(self) -> np.ndarray:
+        """``(2R-1) r + (2G-1) u + (2B-1) f`` per pixel: (n, 3) float32."""
+        basis = np.stack([self.right, self.up, self.forward]).astype(np.float32)
+        return (2.0 * self.color - 1.0) @ basis
+
+
+@dataclass(frozen=True)
+class Mapping:
+    name: str
+    reads: frozenset[str]
+    field: Callable[[MappingInput], np.ndarray]
+    description: str = ""
+
+
+MAPPINGS: dict[str, Mapping] = {}
+
+
+def register_mapping(name: str, reads, field: Callable[[MappingInput], np.ndarray] | None = None):
+    """Register ``field`` (or decorate it) as mapping ``name`` reading the channels ``reads``."""
+    reads = frozenset(reads) | {"color"}  # color is always recorded: it is the image itself
+    unknown = reads - CHANNELS
+    if unknown:
+        raise ValueError(f"mapping {name!r} reads unknown channels {sorted(unknown)}; known: {sorted(CHANNELS)}")
+
+    def register(fn):
+        doc = (fn.__doc__ or "").strip().splitlines()
+        MAPPINGS[name] = Mapping(name, reads, fn, doc[0] if doc else "")
+        return fn
+
+    return register(field) if field is not None else register
+
+
+def get_mapping(name: str) -> Mapping:
+    try:
+        return MAPPINGS[name]
+    except KeyError:
+        raise ValueError(f"unknown mapping {name!r}; valid mappings: {', '.join(sorted(MAPPINGS))}") from None
+
+
+@register_mapping("color", reads={"color"})
+def color_mapping(data: MappingInput) -> np.ndarray:
+    """R moves right, G moves up, B along the view; mid-grey does not move (paper section 3)."""
+    return data.color_field()
+
+
+@register_mapping("depth", reads={"color", "depth"})
+def depth_mapping(data: MappingInput) -> np.ndarray:
+    """The color field times |z - z0|: sharp at the focus depth, smudged away from it (section 4)."""
+    return data.color_field() * np.abs(data.depth - np.float32(data.z0))[:, None]
+
+
+@register_mapping("normal", reads={"normal", "direction"})
+def normal_mapping(data: MappingInput) -> np.ndarray:
+    """C x N, the previous ray direction across the world normal: smudges along surfaces (section 5)."""
+    return np.cross(data.direction, data.normal)

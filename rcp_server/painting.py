@@ -1,0 +1,281 @@
+"""The recursion ``I_n = F(I_{n-1}, S(n))``: previous per-pixel data -> per-pixel cameras -> new data.
+
+Each iteration has four stages, timed separately: camera assignment (mapping plus ray building),
+intersection (Embree), shading (plus the per-pixel mean), bookkeeping (handing the new data on).
+
+A pixel reads only its own previous value, so the image splits into tiles that run every iteration
+independently: tiles go to threads, and a tile gives exactly the pixels of the same region of a full
+render. ``I_0`` is mid-grey and moves no ray, so iteration 1 is the plain ray-traced image.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time as _time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from . import kernels
+from .camera import RAY_DTYPE, Camera, Region, plane_points
+from .mappings import MappingInput, get_mapping
+from .sampling import noise_vectors, stratified_offsets
+from .scene import Scene
+
+STAGES = ("camera", "intersect", "shade", "bookkeeping")
+
+
+@dataclass(frozen=True)
+class PaintParams:
+    """How to paint. ``lambda_p`` in pixels, ``lambda_e`` in scene units; ``z0`` (focus depth) defaults to
+    the distance from the eye to ``look_at``; ``z_max`` (depth of a miss) to the scene's size."""
+
+    mapping: str = "color"
+    eye_mapping: str = "color"
+    iterations: int = 6
+    spp: int = 1
+    lambda_p: float = 8.0
+    lambda_e: float = 0.0
+    z0: float | None = None
+    noise: float = 0.0
+    seed: int = 0
+    z_max: float | None = None
+
+    def __post_init__(self):
+        get_mapping(self.mapping)
+        get_mapping(self.eye_mapping)
+        if self.iterations < 1:
+            raise ValueError(f"iterations must be at least 1, got {self.iterations}")
+        if self.spp < 1:
+            raise ValueError(f"spp (samples per pixel) must be at least 1, got {self.spp}")
+        for name in ("lambda_p", "lambda_e", "z0", "noise", "z_max"):
+            value = getattr(self, name)
+            if value is not None and not math.isfinite(value):
+                raise ValueError(f"{name} must be a finite number, got {value}")
+        if self.noise < 0:
+            raise ValueError(f"noise must not be negative, got {self.noise}")
+
+    @classmethod
+    def from_dict(cls, values: dict) -> PaintParams:
+        known = {f.name for f in fields(cls)}
+        unknown = set(values) - known
+        if unknown:
+            raise ValueError(f"unknown paint settings {sorted(unknown)}; known: {sorted(known)}")
+        return cls(**values)
+
+    def reads(self) -> frozenset[str]:
+        """The channels of ``I_{n-1}`` this painting reads (the only ones it records)."""
+        channels = get_mapping(self.mapping).reads
+        if self.lambda_e != 0.0:
+            channels |= get_mapping(self.eye_mapping).reads
+        return channels
+
+
+@dataclass
+class PaintState:
+    """Per-pixel data of one iteration for a region, row-major. Channels not recorded are None.
+
+    color : (n, 3) float32 in [0, 1];  depth : (n,) float32;  normal, direction : (n, 3) float32
+    """
+
+    region: Region
+    color: np.ndarray
+    depth: np.ndarray | None = None
+    normal: np.ndarray | None = None
+    direction: np.ndarray | None = None
+    blank: bool = False  # I_0: the mid-grey canvas that moves no ray
+
+    @classmethod
+    def canvas(cls, region: Region) -> PaintState:
+        return cls(region, np.full((region.pixel_count, 3), 0.5, np.float32), blank=True)
+
+    def image(self) -> np.ndarray:
+        """The painting, (h, w, 3) float32 in [0, 1]."""
+        return self.color.reshape(self.region.height, self.region.width, 3)
+
+    def rows(self, tile: Region) -> PaintState:
+        """The part of this state that covers ``tile`` (full-width rows of this region)."""
+        a = (tile.y0 - self.region.y0) * self.region.width
+        b = a + tile.pixel_count
+        pick = {name: None if getattr(self, name) is None else getattr(self, name)[a:b]
+                for name in ("color", "depth", "normal", "direction")}
+        return PaintState(tile, blank=self.blank, **pick)
+
+    def has(self, channels) -> bool:
+        return all(getattr(self, name) is not None for name in channels)
+
+
+@dataclass
+class PaintResult:
+    state: PaintState
+    stage_seconds: dict[str, float]  # summed over tiles (thread time), all iterations
+    iterations: list[np.ndarray] = field(default_factory=list)  # (h, w, 3) per iteration when kept
+    rays: int = 0
+
+    @property
+    def image(self) -> np.ndarray:
+        return self.state.image()
+
+
+@dataclass
+class _Frame:
+    """What stays fixed over the iterations of one tile: sample positions, pixel coords, noise."""
+
+    camera: Camera
+    region: Region
+    plane: np.ndarray  # (n*spp, 3) float64
+    i: np.ndarray
+    j: np.ndarray
+    noise: np.ndarray | None
+
+
+def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
+    i, j = region.pixel_coords()
+    xi, eta = stratified_offsets(params.seed, i, j, params.spp)
+    s = ((i[:, None] + xi) / region.full_width).ravel()
+    t = ((j[:, None] + eta) / region.full_height).ravel()
+    noise = noise_vectors(params.seed, i, j) if params.noise > 0 else None
+    return _Frame(camera, region, plane_points(camera, region, s, t), i, j, noise)
+
+
+def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: float) -> tuple[np.ndarray,
+                                                                                                np.ndarray]:
+    """``(V_p, V_e)`` per pixel from ``I_{n-1}``: two (n, 3) float32, scene units."""
+    r, u, f = frame.camera.basis()
+    data = MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, frame.i, frame.j)
+    noise = 0.0 if frame.noise is None else params.noise * (frame.noise @ np.stack([r, u, f]))
+
+    def scaled(mapping: str, scale: float) -> np.ndarray:
+        if scale == 0.0:
+            return np.zeros((state.region.pixel_count, 3), np.float32)
+        d = np.asarray(get_mapping(mapping).field(data), dtype=np.float64) + noise
+        return np.nan_to_num(scale * d, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+
+    pitch = frame.camera.pixel_pitch(frame.region.full_height)
+    return scaled(params.mapping, params.lambda_p * pitch), scaled(params.eye_mapping, params.lambda_e)
+
+
+def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, state: PaintState,
+                keep: list[np.ndarray] | None) -> tuple[PaintState, dict[str, float]]:
+    geometry, tracer = scene.geometry(time)
+    light = scene.light
+    light_dir = np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64)
+    eye = np.asarray(frame.camera.eye, np.float64)
+    _, _, forward = frame.camera.basis()
+    z0 = params.z0 if params.z0 is not None else float(np.linalg.norm(np.subtract(frame.camera.look_at, eye)))
+    z_max = params.z_max if params.z_max is not None else scene.depth_of_miss()
+    reads = params.reads()
+    n_pix, n_rays = frame.region.pixel_count, len(frame.plane)
+    seconds = dict.fromkeys(STAGES, 0.0)
+    origins = np.empty((n_rays, 3), RAY_DTYPE)
+    directions = np.empty((n_rays, 3), RAY_DTYPE)
+    for iteration in range(params.iterations):
+        # ---- camera assignment ----
+        clock = _time.perf_counter()
+        if state.blank or not state.has(reads):
+            v_p = v_e = np.zeros((n_pix, 3), np.float32)
+        else:
+            v_p, v_e = displacements(state, frame, params, z0)
+        kernels.cast_rays(frame.plane, eye, v_p, v_e, params.spp, origins, directions)
+        # ---- intersection ----
+        now = _time.perf_counter()
+        seconds["camera"] += now - clock
+        clock = now
+        hits = tracer.intersect(origins, directions) if tracer is not None else _misses(n_rays)
+        # ---- shading ----
+        now = _time.perf_counter()
+        seconds["intersect"] += now - clock
+        clock = now
+        new = PaintState(
+            frame.region, np.empty((n_pix, 3), np.float32),
+            depth=np.empty(n_pix, np.float32) if "depth" in reads else None,
+            normal=np.empty((n_pix, 3), np.float32) if "normal" in reads else None,
+            direction=np.empty((n_pix, 3), np.float32) if "direction" in reads else None,
+        )
+        kernels.shade(
+            origins, directions, hits.face, hits.t, hits.b1, hits.b2, params.spp,
+            geometry.normals, geometry.colors, geometry.uv, geometry.texture_id, geometry.texels,
+            geometry.texture_offset, geometry.texture_width, geometry.texture_height,
+            scene.environment.image, light_dir, float(light.ambient if light else 1.0), light is not None,
+            eye, forward, float(z_max),
+            new.color, _or_dummy(new.depth, 1), _or_dummy(new.normal, 2), _or_dummy(new.direction, 2),
+            new.depth is not None, new.normal is not None, new.direction is not None,
+        )
+        # ---- bookkeeping ----
+        now = _time.perf_counter()
+        seconds["shade"] += now - clock
+        clock = now
+        state = new
+        if keep is not None:
+            a = frame.region.y0 * frame.region.width
+            keep[iteration].reshape(-1, 3)[a:a + n_pix] = state.color
+        seconds["bookkeeping"] += _time.perf_counter() - clock
+    return state, seconds
+
+
+_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
+
+
+def _or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:
+    # numba needs an array of the right type even for an output it will not write
+    return array if array is not None else _DUMMY[ndim]
+
+
+def _misses(n: int):
+    from .tracer import Hits
+
+    return Hits.misses(n)
+
+
+def default_threads() -> int:
+    return max(1, min(len(os.sched_getaffinity(0)), 32))
+
+
+def paint(scene: Scene, camera: Camera, width: int, height: int, params: PaintParams, *, time: float = 0.0,
+          previous: PaintState | None = None, region: Region | None = None, threads: int | None = None,
+          keep_iterations: bool = False) -> PaintResult:
+    """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera``.
+
+    Per-frame mode: ``previous=None`` starts from ``I_0`` and runs ``params.iterations`` iterations.
+    Temporal mode: pass the previous frame's :attr:`PaintResult.state` to continue the recursion from it
+    with this frame's camera and time (it must cover the same region; otherwise the canvas restarts).
+    """
+    region = region or Region(width, height)
+    if (region.full_width, region.full_height) != (width, height):
+        raise ValueError("region belongs to an image of another size")
+    if previous is None or previous.region != region:
+        previous = PaintState.canvas(region)
+    threads = threads or default_threads()
+    scene.geometry(time)  # build (or fetch) the BVH once, before the tiles ask for it
+    # about four tiles a thread balances the load; bands of whole rows keep tiles contiguous in memory
+    tiles = region.tiles(max(1, -(-region.height // (threads * 4))))
+    keep = ([np.empty((height, width, 3), np.float32) for _ in range(params.iterations)]
+            if keep_iterations else None)
+    if keep is not None and region != Region(width, height):
+        raise ValueError("keep_iterations needs the full image")
+
+    def run(tile: Region):
+        return _paint_tile(scene, time, _frame(camera, tile, params), params, previous.rows(tile), keep)
+
+    if threads == 1 or len(tiles) == 1:
+        parts = [run(tile) for tile in tiles]
+    else:
+        with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as pool:
+            parts = list(pool.map(run, tiles))
+    state = _join([p[0] for p in parts], region)
+    seconds = {stage: sum(p[1][stage] for p in parts) for stage in STAGES}
+    return PaintResult(state, seconds, keep or [], rays=region.pixel_count * params.spp * params.iterations)
+
+
+def _join(states: list[PaintState], region: Region) -> PaintState:
+    def cat(name):
+        arrays = [getattr(s, name) for s in states]
+        return None if arrays[0] is None else np.concatenate(arrays)
+
+    return PaintState(region, cat("color"), cat("depth"), cat("normal"), cat("direction"))
+
+
+def with_overrides(params: PaintParams, **changes) -> PaintParams:
+    return replace(params, **{k: v for k, v in changes.items() if v is not None})

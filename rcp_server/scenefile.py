@@ -1,0 +1,306 @@
+"""Scene files: small declarative TOML in ``scenes/``, validated once, turned into a :class:`Scene`.
+
+A scene is referred to by name (``default`` -> ``scenes/default.toml``); a name is letters, digits,
+``-`` and ``_`` only, so it never reaches outside the scenes folder. ``load_scene`` also takes a scene
+file path or a bare mesh file path (lit and framed with defaults). See ``scenes/README.md`` for the
+format; every key is checked and a broken file is reported in one line naming the file.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+import tomllib
+import zlib
+from pathlib import Path
+from typing import Annotated, Literal
+
+import numpy as np
+import trimesh
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from .camera import Camera, CameraError
+from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
+from .scene import Environment, Light, Scene, SceneObject, Waves
+
+SCENES_DIR = Path(os.environ.get("RCP_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
+SCENE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
+
+
+class SceneError(ValueError):
+    """A scene that cannot be loaded; the message is one line naming the file and the fault."""
+
+
+# ---- the file format ----
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+Color = tuple[
+    Annotated[float, Field(ge=0, le=1)], Annotated[float, Field(ge=0, le=1)], Annotated[float, Field(ge=0, le=1)]
+]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class CameraSpec(_Model):
+    eye: Vec3
+    look_at: Vec3
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: Annotated[float, Field(gt=0, lt=180)] = 60.0
+
+
+class EnvironmentSpec(_Model):
+    image: str | None = None
+    color: Color | None = None
+
+
+class LightSpec(_Model):
+    direction: Vec3 = (-0.4, -1.0, -0.3)
+    ambient: Annotated[float, Field(ge=0, le=1)] = 0.3
+
+
+class PrimitiveSpec(_Model):
+    type: Literal["box", "sphere", "cylinder", "cone", "grid"]
+    extents: Vec3 | None = None
+    radius: Annotated[float, Field(gt=0)] | None = None
+    height: Annotated[float, Field(gt=0)] | None = None
+    sections: Annotated[int, Field(ge=3, le=512)] | None = None
+    subdivisions: Annotated[int, Field(ge=0, le=6)] | None = None
+    size: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)]] | None = None
+    divisions: tuple[Annotated[int, Field(ge=1, le=2048)], Annotated[int, Field(ge=1, le=2048)]] | None = None
+    uv_repeat: tuple[Finite, Finite] | None = None
+
+
+class Placement(_Model):
+    translate: Vec3 = (0.0, 0.0, 0.0)
+    rotate: Vec3 = (0.0, 0.0, 0.0)  # degrees about x, then y, then z
+    scale: Annotated[float, Field(gt=0)] | tuple[Finite, Finite, Finite] = 1.0
+
+    def matrix(self) -> np.ndarray:
+        m = trimesh.transformations.euler_matrix(*np.radians(self.rotate), axes="sxyz")
+        m[:3, :3] = m[:3, :3] * np.broadcast_to(np.asarray(self.scale, dtype=np.float64), (3,))
+        m[:3, 3] = self.translate
+        return m
+
+
+class ScatterSpec(_Model):
+    count: Annotated[int, Field(ge=1, le=10000)]
+    area: tuple[Finite, Finite, Finite, Finite]  # x_min, x_max, z_min, z_max on the ground (y = 0)
+    scale: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)]] = (1.0, 1.0)
+    keep_out: list[tuple[Finite, Finite, Annotated[float, Field(ge=0)]]] = []  # circles (x, z, radius)
+    seed: int = 0
+
+
+class SpinSpec(_Model):
+    axis: Vec3 = (0.0, 1.0, 0.0)
+    degrees_per_second: Finite = 30.0
+
+
+class BobSpec(_Model):
+    height: Finite = 0.2
+    period: Annotated[float, Field(gt=0)] = 2.0
+
+
+class WaveSpec(_Model):
+    amplitude: Finite
+    wavelength: Annotated[float, Field(gt=0)]
+    direction: tuple[Finite, Finite] = (1.0, 0.0)
+    speed: Finite = 1.0
+
+    @field_validator("direction")
+    @classmethod
+    def _nonzero(cls, v):
+        if math.hypot(*v) == 0:
+            raise ValueError("direction must not be zero")
+        return v
+
+
+class ObjectSpec(Placement):
+    name: str = ""
+    mesh: str | None = None
+    primitive: PrimitiveSpec | None = None
+    color: Color | None = None
+    texture: str | None = None
+    palette: list[Color] = []
+    color_jitter: Annotated[float, Field(ge=0, le=1)] = 0.0
+    instances: list[Placement] = []
+    scatter: ScatterSpec | None = None
+    spin: SpinSpec | None = None
+    bob: BobSpec | None = None
+    waves: list[WaveSpec] = []
+
+
+class SceneSpec(_Model):
+    title: str = ""
+    camera: CameraSpec
+    environment: EnvironmentSpec = EnvironmentSpec(color=(0.55, 0.62, 0.72))
+    light: LightSpec | None = None
+    paint: dict[str, str | int | float] = {}
+    z_max: Annotated[float, Field(gt=0)] | None = None
+    objects: list[ObjectSpec] = []
+
+
+# ---- from spec to scene ----
+
+def _instances(spec: ObjectSpec) -> list[np.ndarray]:
+    if spec.scatter is None:
+        return [p.matrix() for p in spec.instances] or [np.eye(4)]
+    sc = spec.scatter
+    rng = np.random.default_rng(sc.seed)
+    placed: list[np.ndarray] = []
+    for _ in range(sc.count * 50):  # rejection sampling around keep-out circles, bounded
+        if len(placed) == sc.count:
+            break
+        x, z = rng.uniform(sc.area[0], sc.area[1]), rng.uniform(sc.area[2], sc.area[3])
+        yaw, scale = rng.uniform(0.0, 360.0), rng.uniform(*sc.scale)
+        if any(math.hypot(x - cx, z - cz) < r for cx, cz, r in sc.keep_out):
+            continue
+        placed.append(Placement(translate=(x, 0.0, z), rotate=(0.0, yaw, 0.0), scale=scale).matrix())
+    return placed
+
+
+def _tints(spec: ObjectSpec, count: int, has_own_colors: bool) -> np.ndarray:
+    """Albedo multiplier per instance: (count, 3)."""
+    base = np.asarray(spec.color if spec.color is not None else
+                      ((1.0, 1.0, 1.0) if has_own_colors else DEFAULT_ALBEDO), dtype=np.float64)
+    rng = np.random.default_rng(zlib.crc32(spec.name.encode()))  # stable across runs, unlike hash()
+    colors = np.tile(base, (count, 1))
+    if spec.palette:
+        colors = np.asarray(spec.palette, dtype=np.float64)[rng.integers(0, len(spec.palette), count)]
+    if spec.color_jitter:
+        colors = colors * (1.0 + spec.color_jitter * rng.uniform(-1.0, 1.0, (count, 3)))
+    return np.clip(colors, 0.0, 1.0)
+
+
+def _motion(spec: ObjectSpec):
+    if spec.spin is None and spec.bob is None:
+        return None
+    spin, bob = spec.spin, spec.bob
+
+    def motion(time: float) -> np.ndarray:
+        m = np.eye(4)
+        if spin is not None:
+            m = trimesh.transformations.rotation_matrix(math.radians(spin.degrees_per_second * time), spin.axis)
+        if bob is not None:
+            m[1, 3] += bob.height * math.sin(2.0 * math.pi * time / bob.period)
+        return m
+
+    return motion
+
+
+def _parts(spec: ObjectSpec, folder: Path, where: str) -> list[Part]:
+    if (spec.mesh is None) == (spec.primitive is None):
+        raise SceneError(f"{where}: give exactly one of 'mesh' or 'primitive'")
+    if spec.mesh is not None:
+        return load_mesh_file(folder / spec.mesh)
+    p = spec.primitive
+    return [primitive(p.type, **{k: v for k, v in p.model_dump().items() if k != "type" and v is not None})]
+
+
+def _scene_object(spec: ObjectSpec, folder: Path, where: str) -> list[SceneObject]:
+    objects = []
+    texture = load_texture(folder / spec.texture) if spec.texture else None
+    placements = [m @ spec.matrix() for m in _instances(spec)]
+    motion = _motion(spec)
+    waves = tuple(Waves(w.amplitude, w.wavelength, w.direction, w.speed) for w in spec.waves)
+    for k, part in enumerate(_parts(spec, folder, where)):
+        if texture is not None:
+            if part.corner_uv is None:
+                raise SceneError(f"{where}: 'texture' needs a mesh with texture coordinates")
+            part = Part(part.vertices, part.faces, part.corner_colors, part.corner_uv, texture)
+        own = part.texture is not None or not np.allclose(part.corner_colors, DEFAULT_ALBEDO)
+        tints = _tints(spec, len(placements), own)
+        instances = [(m, part.tinted(tint)) for m, tint in zip(placements, tints, strict=True)]
+        objects.append(SceneObject(f"{spec.name or where}#{k}", part, instances, motion, waves))
+    return objects
+
+
+def _one_line(exc: ValidationError) -> str:
+    problems = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"])
+        problems.append(f"{loc}: {err['msg']}" if loc else err["msg"])
+    more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+    return problems[0] + more
+
+
+def load_scene_file(path: Path, name: str | None = None) -> Scene:
+    """A scene from a TOML scene file; every fault is a :class:`SceneError` naming the file."""
+    path = Path(path)
+    try:
+        raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise SceneError(f"{path}: cannot read ({exc.strerror})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{path}: not valid TOML ({exc})") from None
+    try:
+        spec = SceneSpec.model_validate(raw)
+    except ValidationError as exc:
+        raise SceneError(f"{path}: {_one_line(exc)}") from None
+    folder = path.parent
+    try:
+        camera = Camera(**spec.camera.model_dump())
+        env = spec.environment
+        if (env.image is None) == (env.color is None):
+            raise SceneError("environment: give exactly one of 'image' or 'color'")
+        environment = (Environment(load_texture(folder / env.image)) if env.image
+                       else Environment.constant(env.color))
+        light = None
+        if spec.light is not None:
+            d = np.asarray(spec.light.direction, dtype=np.float64)
+            if np.linalg.norm(d) == 0:
+                raise SceneError("light.direction must not be zero")
+            light = Light(tuple(d / np.linalg.norm(d)), spec.light.ambient)
+        objects = []
+        for index, obj in enumerate(spec.objects):
+            objects.extend(_scene_object(obj, folder, f"objects.{index}" + (f" ({obj.name})" if obj.name else "")))
+        from .painting import PaintParams
+
+        PaintParams.from_dict(spec.paint)  # refuse bad painting defaults now, not at the first render
+    except (SceneError, MeshError, CameraError, ValueError) as exc:
+        message = str(exc)
+        raise SceneError(message if message.startswith(str(path)) else f"{path}: {message}") from None
+    return Scene(name or path.stem, spec.title or path.stem, camera, environment, light, objects,
+                 dict(spec.paint), spec.z_max)
+
+
+def frame_camera(parts: list[Part], fov: float = 45.0) -> Camera:
+    """A camera that frames ``parts`` from the front, a little above and to the right."""
+    points = np.concatenate([p.vertices[p.faces].reshape(-1, 3) for p in parts])
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    center, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
+    distance = radius / math.sin(math.radians(fov) / 2) * 1.05
+    view = np.array([0.45, 0.35, 1.0]) / np.linalg.norm([0.45, 0.35, 1.0])
+    return Camera(tuple(center + distance * view), tuple(center), fov=fov)
+
+
+def mesh_scene(path: Path) -> Scene:
+    """A bare mesh file as a scene: a soft light, a calm backdrop, a camera that frames it."""
+    try:
+        parts = load_mesh_file(path)
+    except MeshError as exc:
+        raise SceneError(str(exc)) from None
+    objects = [SceneObject(f"{Path(path).name}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
+    light = Light(tuple(np.array([-0.4, -1.0, -0.5]) / np.linalg.norm([-0.4, -1.0, -0.5])), 0.35)
+    return Scene(Path(path).stem, Path(path).name, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)),
+                 light, objects)
+
+
+def scene_names(folder: Path = SCENES_DIR) -> list[str]:
+    return sorted(p.stem for p in Path(folder).glob("*.toml") if SCENE_NAME.match(p.stem))
+
+
+def load_scene(ref: str, folder: Path = SCENES_DIR) -> Scene:
+    """A scene by name (from ``folder``), by scene file path (``.toml``), or by mesh file path."""
+    if SCENE_NAME.match(ref) and (Path(folder) / f"{ref}.toml").is_file():
+        return load_scene_file(Path(folder) / f"{ref}.toml", ref)
+    path = Path(ref)
+    if path.suffix.lower() == ".toml":
+        return load_scene_file(path)
+    if path.is_file():
+        return mesh_scene(path)
+    known = ", ".join(scene_names(folder)) or "none"
+    raise SceneError(f"unknown scene {ref!r}: not a scene name (known: {known}) nor an existing file")
