@@ -1,6 +1,7 @@
 """The two hot passes of an iteration, fused and compiled (numba); numpy cannot fuse them.
 
-``cast_rays`` turns per-pixel displacements into per-sample rays (camera assignment) and ``shade``
+``cast_rays`` turns the previous iteration's data into per-sample rays (camera assignment, with the
+built-in mappings fused in) and ``shade``
 turns Embree's hits into per-pixel data (shading plus the per-pixel mean). Both release the GIL so
 tiles run on threads side by side with Embree. ``tests/test_kernels.py`` holds a plain numpy
 reference of each and checks that they agree.
@@ -13,29 +14,102 @@ import math
 import numba
 import numpy as np
 
+# fast math without the no-NaN/no-inf assumptions: the kernels test for NaN rays on purpose
 _jit = numba.njit(nogil=True, cache=True, error_model="numpy")
 
 
-@_jit
-def cast_rays(plane, eye, v_p, v_e, spp, origins, directions):
-    """Per-pixel cameras for every sample.
+# how cast_rays gets a pixel's displacement field D: the built-in mappings fused, or a field given
+FIELD_ZERO, FIELD_COLOR, FIELD_DEPTH, FIELD_NORMAL, FIELD_GIVEN = 0, 1, 2, 3, 4
 
-    plane : (n*spp, 3) float64 image-plane points P_p; eye : (3,) float64
-    v_p, v_e : (n, 3) float32 target and eye displacement of each pixel
-    origins, directions : (n*spp, 3) float32 outputs: P_e' = eye + V_e, unit direction to P_p' = P_p + V_p
+
+@_jit
+def _fill_field(kind, scale, basis, color, depth, normal, direction, z0, given, noise, noise_scale, out):
+    """``scale * (D + noise_scale * noise)`` for every pixel into out (n, 3) float64; see mappings.py for D.
+
+    One loop per kind (a branch per pixel costs more than the field itself). Non-finite values move nothing.
     """
-    for s in range(plane.shape[0]):
-        pix = s // spp
-        norm2 = 0.0
-        d = np.empty(3)
-        for k in range(3):
-            o = eye[k] + v_e[pix, k]
-            d[k] = plane[s, k] + v_p[pix, k] - o
-            origins[s, k] = o
-            norm2 += d[k] * d[k]
-        inv = 1.0 / math.sqrt(norm2) if norm2 > 0.0 else math.nan  # eye on target: no ray (it misses)
-        for k in range(3):
-            directions[s, k] = d[k] * inv
+    n = out.shape[0]
+    if kind == FIELD_ZERO:
+        out[:] = 0.0
+        return
+    if kind == FIELD_COLOR or kind == FIELD_DEPTH:
+        for pix in range(n):
+            k = abs(depth[pix] - z0) if kind == FIELD_DEPTH else 1.0
+            a = 2.0 * color[pix, 0] - 1.0
+            b = 2.0 * color[pix, 1] - 1.0
+            c = 2.0 * color[pix, 2] - 1.0
+            for q in range(3):
+                out[pix, q] = k * (a * basis[0, q] + b * basis[1, q] + c * basis[2, q])
+    elif kind == FIELD_NORMAL:
+        for pix in range(n):
+            out[pix, 0] = direction[pix, 1] * normal[pix, 2] - direction[pix, 2] * normal[pix, 1]
+            out[pix, 1] = direction[pix, 2] * normal[pix, 0] - direction[pix, 0] * normal[pix, 2]
+            out[pix, 2] = direction[pix, 0] * normal[pix, 1] - direction[pix, 1] * normal[pix, 0]
+    else:
+        for pix in range(n):
+            for q in range(3):
+                out[pix, q] = given[pix, q]
+    for pix in range(n):
+        for q in range(3):
+            v = scale * (out[pix, q] + noise_scale * noise[pix, q]) if noise_scale != 0.0 else scale * out[pix, q]
+            out[pix, q] = v if math.isfinite(v) else 0.0
+
+
+@_jit
+def cast_rays(plane, eye, spp, basis, color, depth, normal, direction, z0,
+              target_kind, target_scale, target_given, eye_kind, eye_scale, eye_given, noise, noise_scale,
+              v_p, v_e, origins, directions):
+    """Per-pixel cameras for every sample: camera assignment fused with the mapping.
+
+    plane : (n*spp, 3) float64 image-plane points P_p;  eye : (3,) float64;  basis : (3, 3) rows r, u, f
+    color, depth, normal, direction : I_{n-1} per pixel (dummies where the mapping does not read them)
+    *_kind : FIELD_*; *_scale : lambda_p * p and lambda_e; *_given : (n, 3) precomputed fields (FIELD_GIVEN)
+    noise : (n, 3) world-space random vectors, added to both fields times noise_scale
+    v_p, v_e : (n, 3) float64 out: the displacements (scratch owned by the caller: a large allocation
+    inside a kernel costs more than the whole pass)
+    origins, directions : (n*spp, 3) float32 out: P_e' = eye + V_e, unit direction to P_p' = P_p + V_p.
+    A non-finite displacement moves nothing; an eye on its target casts a NaN ray, which misses.
+    """
+    n_pix = plane.shape[0] // spp
+    _fill_field(target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise,
+                noise_scale, v_p)
+    _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise,
+                noise_scale, v_e)
+    for pix in range(n_pix):
+        ox = eye[0] + v_e[pix, 0]
+        oy = eye[1] + v_e[pix, 1]
+        oz = eye[2] + v_e[pix, 2]
+        for s in range(pix * spp, (pix + 1) * spp):
+            dx = plane[s, 0] + v_p[pix, 0] - ox
+            dy = plane[s, 1] + v_p[pix, 1] - oy
+            dz = plane[s, 2] + v_p[pix, 2] - oz
+            norm2 = dx * dx + dy * dy + dz * dz
+            inv = 1.0 / math.sqrt(norm2) if norm2 > 0.0 else math.nan
+            origins[s, 0] = ox
+            origins[s, 1] = oy
+            origins[s, 2] = oz
+            directions[s, 0] = dx * inv
+            directions[s, 1] = dy * inv
+            directions[s, 2] = dz * inv
+
+
+@_jit
+def fast_atan2(y, x):
+    """atan2 within 1e-5 rad (a 1024-texel panorama's texel is 6e-3 rad) at a fraction of libm's cost."""
+    ax = abs(x)
+    ay = abs(y)
+    big = max(ax, ay)
+    if big == 0.0:
+        return 0.0
+    z = min(ax, ay) / big
+    z2 = z * z
+    a = z * (0.99997726 + z2 * (-0.33262347 + z2 * (0.19354346 + z2 * (-0.11643287
+                                                                      + z2 * (0.05265332 + z2 * -0.01172120)))))
+    if ay > ax:
+        a = 0.5 * math.pi - a
+    if x < 0.0:
+        a = math.pi - a
+    return -a if y < 0.0 else a
 
 
 @_jit
@@ -43,20 +117,23 @@ def _bilinear(texels, offset, width, height, x, y, out):
     """Bilinear lookup at continuous texel coordinates (x, y), wrapping in x and clamping in y."""
     x -= 0.5
     y -= 0.5
-    x0 = math.floor(x)
-    y0 = math.floor(y)
-    fx = x - x0
-    fy = y - y0
+    fx0 = math.floor(x)
+    fy0 = math.floor(y)
+    fx = x - fx0
+    fy = y - fy0
+    c0 = int(fx0) % width
+    c1 = c0 + 1 if c0 + 1 < width else 0
+    r0 = min(max(int(fy0), 0), height - 1)
+    r1 = min(max(int(fy0) + 1, 0), height - 1)
+    a = offset + r0 * width
+    b = offset + r1 * width
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = fx * (1.0 - fy)
+    w10 = (1.0 - fx) * fy
+    w11 = fx * fy
     for c in range(3):
-        out[c] = 0.0
-    for dy in range(2):
-        row = min(max(int(y0) + dy, 0), height - 1)
-        wy = fy if dy else 1.0 - fy
-        for dx in range(2):
-            col = (int(x0) + dx) % width
-            w = wy * (fx if dx else 1.0 - fx)
-            for c in range(3):
-                out[c] += w * texels[offset + row * width + col, c]
+        out[c] = (w00 * texels[a + c0, c] + w01 * texels[a + c1, c]
+                  + w10 * texels[b + c0, c] + w11 * texels[b + c1, c])
 
 
 @_jit
@@ -133,9 +210,12 @@ def shade(origins, directions, face, t, b1, b2, spp,
                         acc_n[c] += nrm[c]
             else:
                 # ---- miss: the environment, equirectangular ----
-                if finite:
-                    lon = math.atan2(dx, -dz)
-                    lat = math.acos(min(max(dy, -1.0), 1.0))
+                if finite and env_w * env_h == 1:
+                    for c in range(3):
+                        rgb[c] = env_flat[0, c]
+                elif finite:
+                    lon = fast_atan2(dx, -dz)
+                    lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
                     _bilinear(env_flat, 0, env_w, env_h, (lon / (2.0 * math.pi) + 0.5) * env_w,
                               lat / math.pi * env_h, rgb)
                 else:

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kernels import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL
+
 CHANNELS = frozenset({"color", "depth", "normal", "direction"})
 
 
@@ -55,13 +57,19 @@ class Mapping:
     reads: frozenset[str]
     field: Callable[[MappingInput], np.ndarray]
     description: str = ""
+    fused: int = FIELD_GIVEN  # which kernel branch computes this field; a custom W runs in numpy
 
 
 MAPPINGS: dict[str, Mapping] = {}
 
 
-def register_mapping(name: str, reads, field: Callable[[MappingInput], np.ndarray] | None = None):
-    """Register ``field`` (or decorate it) as mapping ``name`` reading the channels ``reads``."""
+def register_mapping(name: str, reads, field: Callable[[MappingInput], np.ndarray] | None = None, *,
+                     fused: int = FIELD_GIVEN):
+    """Register ``field`` (or decorate it) as mapping ``name`` reading the channels ``reads``.
+
+    ``fused`` is for the built-in mappings only: the branch of ``kernels.cast_rays`` that computes the
+    same field without leaving the kernel (``field`` stays its reference).
+    """
     reads = frozenset(reads) | {"color"}  # color is always recorded: it is the image itself
     unknown = reads - CHANNELS
     if unknown:
@@ -69,7 +77,7 @@ def register_mapping(name: str, reads, field: Callable[[MappingInput], np.ndarra
 
     def register(fn):
         doc = (fn.__doc__ or "").strip().splitlines()
-        MAPPINGS[name] = Mapping(name, reads, fn, doc[0] if doc else "")
+        MAPPINGS[name] = Mapping(name, reads, fn, doc[0] if doc else "", fused)
         return fn
 
     return register(field) if field is not None else register
@@ -82,19 +90,19 @@ def get_mapping(name: str) -> Mapping:
         raise ValueError(f"unknown mapping {name!r}; valid mappings: {', '.join(sorted(MAPPINGS))}") from None
 
 
-@register_mapping("color", reads={"color"})
+@register_mapping("color", reads={"color"}, fused=FIELD_COLOR)
 def color_mapping(data: MappingInput) -> np.ndarray:
     """R moves right, G moves up, B along the view; mid-grey does not move (paper section 3)."""
     return data.color_field()
 
 
-@register_mapping("depth", reads={"color", "depth"})
+@register_mapping("depth", reads={"color", "depth"}, fused=FIELD_DEPTH)
 def depth_mapping(data: MappingInput) -> np.ndarray:
     """The color field times |z - z0|: sharp at the focus depth, smudged away from it (section 4)."""
     return data.color_field() * np.abs(data.depth - np.float32(data.z0))[:, None]
 
 
-@register_mapping("normal", reads={"normal", "direction"})
+@register_mapping("normal", reads={"normal", "direction"}, fused=FIELD_NORMAL)
 def normal_mapping(data: MappingInput) -> np.ndarray:
     """C x N, the previous ray direction across the world normal: smudges along surfaces (section 5)."""
     return np.cross(data.direction, data.normal)

@@ -128,7 +128,7 @@ class _Frame:
     plane: np.ndarray  # (n*spp, 3) float64
     i: np.ndarray
     j: np.ndarray
-    noise: np.ndarray | None
+    noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
 
 
 def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
@@ -136,25 +136,57 @@ def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
     s = ((i[:, None] + xi) / region.full_width).ravel()
     t = ((j[:, None] + eta) / region.full_height).ravel()
-    noise = noise_vectors(params.seed, i, j) if params.noise > 0 else None
+    noise = (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) \
+        if params.noise > 0 else None
     return _Frame(camera, region, plane_points(camera, region, s, t), i, j, noise)
+
+
+def _mapping_input(state: PaintState, frame: _Frame, z0: float) -> MappingInput:
+    r, u, f = frame.camera.basis()
+    return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, frame.i, frame.j)
 
 
 def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: float) -> tuple[np.ndarray,
                                                                                                 np.ndarray]:
-    """``(V_p, V_e)`` per pixel from ``I_{n-1}``: two (n, 3) float32, scene units."""
-    r, u, f = frame.camera.basis()
-    data = MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, frame.i, frame.j)
-    noise = 0.0 if frame.noise is None else params.noise * (frame.noise @ np.stack([r, u, f]))
+    """``(V_p, V_e)`` per pixel from ``I_{n-1}`` in plain numpy: two (n, 3) float64, scene units.
+
+    The reference for what ``kernels.cast_rays`` computes fused; a non-finite displacement moves nothing.
+    """
+    data = _mapping_input(state, frame, z0)
+    noise = 0.0 if frame.noise is None else params.noise * frame.noise
 
     def scaled(mapping: str, scale: float) -> np.ndarray:
         if scale == 0.0:
-            return np.zeros((state.region.pixel_count, 3), np.float32)
-        d = np.asarray(get_mapping(mapping).field(data), dtype=np.float64) + noise
-        return np.nan_to_num(scale * d, nan=0.0, posinf=0.0, neginf=0.0).astype(np.float32)
+            return np.zeros((state.region.pixel_count, 3))
+        d = scale * (np.asarray(get_mapping(mapping).field(data), dtype=np.float64) + noise)
+        return np.where(np.isfinite(d), d, 0.0)
 
     pitch = frame.camera.pixel_pitch(frame.region.full_height)
     return scaled(params.mapping, params.lambda_p * pitch), scaled(params.eye_mapping, params.lambda_e)
+
+
+def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scratch: tuple[np.ndarray, ...]
+          ) -> None:
+    """Camera assignment: fill ``scratch`` = (V_p, V_e, origins, directions) from ``I_{n-1}``."""
+    pitch = frame.camera.pixel_pitch(frame.region.full_height)
+    moves = not state.blank and state.has(params.reads())
+    data = _mapping_input(state, frame, z0) if moves else None
+
+    def plan(name: str, scale: float) -> tuple[int, float, np.ndarray]:
+        mapping = get_mapping(name)
+        if not moves or scale == 0.0:
+            return kernels.FIELD_ZERO, 0.0, _DUMMY[2]
+        if mapping.fused != kernels.FIELD_GIVEN:
+            return mapping.fused, scale, _DUMMY[2]
+        return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(mapping.field(data), dtype=np.float32)
+
+    target = plan(params.mapping, params.lambda_p * pitch)
+    eye = plan(params.eye_mapping, params.lambda_e)
+    kernels.cast_rays(
+        frame.plane, np.asarray(frame.camera.eye, np.float64), params.spp, np.stack(frame.camera.basis()),
+        state.color, _or_dummy(state.depth, 1), _or_dummy(state.normal, 2), _or_dummy(state.direction, 2),
+        float(z0), *target, *eye, _or_dummy(frame.noise, 2), float(params.noise) if moves else 0.0, *scratch,
+    )
 
 
 def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, state: PaintState,
@@ -165,20 +197,17 @@ def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, s
     eye = np.asarray(frame.camera.eye, np.float64)
     _, _, forward = frame.camera.basis()
     z0 = params.z0 if params.z0 is not None else float(np.linalg.norm(np.subtract(frame.camera.look_at, eye)))
-    z_max = params.z_max if params.z_max is not None else scene.depth_of_miss()
+    z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
     reads = params.reads()
     n_pix, n_rays = frame.region.pixel_count, len(frame.plane)
     seconds = dict.fromkeys(STAGES, 0.0)
-    origins = np.empty((n_rays, 3), RAY_DTYPE)
-    directions = np.empty((n_rays, 3), RAY_DTYPE)
+    scratch = (np.empty((n_pix, 3)), np.empty((n_pix, 3)), np.empty((n_rays, 3), RAY_DTYPE),
+               np.empty((n_rays, 3), RAY_DTYPE))
+    origins, directions = scratch[2:]
     for iteration in range(params.iterations):
         # ---- camera assignment ----
         clock = _time.perf_counter()
-        if state.blank or not state.has(reads):
-            v_p = v_e = np.zeros((n_pix, 3), np.float32)
-        else:
-            v_p, v_e = displacements(state, frame, params, z0)
-        kernels.cast_rays(frame.plane, eye, v_p, v_e, params.spp, origins, directions)
+        _cast(state, frame, params, z0, scratch)
         # ---- intersection ----
         now = _time.perf_counter()
         seconds["camera"] += now - clock

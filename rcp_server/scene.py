@@ -89,6 +89,7 @@ class Geometry:
     texture_offset: np.ndarray
     texture_width: np.ndarray
     texture_height: np.ndarray
+    bounds: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # (2, 3) min and max corner
 
     @property
     def face_count(self) -> int:
@@ -130,6 +131,7 @@ def build_geometry(objects: list[SceneObject], time: float) -> Geometry:
                 uvs.append(np.zeros((len(tri), 3, 2), np.float32))
                 tex_ids.append(np.full(len(tri), -1, np.int32))
     images = [image for _, image in sorted(textures.values(), key=lambda item: item[0])]
+    points = np.concatenate(tris).reshape(-1, 3) if tris else np.zeros((1, 3))
     sizes = np.array([im.shape[0] * im.shape[1] for im in images], dtype=np.int64)
     return Geometry(
         triangles=np.concatenate(tris).astype(np.float32) if tris else np.zeros((0, 3, 3), np.float32),
@@ -143,6 +145,7 @@ def build_geometry(objects: list[SceneObject], time: float) -> Geometry:
         else np.zeros(1, np.int64),
         texture_width=np.array([im.shape[1] for im in images] or [1], dtype=np.int64),
         texture_height=np.array([im.shape[0] for im in images] or [1], dtype=np.int64),
+        bounds=np.stack([points.min(axis=0), points.max(axis=0)]),
     )
 
 
@@ -182,14 +185,15 @@ class Scene:
                 self._cache[key] = (geometry, tracer)
             return self._cache[key]
 
-    def depth_of_miss(self) -> float:
-        """``z_max``: the depth recorded where a ray sees only the environment."""
+    def depth_of_miss(self, eye, time: float = 0.0) -> float:
+        """``z_max``: the depth recorded where a ray sees only the environment, seen from ``eye``.
+
+        The scene file's ``z_max`` when it sets one; otherwise beyond the farthest point of the scene.
+        """
         if self.z_max is not None:
             return self.z_max
-        geometry, _ = self.geometry(0.0)
+        geometry, _ = self.geometry(time)
         if geometry.face_count == 0:
             return 100.0
-        tri = geometry.triangles.reshape(-1, 3)
-        extent = float(np.linalg.norm(tri.max(axis=0) - tri.min(axis=0)))
-        reach = float(np.max(np.linalg.norm(tri - np.asarray(self.camera.eye, np.float32), axis=1)))
-        return max(extent, reach, 1.0)
+        lo, hi = geometry.bounds
+        return max(float(np.linalg.norm(hi - lo) + np.linalg.norm((lo + hi) / 2 - np.asarray(eye))), 1.0)
