@@ -56,41 +56,63 @@ def _fill_field(kind, scale, basis, color, depth, normal, direction, z0, given, 
 
 
 @_jit
-def cast_rays(plane, eye, spp, basis, color, depth, normal, direction, z0,
+def cast_rays(eye, basis, tan_half, aspect, full_width, full_height, x0, y0, width, xi, eta,
+              color, depth, normal, direction, z0,
               target_kind, target_scale, target_given, eye_kind, eye_scale, eye_given, noise, noise_scale,
               v_p, v_e, origins, directions):
-    """Per-pixel cameras for every sample: camera assignment fused with the mapping.
+    """Per-pixel cameras for every sample: camera assignment fused with the mapping. Returns the number
+    of rays that came out non-finite (a NaN or infinite input), so the caller masks only when needed.
 
-    plane : (n*spp, 3) float64 image-plane points P_p;  eye : (3,) float64;  basis : (3, 3) rows r, u, f
+    eye : (3,) float64;  basis : (3, 3) rows r, u, f;  tan_half : tan(fov/2);  aspect : W / H
+    full_width, full_height : W, H;  x0, y0, width : the region's corner and width (pixels row-major)
+    xi, eta : (n, spp) float64 sub-pixel offsets of each sample
     color, depth, normal, direction : I_{n-1} per pixel (dummies where the mapping does not read them)
     *_kind : FIELD_*; *_scale : lambda_p * p and lambda_e; *_given : (n, 3) precomputed fields (FIELD_GIVEN)
     noise : (n, 3) world-space random vectors, added to both fields times noise_scale
     v_p, v_e : (n, 3) float64 out: the displacements (scratch owned by the caller: a large allocation
     inside a kernel costs more than the whole pass)
-    origins, directions : (n*spp, 3) float32 out: P_e' = eye + V_e, unit direction to P_p' = P_p + V_p.
-    A non-finite displacement moves nothing; an eye on its target casts a NaN ray, which misses.
+    origins, directions : (n*spp, 3) float32 out: P_e' = eye + V_e, unit direction to
+    P_p' = P_p(s, t) + V_p with P_p as in camera.py. A non-finite displacement moves nothing.
     """
-    n_pix = plane.shape[0] // spp
+    n_pix, spp = xi.shape
     _fill_field(target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise,
                 noise_scale, v_p)
     _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise,
                 noise_scale, v_e)
-    for pix in range(n_pix):
-        ox = eye[0] + v_e[pix, 0]
-        oy = eye[1] + v_e[pix, 1]
-        oz = eye[2] + v_e[pix, 2]
-        for s in range(pix * spp, (pix + 1) * spp):
-            dx = plane[s, 0] + v_p[pix, 0] - ox
-            dy = plane[s, 1] + v_p[pix, 1] - oy
-            dz = plane[s, 2] + v_p[pix, 2] - oz
-            norm2 = dx * dx + dy * dy + dz * dz
-            inv = 1.0 / math.sqrt(norm2) if norm2 > 0.0 else math.nan
-            origins[s, 0] = ox
-            origins[s, 1] = oy
-            origins[s, 2] = oz
-            directions[s, 0] = dx * inv
-            directions[s, 1] = dy * inv
-            directions[s, 2] = dz * inv
+    # plane point = centre + sx * r + ty * u; centre = eye + f
+    cx = eye[0] + basis[2, 0]
+    cy = eye[1] + basis[2, 1]
+    cz = eye[2] + basis[2, 2]
+    bad = 0
+    for row in range(n_pix // width):  # nested loops: an integer division per pixel costs more than a ray
+        j = y0 + row
+        ty0 = (1.0 - 2.0 * j / full_height) * tan_half
+        for col in range(width):
+            pix = row * width + col
+            i = x0 + col
+            ox = eye[0] + v_e[pix, 0]
+            oy = eye[1] + v_e[pix, 1]
+            oz = eye[2] + v_e[pix, 2]
+            for k in range(spp):
+                sx = (2.0 * (i + xi[pix, k]) / full_width - 1.0) * aspect * tan_half
+                ty = ty0 - 2.0 * eta[pix, k] / full_height * tan_half
+                dx = cx + sx * basis[0, 0] + ty * basis[1, 0] + v_p[pix, 0] - ox
+                dy = cy + sx * basis[0, 1] + ty * basis[1, 1] + v_p[pix, 1] - oy
+                dz = cz + sx * basis[0, 2] + ty * basis[1, 2] + v_p[pix, 2] - oz
+                norm2 = dx * dx + dy * dy + dz * dz
+                if norm2 > 0.0 and norm2 < math.inf:
+                    inv = 1.0 / math.sqrt(norm2)
+                else:  # eye on its target, or a non-finite input: a NaN ray, which misses
+                    inv = math.nan
+                    bad += 1
+                s = pix * spp + k
+                origins[s, 0] = ox
+                origins[s, 1] = oy
+                origins[s, 2] = oz
+                directions[s, 0] = dx * inv
+                directions[s, 1] = dy * inv
+                directions[s, 2] = dz * inv
+    return bad
 
 
 @_jit

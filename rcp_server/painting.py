@@ -23,6 +23,7 @@ from .camera import RAY_DTYPE, Camera, Region, plane_points
 from .mappings import MappingInput, get_mapping
 from .sampling import noise_vectors, stratified_offsets
 from .scene import Scene
+from .tracer import Hits
 
 STAGES = ("camera", "intersect", "shade", "bookkeeping")
 
@@ -121,29 +122,40 @@ class PaintResult:
 
 @dataclass
 class _Frame:
-    """What stays fixed over the iterations of one tile: sample positions, pixel coords, noise."""
+    """What stays fixed over the iterations of one tile: sample offsets and the noise."""
 
     camera: Camera
     region: Region
-    plane: np.ndarray  # (n*spp, 3) float64
-    i: np.ndarray
-    j: np.ndarray
+    xi: np.ndarray  # (n, spp) float64 sub-pixel offsets
+    eta: np.ndarray
     noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
+
+    def pixel_coords(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.region.pixel_coords()
+
+    def plane(self) -> np.ndarray:
+        """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
+        i, j = self.pixel_coords()
+        s = ((i[:, None] + self.xi) / self.region.full_width).ravel()
+        t = ((j[:, None] + self.eta) / self.region.full_height).ravel()
+        return plane_points(self.camera, self.region, s, t)
 
 
 def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
+    if params.spp == 1 and params.noise == 0:  # the common case needs no pixel coordinates at all
+        half = np.full((region.pixel_count, 1), 0.5)
+        return _Frame(camera, region, half, half, None)
     i, j = region.pixel_coords()
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
-    s = ((i[:, None] + xi) / region.full_width).ravel()
-    t = ((j[:, None] + eta) / region.full_height).ravel()
     noise = (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) \
         if params.noise > 0 else None
-    return _Frame(camera, region, plane_points(camera, region, s, t), i, j, noise)
+    return _Frame(camera, region, xi, eta, noise)
 
 
 def _mapping_input(state: PaintState, frame: _Frame, z0: float) -> MappingInput:
     r, u, f = frame.camera.basis()
-    return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, frame.i, frame.j)
+    i, j = frame.pixel_coords()
+    return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
 
 
 def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: float) -> tuple[np.ndarray,
@@ -166,8 +178,10 @@ def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: flo
 
 
 def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scratch: tuple[np.ndarray, ...]
-          ) -> None:
-    """Camera assignment: fill ``scratch`` = (V_p, V_e, origins, directions) from ``I_{n-1}``."""
+          ) -> int:
+    """Camera assignment: fill ``scratch`` = (V_p, V_e, origins, directions) from ``I_{n-1}``.
+
+    Returns how many rays came out non-finite (they must not reach Embree)."""
     pitch = frame.camera.pixel_pitch(frame.region.full_height)
     moves = not state.blank and state.has(params.reads())
     data = _mapping_input(state, frame, z0) if moves else None
@@ -182,9 +196,11 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scra
 
     target = plan(params.mapping, params.lambda_p * pitch)
     eye = plan(params.eye_mapping, params.lambda_e)
-    kernels.cast_rays(
-        frame.plane, np.asarray(frame.camera.eye, np.float64), params.spp, np.stack(frame.camera.basis()),
-        state.color, _or_dummy(state.depth, 1), _or_dummy(state.normal, 2), _or_dummy(state.direction, 2),
+    region = frame.region
+    return kernels.cast_rays(
+        np.asarray(frame.camera.eye, np.float64), np.stack(frame.camera.basis()), frame.camera.half_height(),
+        region.full_width / region.full_height, region.full_width, region.full_height, region.x0, region.y0,
+        region.width, frame.xi, frame.eta, state.color, _or_dummy(state.depth, 1), _or_dummy(state.normal, 2), _or_dummy(state.direction, 2),
         float(z0), *target, *eye, _or_dummy(frame.noise, 2), float(params.noise) if moves else 0.0, *scratch,
     )
 
@@ -199,7 +215,8 @@ def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, s
     z0 = params.z0 if params.z0 is not None else float(np.linalg.norm(np.subtract(frame.camera.look_at, eye)))
     z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
     reads = params.reads()
-    n_pix, n_rays = frame.region.pixel_count, len(frame.plane)
+    n_pix = frame.region.pixel_count
+    n_rays = n_pix * params.spp
     seconds = dict.fromkeys(STAGES, 0.0)
     scratch = (np.empty((n_pix, 3)), np.empty((n_pix, 3)), np.empty((n_rays, 3), RAY_DTYPE),
                np.empty((n_rays, 3), RAY_DTYPE))
@@ -207,12 +224,15 @@ def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, s
     for iteration in range(params.iterations):
         # ---- camera assignment ----
         clock = _time.perf_counter()
-        _cast(state, frame, params, z0, scratch)
+        invalid = _cast(state, frame, params, z0, scratch)
         # ---- intersection ----
         now = _time.perf_counter()
         seconds["camera"] += now - clock
         clock = now
-        hits = tracer.intersect(origins, directions) if tracer is not None else _misses(n_rays)
+        if tracer is None:
+            hits = Hits.misses(n_rays)
+        else:
+            hits = tracer.intersect(origins, directions, checked=invalid == 0)
         # ---- shading ----
         now = _time.perf_counter()
         seconds["intersect"] += now - clock
@@ -250,12 +270,6 @@ _DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
 def _or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:
     # numba needs an array of the right type even for an output it will not write
     return array if array is not None else _DUMMY[ndim]
-
-
-def _misses(n: int):
-    from .tracer import Hits
-
-    return Hits.misses(n)
 
 
 def default_threads() -> int:

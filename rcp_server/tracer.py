@@ -36,11 +36,14 @@ class Tracer:
         # commit now, once, rather than lazily inside the first (possibly concurrent) query
         self._scene.run(np.zeros((1, 3), RAY_DTYPE), np.ones((1, 3), RAY_DTYPE), query="DISTANCE")
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
+    def intersect(self, origins: np.ndarray, directions: np.ndarray, checked: bool = False) -> Hits:
         """Closest hit of each ray. origins, directions : (n, 3) float32, directions unit length.
 
-        Rays with a non-finite component are not sent to Embree; they miss.
+        Rays with a non-finite component are not sent to Embree; they miss. ``checked=True`` says the
+        caller already knows every ray is finite (cast_rays counts them), which skips the mask.
         """
+        if checked:
+            return self._intersect(origins, directions)
         valid = np.isfinite(origins).all(axis=1) & np.isfinite(directions).all(axis=1)
         if valid.all():
             return self._intersect(origins, directions)

@@ -1,0 +1,76 @@
+"""``rcp bench speed``: where an iteration's time goes, and how close it comes to Embree alone.
+
+Both sides run in one process, interleaved repeat by repeat, with the same rays, tiles and threads,
+so the ratio holds on a noisy machine even when the absolute figures move.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+from .camera import RAY_DTYPE, Region
+from .painting import STAGES, PaintParams, _cast, _frame, default_threads, paint
+from .scenefile import load_scene
+
+
+def _embree_alone(tracer, origins, directions, tiles, pool) -> float:
+    """Seconds for the tracer's raw Embree query over the given ray bands, threads as in painting."""
+    raw = tracer._scene  # the native scene itself: no validity masks, no wrapping
+
+    def run(band):
+        raw.run(origins[band], directions[band], output=1)
+
+    clock = time.perf_counter()
+    list(pool.map(run, tiles))
+    return time.perf_counter() - clock
+
+
+def speed(scene_name: str, width: int, height: int, iterations: int, repeats: int, threads: int | None) -> None:
+    scene = load_scene(scene_name)
+    threads = threads or default_threads()
+    params = PaintParams(mapping="color", iterations=iterations, spp=1,
+                         lambda_p=float(scene.paint.get("lambda_p", 8.0)))
+    camera = scene.camera
+    geometry, tracer = scene.geometry(0.0)
+    print(f"scene {scene_name!r}: {geometry.face_count} triangles; {width}x{height}, 1 spp, "
+          f"{iterations} iterations, color mapping, {threads} threads")
+    paint(scene, camera, width, height, params, threads=threads)  # compile kernels, build the BVH
+
+    # the rays of a real painted iteration (the last one), cast in the same row bands as the painting
+    region = Region(width, height)
+    state = paint(scene, camera, width, height, params, threads=threads).state
+    frame = _frame(camera, region, params)
+    n = region.pixel_count
+    scratch = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), RAY_DTYPE), np.empty((n, 3), RAY_DTYPE))
+    _cast(state, frame, params, float(np.linalg.norm(np.subtract(camera.look_at, camera.eye))), scratch)
+    origins, directions = scratch[2:]
+    rows = max(1, -(-height // (threads * 4)))
+    bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(rows)]
+    hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0
+
+    painted, alone, stage_sums = [], [], dict.fromkeys(STAGES, 0.0)
+    with ThreadPoolExecutor(threads) as pool:
+        for _ in range(repeats):
+            clock = time.perf_counter()
+            result = paint(scene, camera, width, height, params, threads=threads)
+            painted.append((time.perf_counter() - clock) / iterations)
+            for stage in STAGES:
+                stage_sums[stage] += result.stage_seconds[stage] / iterations / repeats
+            alone.append(_embree_alone(tracer, origins, directions, bands, pool) if tracer else float("nan"))
+
+    per_iteration, embree = statistics.median(painted), statistics.median(alone)
+    thread_total = sum(stage_sums.values())
+    print(f"rays hitting geometry: {hit_fraction:.0%}")
+    print(f"one iteration (wall, median of {repeats}): {per_iteration * 1e3:7.2f} ms   "
+          f"{n / per_iteration / 1e6:5.2f} M samples/s")
+    for stage in STAGES:
+        share = stage_sums[stage] / thread_total if thread_total else 0.0
+        print(f"  {stage:12s} {stage_sums[stage] * 1e3:7.2f} ms thread time  {share:6.1%}")
+    frame_setup = per_iteration * threads - thread_total
+    print(f"  {'(frame setup, threads, joins)':12s} ~{max(frame_setup, 0.0) * 1e3:.2f} ms thread time")
+    print(f"Embree alone, same rays and threads:  {embree * 1e3:7.2f} ms   {n / embree / 1e6:5.2f} M rays/s")
+    print(f"ratio iteration / Embree alone: {per_iteration / embree:.2f}x   (target <= 1.3x, goal 1.2x)")

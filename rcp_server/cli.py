@@ -1,0 +1,210 @@
+"""``rcp``: paint stills and sequences, list scenes, benchmark. Bad arguments: one line, exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from . import images
+from .camera import Camera, CameraError
+from .mappings import MAPPINGS
+from .painting import PaintParams, PaintState, paint
+from .scenefile import SceneError, load_scene, scene_names
+
+log = logging.getLogger("rcp")
+
+
+class UsageError(Exception):
+    """A command line that cannot run; reported in one line with exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse prints usage and a message over two lines; we want one
+        raise UsageError(message)
+
+
+def _positive_int(text: str) -> int:
+    value = int(text)
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
+    return value
+
+
+def _finite(text: str) -> float:
+    value = float(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
+    return value
+
+
+def _add_paint_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("painting (defaults: the scene's [paint] table, then the engine's)")
+    g.add_argument("--iterations", type=_positive_int, help="recursion depth N (default 6)")
+    g.add_argument("--spp", type=_positive_int, help="samples per pixel, stratified and seeded (default 1)")
+    g.add_argument("--mapping", help=f"target displacement mapping: {', '.join(sorted(MAPPINGS))}")
+    g.add_argument("--eye-mapping", help="eye displacement mapping (default color)")
+    g.add_argument("--lambda-p", type=_finite, help="largest target displacement, in pixels")
+    g.add_argument("--lambda-e", type=_finite, help="largest eye displacement, in scene units (default 0)")
+    g.add_argument("--z0", type=_finite, help="focus depth of the depth mapping (default: distance to look-at)")
+    g.add_argument("--z-max", type=_finite, help="depth recorded for a miss (default: beyond the scene)")
+    g.add_argument("--noise", type=_finite, help="strength of a seeded random vector added per pixel")
+    g.add_argument("--seed", type=int, help="seed of the jitter and the noise")
+
+
+def _add_camera_options(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("camera (default: the scene's)")
+    g.add_argument("--eye", nargs=3, type=_finite, metavar=("X", "Y", "Z"))
+    g.add_argument("--look-at", nargs=3, type=_finite, metavar=("X", "Y", "Z"))
+    g.add_argument("--up", nargs=3, type=_finite, metavar=("X", "Y", "Z"))
+    g.add_argument("--fov", type=_finite, help="vertical field of view in degrees")
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="rcp", description="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no warnings or progress")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    r = sub.add_parser("render", help="paint a still, its iterations, or a sequence")
+    r.add_argument("scene", help="a scene name (see 'rcp scenes'), a scene .toml file, or a mesh file")
+    r.add_argument("--out", required=True, type=Path,
+                   help="image file (.png, .jpg); with --frames, frames go to OUT's stem _0000, _0001, ...")
+    r.add_argument("--width", type=_positive_int, default=640)
+    r.add_argument("--height", type=_positive_int, default=360)
+    _add_paint_options(r)
+    _add_camera_options(r)
+    r.add_argument("--time", type=_finite, default=0.0, help="scene time in seconds (animated scenes)")
+    r.add_argument("--save-iterations", type=Path, metavar="DIR", help="also write every iteration to DIR")
+    r.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
+    r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100",
+                   help="JPEG quality")
+    s = r.add_argument_group("sequences")
+    s.add_argument("--frames", type=_positive_int, default=1, help="number of frames")
+    s.add_argument("--fps", type=_finite, default=24.0, help="frames per second of scene time")
+    s.add_argument("--orbit", type=_finite, default=0.0, metavar="DEG",
+                   help="turn the eye this many degrees around look-at over the sequence")
+    s.add_argument("--walk", type=_finite, default=0.0, metavar="DIST",
+                   help="move eye and look-at this far forward over the sequence")
+    s.add_argument("--temporal", type=_positive_int, metavar="K",
+                   help="temporal mode: after the first frame, run K iterations from the previous frame")
+
+    sub.add_parser("scenes", help="list the shipped scenes")
+
+    b = sub.add_parser("bench", help="benchmarks that print figures")
+    b.add_argument("which", choices=["speed"])
+    b.add_argument("--scene", default="default")
+    b.add_argument("--width", type=_positive_int, default=640)
+    b.add_argument("--height", type=_positive_int, default=360)
+    b.add_argument("--iterations", type=_positive_int, default=6)
+    b.add_argument("--repeats", type=_positive_int, default=5)
+    b.add_argument("--threads", type=_positive_int)
+    return parser
+
+
+def paint_params(scene_defaults: dict, args: argparse.Namespace) -> PaintParams:
+    """The scene's painting defaults, overridden by whatever the command line gives."""
+    values = dict(scene_defaults)
+    for name in ("iterations", "spp", "mapping", "eye_mapping", "lambda_p", "lambda_e", "z0", "z_max",
+                 "noise", "seed"):
+        if getattr(args, name, None) is not None:
+            values[name] = getattr(args, name)
+    return PaintParams.from_dict(values)
+
+
+def _camera(default: Camera, args: argparse.Namespace) -> Camera:
+    changes = {k: tuple(v) if isinstance(v, list) else v
+               for k, v in (("eye", args.eye), ("look_at", args.look_at), ("up", args.up), ("fov", args.fov))
+               if v is not None}
+    return default.moved(**changes)
+
+
+def camera_path(camera: Camera, fraction: float, orbit_degrees: float, walk: float) -> Camera:
+    """The camera a fraction of the way along an orbit around look-at and a walk forward."""
+    eye, target = np.asarray(camera.eye), np.asarray(camera.look_at)
+    if orbit_degrees:
+        axis = np.asarray(camera.up) / np.linalg.norm(camera.up)
+        angle = math.radians(orbit_degrees * fraction)
+        v = eye - target  # Rodrigues' rotation of the eye about the up axis through the target
+        v = v * math.cos(angle) + np.cross(axis, v) * math.sin(angle) + axis * axis.dot(v) * (1 - math.cos(angle))
+        eye = target + v
+    if walk:
+        _, _, f = camera.moved(eye=tuple(eye)).basis()
+        eye, target = eye + walk * fraction * f, target + walk * fraction * f
+    return camera.moved(eye=tuple(eye), look_at=tuple(target))
+
+
+def _frame_path(out: Path, index: int) -> Path:
+    return out.with_name(f"{out.stem}_{index:04d}{out.suffix}")
+
+
+def _render(args: argparse.Namespace) -> None:
+    images.image_format(args.out)  # refuse an unknown image type before painting anything
+    scene = load_scene(args.scene)
+    params = paint_params(scene.paint, args)
+    base = _camera(scene.camera, args)
+    if args.frames == 1:
+        result = paint(scene, base, args.width, args.height, params, time=args.time, threads=args.threads,
+                       keep_iterations=args.save_iterations is not None)
+        images.save(args.out, result.image, args.quality)
+        if args.save_iterations is not None:
+            for k, image in enumerate(result.iterations, start=1):
+                images.save(args.save_iterations / f"iteration_{k}.png", image)
+        return
+    from tqdm import tqdm
+
+    previous: PaintState | None = None
+    for index in tqdm(range(args.frames), desc="painting", unit="frame", disable=args.quiet):
+        fraction = index / (args.frames - 1)
+        camera = camera_path(base, fraction, args.orbit, args.walk)
+        frame_params = params
+        if args.temporal and previous is not None:
+            frame_params = replace(params, iterations=args.temporal)
+        result = paint(scene, camera, args.width, args.height, frame_params, time=args.time + index / args.fps,
+                       previous=previous if args.temporal else None, threads=args.threads)
+        previous = result.state
+        images.save(_frame_path(args.out, index), result.image, args.quality)
+
+
+def _scenes() -> None:
+    for name in scene_names():
+        try:
+            scene = load_scene(name)
+            faces = scene.geometry(0.0)[0].face_count
+            kind = "animated" if scene.animated else "static"
+            print(f"{name:12s} {scene.title}  ({faces} triangles, {kind})")
+        except SceneError as exc:
+            print(f"{name:12s} BROKEN: {exc}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    logging.basicConfig(format="rcp: warning: %(message)s", level=logging.WARNING)
+    try:
+        args = _parser().parse_args(argv)
+        if args.quiet:
+            logging.getLogger("rcp").setLevel(logging.ERROR)
+        if args.command == "render":
+            _render(args)
+        elif args.command == "scenes":
+            _scenes()
+        elif args.command == "bench":
+            from .bench import speed
+
+            speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
+    except (UsageError, SceneError, CameraError, ValueError) as exc:
+        print(f"rcp: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # an output path that cannot be written
+        print(f"rcp: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
