@@ -135,8 +135,9 @@ def fast_atan2(y, x):
 
 
 @_jit
-def _bilinear(texels, offset, width, height, x, y, out):
-    """Bilinear lookup at continuous texel coordinates (x, y), wrapping in x and clamping in y."""
+def _bilinear(texels, offset, width, height, x, y, wrap_y, out):
+    """Bilinear lookup at continuous texel coordinates (x, y): x wraps; y wraps for a tiling texture
+    and clamps for a panorama (whose top and bottom rows are the poles)."""
     x -= 0.5
     y -= 0.5
     fx0 = math.floor(x)
@@ -145,8 +146,12 @@ def _bilinear(texels, offset, width, height, x, y, out):
     fy = y - fy0
     c0 = int(fx0) % width
     c1 = c0 + 1 if c0 + 1 < width else 0
-    r0 = min(max(int(fy0), 0), height - 1)
-    r1 = min(max(int(fy0) + 1, 0), height - 1)
+    if wrap_y:
+        r0 = int(fy0) % height
+        r1 = r0 + 1 if r0 + 1 < height else 0
+    else:
+        r0 = min(max(int(fy0), 0), height - 1)
+        r1 = min(max(int(fy0) + 1, 0), height - 1)
     a = offset + r0 * width
     b = offset + r1 * width
     w00 = (1.0 - fx) * (1.0 - fy)
@@ -208,7 +213,7 @@ def shade(origins, directions, face, t, b1, b2, spp,
                     v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
                     tw = texture_width[tid]
                     th = texture_height[tid]
-                    _bilinear(texels, texture_offset[tid], tw, th, u * tw, (1.0 - v) * th, tex)
+                    _bilinear(texels, texture_offset[tid], tw, th, u * tw, (1.0 - v) * th, True, tex)
                     for c in range(3):
                         rgb[c] *= tex[c]
                 nlen = math.sqrt(nrm[0] * nrm[0] + nrm[1] * nrm[1] + nrm[2] * nrm[2])
@@ -239,7 +244,7 @@ def shade(origins, directions, face, t, b1, b2, spp,
                     lon = fast_atan2(dx, -dz)
                     lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
                     _bilinear(env_flat, 0, env_w, env_h, (lon / (2.0 * math.pi) + 0.5) * env_w,
-                              lat / math.pi * env_h, rgb)
+                              lat / math.pi * env_h, False, rgb)
                 else:
                     for c in range(3):
                         rgb[c] = 0.0

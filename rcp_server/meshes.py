@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +35,8 @@ class Part:
     vertices : (V, 3) float64, scene units;  faces : (F, 3) int64
     corner_colors : (F, 3, 3) float32, linear [0, 1], multiplied into the texture when there is one
     corner_uv : (F, 3, 2) float32 or None;  texture : (h, w, 3) float32 in [0, 1] or None
+    colored : the source carried colors of its own (a texture or material color, vertex or face colors);
+    otherwise corner_colors is the default grey
     """
 
     vertices: np.ndarray
@@ -42,17 +44,30 @@ class Part:
     corner_colors: np.ndarray
     corner_uv: np.ndarray | None = None
     texture: np.ndarray | None = None
+    colored: bool = False
 
     def tinted(self, color) -> Part:
-        tint = np.asarray(color, dtype=np.float32).reshape(1, 1, 3)
-        return Part(self.vertices, self.faces, self.corner_colors * tint, self.corner_uv, self.texture)
+        return replace(self, corner_colors=self.corner_colors * np.asarray(color, np.float32).reshape(1, 1, 3))
+
+
+def _grey(face_count: int) -> np.ndarray:
+    return np.broadcast_to(np.float32(DEFAULT_ALBEDO), (face_count, 3, 3)).copy()
 
 
 def corner_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Shading normals at each face corner: (F, 3, 3) float64 unit vectors, smooth below the crease angle."""
-    mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
-    face_n = np.asarray(mesh.face_normals)
-    corner_n = np.asarray(mesh.vertex_normals)[faces]
+    """Shading normals at each face corner: (F, 3, 3) float64 unit vectors, smooth below the crease angle.
+
+    Vertex normals are area-weighted means of the faces around a vertex (a bincount per axis, which is
+    what lets a wave-deformed sea be re-shaded every frame).
+    """
+    tri = vertices[faces]
+    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = twice the area
+    face_n = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-30)
+    index = faces.ravel()
+    vertex_n = np.stack([np.bincount(index, np.repeat(cross[:, k], 3), minlength=len(vertices))
+                         for k in range(3)], axis=1)
+    vertex_n /= np.maximum(np.linalg.norm(vertex_n, axis=1, keepdims=True), 1e-30)
+    corner_n = vertex_n[faces]
     crease = np.einsum("fck,fk->fc", corner_n, face_n) < CREASE_COS
     corner_n[crease] = np.broadcast_to(face_n[:, None, :], corner_n.shape)[crease]
     return corner_n
@@ -74,7 +89,7 @@ def repaired(part: Part, source: str) -> Part:
     if uv is not None and not np.all(np.isfinite(uv)):
         log.warning("%s: non-finite texture coordinates replaced by 0", source)
         uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0)
-    return Part(part.vertices, part.faces[keep], part.corner_colors[keep], uv, part.texture)
+    return replace(part, faces=part.faces[keep], corner_colors=part.corner_colors[keep], corner_uv=uv)
 
 
 def _image_array(image) -> np.ndarray:
@@ -96,9 +111,10 @@ def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
     faces = np.asarray(mesh.faces, dtype=np.int64)
     vertices = np.asarray(mesh.vertices, dtype=np.float64)
     visual = mesh.visual
-    colors = np.broadcast_to(np.float32(DEFAULT_ALBEDO), (len(faces), 3, 3)).copy()
+    colors = _grey(len(faces))
     uv = texture = None
     kind = getattr(visual, "kind", None)
+    colored = kind in ("texture", "vertex", "face")
     if kind == "texture":
         material = visual.material
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
@@ -117,7 +133,7 @@ def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
     elif kind == "face":
         face_rgb = np.asarray(visual.face_colors, dtype=np.float32)[:, :3] / 255.0
         colors = np.repeat(face_rgb[:, None, :], 3, axis=1)
-    return repaired(Part(vertices, faces, colors, uv, texture), source)
+    return repaired(Part(vertices, faces, colors, uv, texture, colored), source)
 
 
 def load_mesh_file(path: Path) -> list[Part]:
@@ -164,8 +180,7 @@ def primitive(kind: str, **p) -> Part:
     if kind == "grid":
         vertices, faces, uv = grid(p.get("size", (10.0, 10.0)), p.get("divisions", (10, 10)),
                                    p.get("uv_repeat", (1.0, 1.0)))
-        colors = np.ones((len(faces), 3, 3), np.float32)
-        return Part(vertices, faces, colors, uv[faces].astype(np.float32), None)
+        return Part(vertices, faces, _grey(len(faces)), uv[faces].astype(np.float32))
     if kind == "box":
         mesh = trimesh.creation.box(extents=p.get("extents", (1.0, 1.0, 1.0)))
         mesh.apply_translation([0.0, mesh.extents[1] / 2, 0.0])
@@ -181,4 +196,4 @@ def primitive(kind: str, **p) -> Part:
     else:
         raise MeshError(f"unknown primitive {kind!r}")
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    return Part(np.asarray(mesh.vertices, dtype=np.float64), faces, np.ones((len(faces), 3, 3), np.float32))
+    return Part(np.asarray(mesh.vertices, dtype=np.float64), faces, _grey(len(faces)))

@@ -100,26 +100,43 @@ def _transform_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
     return p @ m[:3, :3].T + m[:3, 3]
 
 
-def build_geometry(objects: list[SceneObject], time: float) -> Geometry:
-    """Concatenate all instances of all objects, placed and deformed at ``time``."""
+def _placed(obj: SceneObject, time: float) -> list[tuple[np.ndarray, np.ndarray, Part]]:
+    """World triangles (F, 3, 3) and unit corner normals (F, 3, 3) of each instance of ``obj`` at ``time``."""
+    vertices = obj.part.vertices
+    if obj.waves:
+        vertices = vertices.copy()
+        for w in obj.waves:
+            vertices[:, 1] += w.height(vertices[:, 0], vertices[:, 2], time)
+    local_normals = corner_normals(vertices, obj.part.faces)
+    motion = obj.motion(time) if obj.motion is not None else np.eye(4)
+    placed = []
+    for world_from_object, part in obj.instances:
+        m = world_from_object @ motion
+        tri = _transform_points(m, vertices[part.faces].reshape(-1, 3)).reshape(-1, 3, 3)
+        n = (local_normals.reshape(-1, 3) @ np.linalg.inv(m[:3, :3])).reshape(-1, 3, 3)  # inverse transpose
+        n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
+        if np.linalg.det(m[:3, :3]) < 0:  # a mirroring transform flips the winding; keep normals outward
+            n = -n
+        placed.append((tri, n, part))
+    return placed
+
+
+def build_geometry(objects: list[SceneObject], time: float, static_cache: dict | None = None) -> Geometry:
+    """Concatenate all instances of all objects, placed and deformed at ``time``.
+
+    ``static_cache`` keeps the placed instances of objects that do not move, so an animated scene
+    re-places only what moves.
+    """
     tris, normals, colors, uvs, tex_ids = [], [], [], [], []
     textures: dict[int, tuple[int, np.ndarray]] = {}  # id(texture array) -> (index, array)
     for obj in objects:
-        vertices = obj.part.vertices
-        if obj.waves:
-            vertices = vertices.copy()
-            for w in obj.waves:
-                vertices[:, 1] += w.height(vertices[:, 0], vertices[:, 2], time)
-        local_normals = corner_normals(vertices, obj.part.faces)
-        motion = obj.motion(time) if obj.motion is not None else np.eye(4)
-        for world_from_object, part in obj.instances:
-            m = world_from_object @ motion
-            normal_m = np.linalg.inv(m[:3, :3]).T
-            tri = _transform_points(m, vertices[part.faces].reshape(-1, 3)).reshape(-1, 3, 3)
-            n = (local_normals.reshape(-1, 3) @ normal_m.T).reshape(-1, 3, 3)
-            n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
-            if np.linalg.det(m[:3, :3]) < 0:  # a mirroring transform flips the winding; keep normals outward
-                n = -n
+        if obj.animated or static_cache is None:
+            placed = _placed(obj, time)
+        else:
+            if id(obj) not in static_cache:
+                static_cache[id(obj)] = _placed(obj, time)
+            placed = static_cache[id(obj)]
+        for tri, n, part in placed:
             tris.append(tri)
             normals.append(n)
             colors.append(part.corner_colors)
@@ -162,6 +179,7 @@ class Scene:
     paint: dict = field(default_factory=dict)  # default painting parameters of this scene
     z_max: float | None = None  # depth a miss records; derived from the scene's size when None
     _cache: dict = field(default_factory=dict, repr=False)
+    _static: dict = field(default_factory=dict, repr=False)  # placed instances of objects that never move
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     @property
@@ -178,7 +196,7 @@ class Scene:
         key = float(time) if self.animated else 0.0
         with self._lock:
             if key not in self._cache:
-                geometry = build_geometry(self.objects, key)
+                geometry = build_geometry(self.objects, key, self._static)
                 tracer = Tracer(geometry.triangles) if geometry.face_count else None
                 while len(self._cache) >= 4:
                     self._cache.pop(next(iter(self._cache)))

@@ -13,12 +13,13 @@ import os
 import re
 import tomllib
 import zlib
+from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Literal
 
 import numpy as np
 import trimesh
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .camera import Camera, CameraError
 from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
@@ -119,6 +120,9 @@ class WaveSpec(_Model):
 
 
 class ObjectSpec(Placement):
+    """An object: one mesh or primitive, its colors, where it stands (once, in instances, or scattered),
+    and how it moves."""
+
     name: str = ""
     mesh: str | None = None
     primitive: PrimitiveSpec | None = None
@@ -131,6 +135,12 @@ class ObjectSpec(Placement):
     spin: SpinSpec | None = None
     bob: BobSpec | None = None
     waves: list[WaveSpec] = []
+
+    @model_validator(mode="after")
+    def _one_placement_list(self):
+        if self.instances and self.scatter is not None:
+            raise ValueError("give 'instances' or 'scatter', not both")
+        return self
 
 
 class SceneSpec(_Model):
@@ -162,12 +172,10 @@ def _instances(spec: ObjectSpec) -> list[np.ndarray]:
     return placed
 
 
-def _tints(spec: ObjectSpec, count: int, has_own_colors: bool) -> np.ndarray:
-    """Albedo multiplier per instance: (count, 3)."""
-    base = np.asarray(spec.color if spec.color is not None else
-                      ((1.0, 1.0, 1.0) if has_own_colors else DEFAULT_ALBEDO), dtype=np.float64)
+def _tints(spec: ObjectSpec, count: int, base) -> np.ndarray:
+    """Albedo multiplier per instance: (count, 3): ``base``, or picks from the palette, then jittered."""
     rng = np.random.default_rng(zlib.crc32(spec.name.encode()))  # stable across runs, unlike hash()
-    colors = np.tile(base, (count, 1))
+    colors = np.tile(np.asarray(base, dtype=np.float64), (count, 1))
     if spec.palette:
         colors = np.asarray(spec.palette, dtype=np.float64)[rng.integers(0, len(spec.palette), count)]
     if spec.color_jitter:
@@ -210,9 +218,13 @@ def _scene_object(spec: ObjectSpec, folder: Path, where: str) -> list[SceneObjec
         if texture is not None:
             if part.corner_uv is None:
                 raise SceneError(f"{where}: 'texture' needs a mesh with texture coordinates")
-            part = Part(part.vertices, part.faces, part.corner_colors, part.corner_uv, texture)
-        own = part.texture is not None or not np.allclose(part.corner_colors, DEFAULT_ALBEDO)
-        tints = _tints(spec, len(placements), own)
+            part = replace(part, texture=texture)
+        # 'color' multiplies the colors a part carries (and any texture); a plain part takes it as albedo
+        if not part.colored:
+            part = replace(part, corner_colors=np.ones_like(part.corner_colors))
+        white = part.colored or part.texture is not None
+        base = spec.color if spec.color is not None else ((1.0, 1.0, 1.0) if white else DEFAULT_ALBEDO)
+        tints = _tints(spec, len(placements), base)
         instances = [(m, part.tinted(tint)) for m, tint in zip(placements, tints, strict=True)]
         objects.append(SceneObject(f"{spec.name or where}#{k}", part, instances, motion, waves))
     return objects
