@@ -116,6 +116,7 @@ def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
     kind = getattr(visual, "kind", None)
     colored = kind in ("texture", "vertex", "face")
     if kind == "texture":
+        colors[:] = 1.0  # glTF's base color factor and OBJ's Kd default to white over a texture
         material = visual.material
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
         factor = getattr(material, "baseColorFactor", None)
@@ -133,7 +134,12 @@ def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
     elif kind == "face":
         face_rgb = np.asarray(visual.face_colors, dtype=np.float32)[:, :3] / 255.0
         colors = np.repeat(face_rgb[:, None, :], 3, axis=1)
-    return repaired(Part(vertices, faces, colors, uv, texture, colored), source)
+    part = repaired(Part(vertices, faces, colors, uv, texture, colored), source)
+    # weld corners that share a position (a triangle soup, UV seams) so normals shade smooth across
+    # them; colors and UVs live per corner, so welding changes nothing else
+    unique, inverse = trimesh.grouping.unique_rows(part.vertices[part.faces].reshape(-1, 3), digits=8)
+    welded = part.vertices[part.faces].reshape(-1, 3)[unique]
+    return replace(part, vertices=welded, faces=inverse.reshape(-1, 3).astype(np.int64))
 
 
 def load_mesh_file(path: Path) -> list[Part]:
@@ -142,7 +148,8 @@ def load_mesh_file(path: Path) -> list[Part]:
     if not path.is_file():
         raise MeshError(f"{path}: no such mesh file")
     try:
-        loaded = trimesh.load_scene(str(path))
+        # process=False: trimesh would silently drop non-finite vertices; repaired() reports them
+        loaded = trimesh.load_scene(str(path), process=False)
         meshes = [m for m in loaded.dump() if isinstance(m, trimesh.Trimesh)]
     except Exception as exc:  # trimesh raises anything from ValueError to KeyError on a bad file
         raise MeshError(f"{path}: trimesh cannot read it ({type(exc).__name__}: {exc})") from None

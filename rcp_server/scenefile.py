@@ -26,7 +26,7 @@ from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_textur
 from .scene import Environment, Light, Scene, SceneObject, Waves
 
 SCENES_DIR = Path(os.environ.get("RCP_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
-SCENE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$")
+SCENE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z")  # \Z, not $: "$" lets a newline through
 
 
 class SceneError(ValueError):
@@ -302,12 +302,12 @@ def mesh_scene(path: Path) -> Scene:
 
 
 def scene_names(folder: Path = SCENES_DIR) -> list[str]:
-    return sorted(p.stem for p in Path(folder).glob("*.toml") if SCENE_NAME.match(p.stem))
+    return sorted(p.stem for p in Path(folder).glob("*.toml") if SCENE_NAME.fullmatch(p.stem))
 
 
 def load_scene(ref: str, folder: Path = SCENES_DIR) -> Scene:
     """A scene by name (from ``folder``), by scene file path (``.toml``), or by mesh file path."""
-    if SCENE_NAME.match(ref) and (Path(folder) / f"{ref}.toml").is_file():
+    if SCENE_NAME.fullmatch(ref) and (Path(folder) / f"{ref}.toml").is_file():
         return load_scene_file(Path(folder) / f"{ref}.toml", ref)
     path = Path(ref)
     if path.suffix.lower() == ".toml":
