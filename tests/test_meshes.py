@@ -96,8 +96,9 @@ def test_nan_vertices_are_repaired_with_a_warning(tmp_path, caplog, suffix):
     faces = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4], [0, 1, 4]])
     mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
     path = tmp_path / f"nan.{suffix}"
-    path.write_bytes(mesh.export(file_type=suffix) if suffix == "obj"
-                     else trimesh.exchange.ply.export_ply(mesh, encoding="ascii"))
+    data = (trimesh.exchange.obj.export_obj(mesh) if suffix == "obj"
+            else trimesh.exchange.ply.export_ply(mesh, encoding="ascii"))
+    path.write_bytes(data.encode() if isinstance(data, str) else data)
     assert "nan" in path.read_text().lower()
     with caplog.at_level(logging.WARNING, logger="rcp"):
         parts = load_mesh_file(path)
