@@ -18,7 +18,9 @@ CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0)
 SKY = (0.2, 0.35, 0.6)
 
 # grid faces +y in the xz plane; a quarter turn about +x makes it face +z (towards the standard camera)
-FACE_PLUS_Z = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
+FACE_PLUS_Z = np.array(
+    [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
+)
 
 
 def translate(x=0.0, y=0.0, z=0.0) -> np.ndarray:
@@ -27,9 +29,17 @@ def translate(x=0.0, y=0.0, z=0.0) -> np.ndarray:
     return m
 
 
-def facing_plane(depth: float, size=(16.0, 16.0), divisions=(4, 4), color=(1.0, 1.0, 1.0),
-                 center=(0.0, 0.0), colors_of=None, texture=None, uv_repeat=(1.0, 1.0),
-                 name="plane") -> SceneObject:
+def facing_plane(
+    depth: float,
+    size=(16.0, 16.0),
+    divisions=(4, 4),
+    color=(1.0, 1.0, 1.0),
+    center=(0.0, 0.0),
+    colors_of=None,
+    texture=None,
+    uv_repeat=(1.0, 1.0),
+    name="plane",
+) -> SceneObject:
     """A plane at view depth ``depth`` facing the standard camera.
 
     ``colors_of(points (..., 3) world) -> (..., 3)`` gives per-corner albedo from world position.
@@ -37,8 +47,11 @@ def facing_plane(depth: float, size=(16.0, 16.0), divisions=(4, 4), color=(1.0, 
     part = primitive("grid", size=size, divisions=divisions, uv_repeat=uv_repeat)
     world = translate(center[0], center[1], -depth) @ FACE_PLUS_Z
     corners = part.vertices[part.faces] @ world[:3, :3].T + world[:3, 3]
-    colors = (np.asarray(colors_of(corners), np.float32) if colors_of is not None
-              else np.broadcast_to(np.float32(color), corners.shape).copy())
+    colors = (
+        np.asarray(colors_of(corners), np.float32)
+        if colors_of is not None
+        else np.broadcast_to(np.float32(color), corners.shape).copy()
+    )
     part = Part(part.vertices, part.faces, colors.astype(np.float32), part.corner_uv, texture)
     return SceneObject(name, part, [(world, part)])
 
@@ -77,8 +90,9 @@ def busy_scene() -> Scene:
     """Lit, textured and colored objects at several depths in front of a gradient sky: every mapping moves."""
     rng = np.random.default_rng(0)
     texture = rng.uniform(0, 1, (8, 8, 3)).astype(np.float32)
-    sky = np.stack([*np.meshgrid(np.linspace(0, 1, 32), np.linspace(0, 1, 16)), np.full((16, 32), 0.3)],
-                   axis=2).astype(np.float32)
+    sky = np.stack(
+        [*np.meshgrid(np.linspace(0, 1, 32), np.linspace(0, 1, 16)), np.full((16, 32), 0.3)], axis=2
+    ).astype(np.float32)
     objects = [
         facing_plane(9.0, size=(10.0, 6.0), divisions=(3, 2), texture=texture, center=(0.0, -2.0)),
         sphere((-1.2, 0.3, -4.5), 1.0, 2, (0.9, 0.2, 0.1), "red"),

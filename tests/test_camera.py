@@ -39,12 +39,18 @@ def test_plane_points_formula_and_corners():
     r, u, f = cam.basis()
     tan_half = math.tan(math.radians(47.0) / 2)
     a = 40 / 25
-    expected = (np.asarray(cam.eye) + f + ((2 * s - 1) * a * tan_half)[:, None] * r
-                + ((1 - 2 * t) * tan_half)[:, None] * u)
+    expected = (
+        np.asarray(cam.eye)
+        + f
+        + ((2 * s - 1) * a * tan_half)[:, None] * r
+        + ((1 - 2 * t) * tan_half)[:, None] * u
+    )
     np.testing.assert_allclose(plane_points(cam, region, s, t), expected, rtol=0, atol=1e-13)
     # (s, t) = (0, 0) is the top-left corner: left of centre along r, above along u
     top_left = plane_points(cam, region, np.array([0.0]), np.array([0.0]))[0]
-    np.testing.assert_allclose(top_left, np.asarray(cam.eye) + f - a * tan_half * r + tan_half * u, atol=1e-13)
+    np.testing.assert_allclose(
+        top_left, np.asarray(cam.eye) + f - a * tan_half * r + tan_half * u, atol=1e-13
+    )
     centre = plane_points(cam, region, np.array([0.5]), np.array([0.5]))[0]
     np.testing.assert_allclose(centre, np.asarray(cam.eye) + f, atol=1e-15)
 
@@ -71,20 +77,23 @@ def test_pixel_pitch_is_the_distance_between_neighbouring_pixel_centres(width, h
     np.testing.assert_allclose(pts[2] - pts[0], -p * u, rtol=0, atol=1e-14)
 
 
-@pytest.mark.parametrize("kwargs", [
-    {"eye": (1, 2, 3), "look_at": (1, 2, 3)},
-    {"eye": (0, 0, 0), "look_at": (0, 5, 0)},  # up parallel to the view
-    {"eye": (0, 0, 0), "look_at": (0, -5, 0)},  # up anti-parallel to the view
-    {"eye": (0, 0, 0), "look_at": (1, 0, 0), "up": (2, 0, 0)},
-    {"eye": (0, 0, 0), "look_at": (1, 0, 0), "up": (0, 0, 0)},
-    {"eye": (float("nan"), 0, 0), "look_at": (1, 0, 0)},
-    {"eye": (0, 0, 0), "look_at": (1, float("inf"), 0)},
-    {"eye": (0, 0, 0), "look_at": (1, 0, 0), "up": (0, float("nan"), 0)},
-    {"eye": (0, 0, 0), "look_at": (1, 0, 0), "fov": float("nan")},
-    {"eye": (0, 0, 0), "look_at": (1, 0, 0), "fov": 0.0},
-    {"eye": (0, 0, 0), "look_at": (1, 0, 0), "fov": 180.0},
-    {"eye": (0, 0), "look_at": (1, 0, 0)},
-])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"eye": (1, 2, 3), "look_at": (1, 2, 3)},
+        {"eye": (0, 0, 0), "look_at": (0, 5, 0)},  # up parallel to the view
+        {"eye": (0, 0, 0), "look_at": (0, -5, 0)},  # up anti-parallel to the view
+        {"eye": (0, 0, 0), "look_at": (1, 0, 0), "up": (2, 0, 0)},
+        {"eye": (0, 0, 0), "look_at": (1, 0, 0), "up": (0, 0, 0)},
+        {"eye": (float("nan"), 0, 0), "look_at": (1, 0, 0)},
+        {"eye": (0, 0, 0), "look_at": (1, float("inf"), 0)},
+        {"eye": (0, 0, 0), "look_at": (1, 0, 0), "up": (0, float("nan"), 0)},
+        {"eye": (0, 0, 0), "look_at": (1, 0, 0), "fov": float("nan")},
+        {"eye": (0, 0, 0), "look_at": (1, 0, 0), "fov": 0.0},
+        {"eye": (0, 0, 0), "look_at": (1, 0, 0), "fov": 180.0},
+        {"eye": (0, 0), "look_at": (1, 0, 0)},
+    ],
+)
 def test_degenerate_cameras_raise_camera_error(kwargs):
     with pytest.raises(CameraError):
         Camera(**kwargs)
@@ -98,13 +107,16 @@ def test_camera_error_is_a_value_error_and_moved_revalidates():
         cam.moved(look_at=(0, 0, 5))
 
 
-@pytest.mark.parametrize("region,rows", [
-    (Region(13, 11), 3),
-    (Region(13, 11), 11),
-    (Region(13, 11), 100),
-    (Region(40, 30, 7, 4, 9, 17), 5),
-    (Region(40, 30, 7, 4, 9, 17), 1),
-])
+@pytest.mark.parametrize(
+    "region,rows",
+    [
+        (Region(13, 11), 3),
+        (Region(13, 11), 11),
+        (Region(13, 11), 100),
+        (Region(40, 30, 7, 4, 9, 17), 5),
+        (Region(40, 30, 7, 4, 9, 17), 1),
+    ],
+)
 def test_region_tiles_cover_the_region_exactly_once(region, rows):
     tiles = region.tiles(rows)
     assert all(t.height <= rows and t.width == region.width and t.x0 == region.x0 for t in tiles)
@@ -125,7 +137,9 @@ def test_region_pixel_coords_are_absolute_row_major():
     assert Region(10, 8, 2, 3).shape == (5, 8)
 
 
-@pytest.mark.parametrize("args", [(0, 5), (5, 0), (10, 8, 8, 0, 3, 1), (10, 8, 0, 7, 1, 2), (10, 8, -1, 0, 2, 2)])
+@pytest.mark.parametrize(
+    "args", [(0, 5), (5, 0), (10, 8, 8, 0, 3, 1), (10, 8, 0, 7, 1, 2), (10, 8, -1, 0, 2, 2)]
+)
 def test_region_outside_the_image_is_refused(args):
     with pytest.raises(ValueError):
         Region(*args)

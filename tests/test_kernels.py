@@ -13,11 +13,17 @@ from rcp_server import kernels
 from rcp_server.camera import Camera, Region, plane_points
 from rcp_server.painting import PaintParams, PaintState, _frame, displacements
 
-KINDS = {"zero": kernels.FIELD_ZERO, "color": kernels.FIELD_COLOR, "depth": kernels.FIELD_DEPTH,
-         "normal": kernels.FIELD_NORMAL, "given": kernels.FIELD_GIVEN}
+KINDS = {
+    "zero": kernels.FIELD_ZERO,
+    "color": kernels.FIELD_COLOR,
+    "depth": kernels.FIELD_DEPTH,
+    "normal": kernels.FIELD_NORMAL,
+    "given": kernels.FIELD_GIVEN,
+}
 
 
 # ---- cast_rays ----
+
 
 def ref_field(kind, scale, basis, color, depth, normal, direction, z0, given, noise, noise_scale):
     """scale * (D + noise_scale * noise), non-finite -> 0; (n, 3) float64."""
@@ -83,11 +89,35 @@ def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
     origins = np.full((n * spp, 3), 7.0, np.float32)
     directions = np.full((n * spp, 3), 7.0, np.float32)
     bad = kernels.cast_rays(
-        np.asarray(camera.eye, np.float64), np.stack(camera.basis()), camera.half_height(),
-        region.full_width / region.full_height, region.full_width, region.full_height, region.x0, region.y0,
-        region.width, xi, eta, data["color"], data["depth"], data["normal"], data["direction"], float(z0),
-        target[0], target[1], data["given"], eye[0], eye[1], data["given"][::-1].copy(), data["noise"],
-        noise_scale, v_p, v_e, origins, directions)
+        np.asarray(camera.eye, np.float64),
+        np.stack(camera.basis()),
+        camera.half_height(),
+        region.full_width / region.full_height,
+        region.full_width,
+        region.full_height,
+        region.x0,
+        region.y0,
+        region.width,
+        xi,
+        eta,
+        data["color"],
+        data["depth"],
+        data["normal"],
+        data["direction"],
+        float(z0),
+        target[0],
+        target[1],
+        data["given"],
+        eye[0],
+        eye[1],
+        data["given"][::-1].copy(),
+        data["noise"],
+        noise_scale,
+        v_p,
+        v_e,
+        origins,
+        directions,
+    )
     return bad, v_p, v_e, origins, directions
 
 
@@ -102,12 +132,36 @@ def test_cast_rays_matches_numpy_reference(target_kind, eye_kind, noise_scale):
     z0 = 4.5
     target = (KINDS[target_kind], 0.07)
     eye = (KINDS[eye_kind], 0.3)
-    bad, v_p, v_e, origins, directions = _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale)
+    bad, v_p, v_e, origins, directions = _run_cast(
+        camera, region, xi, eta, data, z0, target, eye, noise_scale
+    )
     basis = np.stack(camera.basis())
-    ref_vp = ref_field(target[0], target[1], basis, data["color"], data["depth"], data["normal"], data["direction"],
-                       z0, data["given"], data["noise"], noise_scale)
-    ref_ve = ref_field(eye[0], eye[1], basis, data["color"], data["depth"], data["normal"], data["direction"],
-                       z0, data["given"][::-1], data["noise"], noise_scale)
+    ref_vp = ref_field(
+        target[0],
+        target[1],
+        basis,
+        data["color"],
+        data["depth"],
+        data["normal"],
+        data["direction"],
+        z0,
+        data["given"],
+        data["noise"],
+        noise_scale,
+    )
+    ref_ve = ref_field(
+        eye[0],
+        eye[1],
+        basis,
+        data["color"],
+        data["depth"],
+        data["normal"],
+        data["direction"],
+        z0,
+        data["given"][::-1],
+        data["noise"],
+        noise_scale,
+    )
     np.testing.assert_allclose(v_p, ref_vp, rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(v_e, ref_ve, rtol=1e-12, atol=1e-14)
     ref_o, ref_d, ref_bad = ref_cast_rays(camera, region, xi, eta, ref_vp, ref_ve)
@@ -125,8 +179,9 @@ def test_cast_rays_counts_rays_that_overflow_and_leaves_them_nan():
     data, xi, eta = _cast_inputs(2, region, 2)
     data["given"][:] = 0.0
     data["given"][[4, 10]] = (1.0, 0.0, 0.0)
-    bad, v_p, _, origins, directions = _run_cast(camera, region, xi, eta, data, 1.0,
-                                                 (kernels.FIELD_GIVEN, 1e300), (kernels.FIELD_ZERO, 0.0), 0.0)
+    bad, v_p, _, origins, directions = _run_cast(
+        camera, region, xi, eta, data, 1.0, (kernels.FIELD_GIVEN, 1e300), (kernels.FIELD_ZERO, 0.0), 0.0
+    )
     # |P_p + 1e300 r - eye|^2 overflows: no ray for those pixels' samples, and they are counted
     assert bad == 4
     nan_rows = np.isnan(directions).any(axis=1)
@@ -141,7 +196,9 @@ def test_cast_rays_agrees_with_the_painting_reference():
     camera = Camera((1.0, 0.5, 4.0), (0.0, 0.0, 0.0), fov=45.0)
     region = Region(20, 14, 4, 3, 9, 7)
     for mapping in ("color", "depth", "normal"):
-        params = PaintParams(mapping=mapping, eye_mapping="depth", lambda_p=6.0, lambda_e=0.2, noise=0.4, spp=2)
+        params = PaintParams(
+            mapping=mapping, eye_mapping="depth", lambda_p=6.0, lambda_e=0.2, noise=0.4, spp=2
+        )
         frame = _frame(camera, region, params)
         data, _, _ = _cast_inputs(3, region, 2)
         state = PaintState(region, data["color"], data["depth"], data["normal"].copy(), data["direction"])
@@ -149,16 +206,29 @@ def test_cast_rays_agrees_with_the_painting_reference():
         pitch = camera.pixel_pitch(region.full_height)
         data["noise"] = frame.noise
         _, kv_p, kv_e, origins, directions = _run_cast(
-            camera, region, frame.xi, frame.eta, data, 3.0, (KINDS[mapping], params.lambda_p * pitch),
-            (kernels.FIELD_DEPTH, params.lambda_e), params.noise)
+            camera,
+            region,
+            frame.xi,
+            frame.eta,
+            data,
+            3.0,
+            (KINDS[mapping], params.lambda_p * pitch),
+            (kernels.FIELD_DEPTH, params.lambda_e),
+            params.noise,
+        )
         # the mappings' numpy fields are float32 (the state's dtype); the kernel sums in float64
         np.testing.assert_allclose(kv_p, v_p, rtol=1e-6, atol=1e-7)
         np.testing.assert_allclose(kv_e, v_e, rtol=1e-6, atol=1e-7)
-        target = frame.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
-        np.testing.assert_allclose(directions, target / np.linalg.norm(target, axis=1, keepdims=True), atol=2e-7)
+        target = (
+            frame.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
+        )
+        np.testing.assert_allclose(
+            directions, target / np.linalg.norm(target, axis=1, keepdims=True), atol=2e-7
+        )
 
 
 # ---- shade ----
+
 
 def ref_bilinear(texels, offset, width, height, x, y, wrap_y):
     """Bilinear lookup at texel coordinates (x, y) (texel centres at +0.5): x wraps; y wraps or clamps."""
@@ -178,12 +248,38 @@ def ref_bilinear(texels, offset, width, height, x, y, wrap_y):
     def texel(r, c):
         return texels[offset + r * width + c].astype(np.float64)
 
-    return ((1 - fx) * (1 - fy) * texel(r0, c0) + fx * (1 - fy) * texel(r0, c1)
-            + (1 - fx) * fy * texel(r1, c0) + fx * fy * texel(r1, c1))
+    return (
+        (1 - fx) * (1 - fy) * texel(r0, c0)
+        + fx * (1 - fy) * texel(r0, c1)
+        + (1 - fx) * fy * texel(r1, c0)
+        + fx * fy * texel(r1, c1)
+    )
 
 
-def ref_shade(origins, directions, face, t, b1, b2, spp, normals, colors, uv, texture_id, texels, texture_offset,
-              texture_width, texture_height, environment, light_dir, ambient, lit, eye, forward, z_max):
+def ref_shade(
+    origins,
+    directions,
+    face,
+    t,
+    b1,
+    b2,
+    spp,
+    normals,
+    colors,
+    uv,
+    texture_id,
+    texels,
+    texture_offset,
+    texture_width,
+    texture_height,
+    environment,
+    light_dir,
+    ambient,
+    lit,
+    eye,
+    forward,
+    z_max,
+):
     o = origins.astype(np.float64)
     d = directions.astype(np.float64)
     n = len(face)
@@ -194,7 +290,9 @@ def ref_shade(origins, directions, face, t, b1, b2, spp, normals, colors, uv, te
     z = np.full(n, float(z_max))
     # ---- hits ----
     f = face[hit]
-    w = np.stack([1.0 - b1.astype(np.float64) - b2, b1.astype(np.float64), b2.astype(np.float64)], axis=1)[hit]
+    w = np.stack([1.0 - b1.astype(np.float64) - b2, b1.astype(np.float64), b2.astype(np.float64)], axis=1)[
+        hit
+    ]
     albedo = np.einsum("nc,nck->nk", w, colors[f].astype(np.float64))
     nr = np.einsum("nc,nck->nk", w, normals[f].astype(np.float64))
     length = np.linalg.norm(nr, axis=1, keepdims=True)
@@ -205,8 +303,9 @@ def ref_shade(origins, directions, face, t, b1, b2, spp, normals, colors, uv, te
         uvs = np.einsum("nc,nck->nk", w[textured], uv[f][textured].astype(np.float64))
         k = tid[textured]
         tw, th = texture_width[k], texture_height[k]
-        albedo[textured] *= ref_bilinear(texels, texture_offset[k], tw, th, uvs[:, 0] * tw, (1 - uvs[:, 1]) * th,
-                                         True)
+        albedo[textured] *= ref_bilinear(
+            texels, texture_offset[k], tw, th, uvs[:, 0] * tw, (1 - uvs[:, 1]) * th, True
+        )
     dh = d[hit]
     if lit:
         facing = np.where((nr * dh).sum(axis=1) > 0, -1.0, 1.0)
@@ -224,8 +323,15 @@ def ref_shade(origins, directions, face, t, b1, b2, spp, normals, colors, uv, te
         ds = d[sky]
         lon = np.arctan2(ds[:, 0], -ds[:, 2])
         lat = 0.5 * np.pi - np.arctan2(ds[:, 1], np.hypot(ds[:, 0], ds[:, 2]))
-        rgb[sky] = ref_bilinear(environment.reshape(-1, 3), 0, env_w, env_h, (lon / (2 * np.pi) + 0.5) * env_w,
-                                lat / np.pi * env_h, False)
+        rgb[sky] = ref_bilinear(
+            environment.reshape(-1, 3),
+            0,
+            env_w,
+            env_h,
+            (lon / (2 * np.pi) + 0.5) * env_w,
+            lat / np.pi * env_h,
+            False,
+        )
     rgb[~hit & ~finite] = 0.0
     # ---- per-pixel means ----
     color = np.clip(rgb, 0.0, 1.0).reshape(-1, spp, 3).mean(axis=1)
@@ -272,19 +378,39 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
     env = rng.uniform(0, 1, env_shape + (3,)).astype(np.float32)
     light = np.array([-0.3, -1.0, -0.4])
     return dict(
-        origins=rng.normal(size=(n, 3)).astype(np.float32), directions=directions, face=face,
-        t=rng.uniform(0.1, 10, n).astype(np.float32), b1=b1.astype(np.float32), b2=b2.astype(np.float32),
-        spp=spp, normals=normals, colors=colors, uv=uv, texture_id=texture_id, texels=texels,
-        texture_offset=texture_offset, texture_width=texture_width, texture_height=texture_height,
-        environment=env, light_dir=light / np.linalg.norm(light), ambient=0.25, lit=True,
-        eye=np.array([0.2, -0.1, 0.3]), forward=np.array([0.0, 0.6, -0.8]), z_max=50.0,
+        origins=rng.normal(size=(n, 3)).astype(np.float32),
+        directions=directions,
+        face=face,
+        t=rng.uniform(0.1, 10, n).astype(np.float32),
+        b1=b1.astype(np.float32),
+        b2=b2.astype(np.float32),
+        spp=spp,
+        normals=normals,
+        colors=colors,
+        uv=uv,
+        texture_id=texture_id,
+        texels=texels,
+        texture_offset=texture_offset,
+        texture_width=texture_width,
+        texture_height=texture_height,
+        environment=env,
+        light_dir=light / np.linalg.norm(light),
+        ambient=0.25,
+        lit=True,
+        eye=np.array([0.2, -0.1, 0.3]),
+        forward=np.array([0.0, 0.6, -0.8]),
+        z_max=50.0,
     )
 
 
 def _run_shade(inputs, need=(True, True, True)):
     n_pix = len(inputs["face"]) // inputs["spp"]
-    out = (np.full((n_pix, 3), -9.0, np.float32), np.full(n_pix, -9.0, np.float32),
-           np.full((n_pix, 3), -9.0, np.float32), np.full((n_pix, 3), -9.0, np.float32))
+    out = (
+        np.full((n_pix, 3), -9.0, np.float32),
+        np.full(n_pix, -9.0, np.float32),
+        np.full((n_pix, 3), -9.0, np.float32),
+        np.full((n_pix, 3), -9.0, np.float32),
+    )
     kernels.shade(*inputs.values(), *out, *need)
     return out
 
@@ -315,8 +441,9 @@ def test_shade_textured_faces_really_are_textured_and_the_sky_really_is_sampled(
     inputs = _shade_inputs(0, spp=1)
     plain = dict(inputs, texture_id=np.full_like(inputs["texture_id"], -1))
     assert not np.allclose(_run_shade(inputs)[0], _run_shade(plain)[0], atol=1e-3)
-    flat_sky = dict(inputs, environment=np.ascontiguousarray(np.broadcast_to(inputs["environment"][:1, :1],
-                                                                            (6, 10, 3))))
+    flat_sky = dict(
+        inputs, environment=np.ascontiguousarray(np.broadcast_to(inputs["environment"][:1, :1], (6, 10, 3)))
+    )
     assert not np.allclose(_run_shade(inputs)[0], _run_shade(flat_sky)[0], atol=1e-3)
 
 
@@ -327,9 +454,12 @@ def test_shade_constant_environment_and_channels_not_needed_are_not_written():
     np.testing.assert_allclose(color, ref[0], rtol=0, atol=1e-6)
     assert np.all(depth == -9.0) and np.all(normal == -9.0) and np.all(direction == -9.0)
     sky_only = (inputs["face"].reshape(-1, 2) < 0).all(axis=1) & np.isfinite(inputs["directions"]).all(
-        axis=1).reshape(-1, 2).all(axis=1)
+        axis=1
+    ).reshape(-1, 2).all(axis=1)
     assert sky_only.sum() > 3
-    np.testing.assert_array_equal(color[sky_only], np.broadcast_to(inputs["environment"][0, 0], (sky_only.sum(), 3)))
+    np.testing.assert_array_equal(
+        color[sky_only], np.broadcast_to(inputs["environment"][0, 0], (sky_only.sum(), 3))
+    )
 
 
 def test_bilinear_texture_tiles_in_both_directions():

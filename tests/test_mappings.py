@@ -16,9 +16,14 @@ def _input(n=64, seed=0, z0=3.0):
     return MappingInput(
         color=rng.uniform(0, 1, (n, 3)).astype(np.float32),
         depth=rng.uniform(0.5, 10, n).astype(np.float32),
-        normal=normal, direction=direction,
-        right=np.array(r), up=np.array(u), forward=np.array(f), z0=z0,
-        i=np.arange(n), j=np.zeros(n, int),
+        normal=normal,
+        direction=direction,
+        right=np.array(r),
+        up=np.array(u),
+        forward=np.array(f),
+        z0=z0,
+        i=np.arange(n),
+        j=np.zeros(n, int),
     )
 
 
@@ -34,32 +39,66 @@ def test_color_field_formula():
     basis = np.stack([data.right, data.up, data.forward])
     expected = (2.0 * data.color.astype(np.float64) - 1.0) @ basis
     np.testing.assert_allclose(get_mapping("color").field(data), expected, rtol=0, atol=1e-6)
-    mid = MappingInput(np.full((5, 3), 0.5, np.float32), None, None, None, data.right, data.up, data.forward,
-                       1.0, np.arange(5), np.arange(5))
+    mid = MappingInput(
+        np.full((5, 3), 0.5, np.float32),
+        None,
+        None,
+        None,
+        data.right,
+        data.up,
+        data.forward,
+        1.0,
+        np.arange(5),
+        np.arange(5),
+    )
     assert np.all(get_mapping("color").field(mid) == 0.0)
 
 
 def test_depth_field_is_color_field_times_distance_from_focus():
     data = _input(z0=4.0)
-    expected = ((2.0 * data.color.astype(np.float64) - 1.0) @ np.stack([data.right, data.up, data.forward])
-                * np.abs(data.depth.astype(np.float64) - 4.0)[:, None])
+    expected = (
+        (2.0 * data.color.astype(np.float64) - 1.0)
+        @ np.stack([data.right, data.up, data.forward])
+        * np.abs(data.depth.astype(np.float64) - 4.0)[:, None]
+    )
     np.testing.assert_allclose(get_mapping("depth").field(data), expected, rtol=1e-5, atol=1e-5)
 
 
 def test_depth_field_vanishes_exactly_at_the_focus_depth():
     data = _input(z0=2.5)
-    focused = MappingInput(data.color, np.full(len(data.color), 2.5, np.float32), None, None,
-                           data.right, data.up, data.forward, 2.5, data.i, data.j)
+    focused = MappingInput(
+        data.color,
+        np.full(len(data.color), 2.5, np.float32),
+        None,
+        None,
+        data.right,
+        data.up,
+        data.forward,
+        2.5,
+        data.i,
+        data.j,
+    )
     assert np.all(get_mapping("depth").field(focused) == 0.0)
 
 
 def test_normal_field_is_direction_cross_normal_and_vanishes_when_parallel():
     data = _input()
-    np.testing.assert_allclose(get_mapping("normal").field(data),
-                               np.cross(data.direction.astype(np.float64), data.normal), atol=1e-6)
+    np.testing.assert_allclose(
+        get_mapping("normal").field(data), np.cross(data.direction.astype(np.float64), data.normal), atol=1e-6
+    )
     for normal in (-data.direction, data.direction):
-        parallel = MappingInput(data.color, None, normal.astype(np.float32), data.direction,
-                                data.right, data.up, data.forward, 1.0, data.i, data.j)
+        parallel = MappingInput(
+            data.color,
+            None,
+            normal.astype(np.float32),
+            data.direction,
+            data.right,
+            data.up,
+            data.forward,
+            1.0,
+            data.i,
+            data.j,
+        )
         assert np.all(get_mapping("normal").field(parallel) == 0.0)
 
 

@@ -7,7 +7,15 @@ import pytest
 import trimesh
 from PIL import Image
 
-from rcp_server.meshes import DEFAULT_ALBEDO, MeshError, Part, corner_normals, load_mesh_file, primitive, repaired
+from rcp_server.meshes import (
+    DEFAULT_ALBEDO,
+    MeshError,
+    Part,
+    corner_normals,
+    load_mesh_file,
+    primitive,
+    repaired,
+)
 
 
 def _write(path, text):
@@ -57,12 +65,15 @@ def test_ply_face_colors_and_stl_load(tmp_path):
     np.testing.assert_allclose(stl[0].corner_colors, np.broadcast_to(np.float32(DEFAULT_ALBEDO), (12, 3, 3)))
 
 
-@pytest.mark.parametrize("name,content", [
-    ("garbage.obj", b"\x00\xff\x13garbage\x00" * 40),
-    ("garbage.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 999\nend_header\n\x01\x02"),
-    ("garbage.glb", b"glTF\x02\x00\x00\x00garbage"),
-    ("garbage.stl", b"solid x\nfacet normal 0 0\nendsolid"),
-])
+@pytest.mark.parametrize(
+    "name,content",
+    [
+        ("garbage.obj", b"\x00\xff\x13garbage\x00" * 40),
+        ("garbage.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 999\nend_header\n\x01\x02"),
+        ("garbage.glb", b"glTF\x02\x00\x00\x00garbage"),
+        ("garbage.stl", b"solid x\nfacet normal 0 0\nendsolid"),
+    ],
+)
 def test_unreadable_mesh_file_is_a_mesh_error_naming_the_file(tmp_path, name, content):
     path = tmp_path / name
     path.write_bytes(content)
@@ -96,8 +107,11 @@ def test_nan_vertices_are_repaired_with_a_warning(tmp_path, caplog, suffix):
     faces = np.array([[0, 1, 2], [1, 3, 2], [2, 3, 4], [0, 1, 4]])
     mesh = trimesh.Trimesh(vertices, faces, process=False, validate=False)
     path = tmp_path / f"nan.{suffix}"
-    data = (trimesh.exchange.obj.export_obj(mesh) if suffix == "obj"
-            else trimesh.exchange.ply.export_ply(mesh, encoding="ascii"))
+    data = (
+        trimesh.exchange.obj.export_obj(mesh)
+        if suffix == "obj"
+        else trimesh.exchange.ply.export_ply(mesh, encoding="ascii")
+    )
     path.write_bytes(data.encode() if isinstance(data, str) else data)
     assert "nan" in path.read_text().lower()
     with caplog.at_level(logging.WARNING, logger="rcp"):
@@ -105,8 +119,11 @@ def test_nan_vertices_are_repaired_with_a_warning(tmp_path, caplog, suffix):
     assert len(parts) == 1
     tri = parts[0].vertices[parts[0].faces]
     assert np.all(np.isfinite(tri))
-    np.testing.assert_allclose(tri.reshape(-1, 3)[np.lexsort(tri.reshape(-1, 3).T)],
-                               np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), atol=0)
+    np.testing.assert_allclose(
+        tri.reshape(-1, 3)[np.lexsort(tri.reshape(-1, 3).T)],
+        np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float),
+        atol=0,
+    )
     # the three faces that touched a non-finite vertex are gone, and the user is told so
     warnings = [r.getMessage() for r in caplog.records if r.name == "rcp" and r.levelno == logging.WARNING]
     assert any(str(path) in w for w in warnings), warnings
@@ -130,22 +147,30 @@ def test_repaired_counts_and_keeps_good_faces(caplog):
 
 def test_obj_with_missing_texture_keeps_its_flat_color_and_warns(tmp_path, caplog):
     _write(tmp_path / "tex.mtl", "newmtl m\nKd 0.2 0.6 0.4\nmap_Kd missing.png\n")
-    path = _write(tmp_path / "tex.obj", "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n"
-                                        "usemtl m\nf 1/1 2/2 3/3\n")
+    path = _write(
+        tmp_path / "tex.obj",
+        "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\n",
+    )
     with caplog.at_level(logging.WARNING, logger="rcp"):
         parts = load_mesh_file(path)
     assert parts[0].texture is None
-    np.testing.assert_allclose(parts[0].corner_colors, np.broadcast_to([0.2, 0.6, 0.4], (1, 3, 3)), atol=1 / 255)
-    assert any(str(path) in r.getMessage() and "texture" in r.getMessage()
-               for r in caplog.records if r.name == "rcp")
+    np.testing.assert_allclose(
+        parts[0].corner_colors, np.broadcast_to([0.2, 0.6, 0.4], (1, 3, 3)), atol=1 / 255
+    )
+    assert any(
+        str(path) in r.getMessage() and "texture" in r.getMessage() for r in caplog.records if r.name == "rcp"
+    )
 
 
 def test_obj_with_texture_loads_uv_and_image(tmp_path):
     Image.fromarray(np.array([[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]], np.uint8)).save(
-        tmp_path / "t.png")
+        tmp_path / "t.png"
+    )
     _write(tmp_path / "tex.mtl", "newmtl m\nKd 1 1 1\nmap_Kd t.png\n")
-    path = _write(tmp_path / "tex.obj", "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n"
-                                        "usemtl m\nf 1/1 2/2 3/3\n")
+    path = _write(
+        tmp_path / "tex.obj",
+        "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\n",
+    )
     part = load_mesh_file(path)[0]
     assert part.texture is not None and part.texture.shape == (2, 2, 3)
     np.testing.assert_array_equal(part.texture[0, 0], [1, 0, 0])
@@ -162,7 +187,9 @@ def test_primitives_sit_on_the_ground_with_outward_normals():
     sphere = primitive("sphere", subdivisions=2, radius=2.0)
     np.testing.assert_allclose(np.linalg.norm(sphere.vertices, axis=1), 2.0, rtol=1e-12)
     n = corner_normals(sphere.vertices, sphere.faces)
-    np.testing.assert_allclose(np.einsum("fck,fck->fc", n, sphere.vertices[sphere.faces] / 2.0), 1.0, atol=1e-3)
+    np.testing.assert_allclose(
+        np.einsum("fck,fck->fc", n, sphere.vertices[sphere.faces] / 2.0), 1.0, atol=1e-3
+    )
     box = primitive("box", extents=(2, 2, 2))
     bn = corner_normals(box.vertices, box.faces)
     # crisp box: every corner keeps its face normal, one of the six axes

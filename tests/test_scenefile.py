@@ -1,4 +1,4 @@
-"""Scene files: valid TOML loads; every broken file is one SceneError line naming the file; names stay inside."""
+"""Scene files: valid TOML loads; a broken file is one SceneError line naming the file; names stay inside."""
 
 import logging
 import math
@@ -85,37 +85,50 @@ def test_scene_by_name_and_scene_names(tmp_path):
     assert "b-2_x, ball" in str(info.value) and "\n" not in str(info.value)
 
 
+CAM = "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n"
+
 BROKEN = {
     "bad_toml": "[camera\neye = [0, 0, 5]\n",
     "unknown_key": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\nzoom = 2\n",
     "unknown_top_key": "colour = 1\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n",
-    "wrong_type": "[camera]\neye = \"up there\"\nlook_at = [0, 0, 0]\n",
+    "wrong_type": '[camera]\neye = "up there"\nlook_at = [0, 0, 0]\n',
     "short_vector": "[camera]\neye = [0, 5]\nlook_at = [0, 0, 0]\n",
     "nan": "[camera]\neye = [nan, 0, 5]\nlook_at = [0, 0, 0]\n",
-    "inf_translate": ("[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-                      "primitive = { type = \"box\" }\ntranslate = [inf, 0, 0]\n"),
+    "inf_translate": (
+        "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
+        'primitive = { type = "box" }\ntranslate = [inf, 0, 0]\n'
+    ),
     "missing_camera": "[environment]\ncolor = [0.1, 0.1, 0.1]\n",
     "degenerate_camera": "[camera]\neye = [1, 2, 3]\nlook_at = [1, 2, 3]\n",
     "up_parallel": "[camera]\neye = [0, 0, 0]\nlook_at = [0, 4, 0]\n",
-    "color_out_of_range": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\ncolor = [2, 0, 0]\n",
-    "both_env": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\ncolor = [1, 0, 0]\nimage = \"x.png\"\n",
-    "missing_env_image": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\nimage = \"sky.png\"\n",
+    "color_out_of_range": CAM + "[environment]\ncolor = [2, 0, 0]\n",
+    "both_env": CAM + '[environment]\ncolor = [1, 0, 0]\nimage = "x.png"\n',
+    "missing_env_image": '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\nimage = "sky.png"\n',
     "zero_light": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[light]\ndirection = [0, 0, 0]\n",
-    "mesh_and_primitive": ("[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = \"m.obj\"\n"
-                           "primitive = { type = \"box\" }\n"),
-    "neither_mesh_nor_primitive": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nname = \"x\"\n",
-    "unknown_primitive": ("[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-                          "primitive = { type = \"torus\" }\n"),
-    "missing_mesh": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = \"nope.obj\"\n",
-    "missing_texture": ("[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-                        "primitive = { type = \"grid\" }\ntexture = \"nope.png\"\n"),
-    "texture_without_uv": ("[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-                           "primitive = { type = \"box\" }\ntexture = \"t.png\"\n"),
+    "mesh_and_primitive": (
+        '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\n'
+        'primitive = { type = "box" }\n'
+    ),
+    "neither_mesh_nor_primitive": '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nname = "x"\n',
+    "unknown_primitive": (
+        '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nprimitive = { type = "torus" }\n'
+    ),
+    "missing_mesh": '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "nope.obj"\n',
+    "missing_texture": (
+        "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
+        'primitive = { type = "grid" }\ntexture = "nope.png"\n'
+    ),
+    "texture_without_uv": (
+        "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
+        'primitive = { type = "box" }\ntexture = "t.png"\n'
+    ),
     "unknown_paint_key": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\nsmudge = 3\n",
     "bad_paint_value": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\niterations = 0\n",
-    "negative_radius": ("[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-                        "primitive = { type = \"sphere\", radius = -1.0 }\n"),
-    "not_utf8": b"title = \"\xff\xfe\"\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n",
+    "negative_radius": (
+        "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
+        'primitive = { type = "sphere", radius = -1.0 }\n'
+    ),
+    "not_utf8": b'title = "\xff\xfe"\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n',
 }
 
 
@@ -145,7 +158,9 @@ def test_broken_scene_messages_say_what_is_wrong(tmp_path):
     assert "zoom" in message(BROKEN["unknown_key"])
     assert "camera" in message(BROKEN["missing_camera"])
     assert "eye" in message(BROKEN["nan"])
-    assert "mesh" in message(BROKEN["mesh_and_primitive"]) and "primitive" in message(BROKEN["mesh_and_primitive"])
+    assert "mesh" in message(BROKEN["mesh_and_primitive"]) and "primitive" in message(
+        BROKEN["mesh_and_primitive"]
+    )
     assert "nope.obj" in message(BROKEN["missing_mesh"])
 
 
@@ -156,7 +171,9 @@ def test_unreadable_scene_file(tmp_path):
 
 
 def test_unknown_mapping_in_paint_lists_the_valid_ones(tmp_path):
-    path = _write(tmp_path / "s.toml", "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\nmapping = \"swirly\"\n")
+    path = _write(
+        tmp_path / "s.toml", '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\nmapping = "swirly"\n'
+    )
     with pytest.raises(SceneError) as info:
         load_scene_file(path)
     message = _one_line_error(path, info)
@@ -165,8 +182,10 @@ def test_unknown_mapping_in_paint_lists_the_valid_ones(tmp_path):
         assert name in message
 
 
-@pytest.mark.parametrize("ref", ["../outside", "../outside.toml", "/etc/passwd", "a\x00b", "..", "scenes/../outside",
-                                 "", ".", "~root"])
+@pytest.mark.parametrize(
+    "ref",
+    ["../outside", "../outside.toml", "/etc/passwd", "a\x00b", "..", "scenes/../outside", "", ".", "~root"],
+)
 def test_a_path_is_never_taken_for_a_scene_name(tmp_path, monkeypatch, ref):
     folder = tmp_path / "scenes"
     folder.mkdir()
@@ -196,8 +215,10 @@ def _sun_lit(color, normal, light):
 
 
 def test_bare_obj_with_vertex_colors_loads_as_a_lit_framed_scene(tmp_path):
-    path = _write(tmp_path / "red.obj", "v -1 -1 0 1 0 0\nv 1 -1 0 1 0 0\nv -1 1 0 1 0 0\nv 1 1 0 1 0 0\n"
-                                         "f 1 2 3\nf 2 4 3\n")
+    path = _write(
+        tmp_path / "red.obj",
+        "v -1 -1 0 1 0 0\nv 1 -1 0 1 0 0\nv -1 1 0 1 0 0\nv 1 1 0 1 0 0\nf 1 2 3\nf 2 4 3\n",
+    )
     scene = load_scene(str(path))
     assert scene.title == "red.obj" and scene.light is not None
     image = paint(scene, scene.camera, 33, 25, PaintParams(iterations=1)).image
@@ -230,10 +251,14 @@ def test_bad_bare_mesh_files_are_scene_errors(tmp_path):
 
 def test_scene_file_with_missing_mtl_texture_still_renders(tmp_path, caplog):
     _write(tmp_path / "m.mtl", "newmtl m\nKd 0.2 0.6 0.4\nmap_Kd gone.png\n")
-    _write(tmp_path / "m.obj", "mtllib m.mtl\nv -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\n"
-                               "vt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nusemtl m\nf 1/1 2/2 3/3\nf 2/2 4/4 3/3\n")
-    path = _write(tmp_path / "s.toml", "[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n"
-                                       "[[objects]]\nmesh = \"m.obj\"\n")
+    _write(
+        tmp_path / "m.obj",
+        "mtllib m.mtl\nv -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\n"
+        "vt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nusemtl m\nf 1/1 2/2 3/3\nf 2/2 4/4 3/3\n",
+    )
+    path = _write(
+        tmp_path / "s.toml", '[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\n'
+    )
     with caplog.at_level(logging.WARNING, logger="rcp"):
         scene = load_scene_file(path)
     assert any("texture" in r.getMessage() for r in caplog.records if r.name == "rcp")
@@ -242,9 +267,14 @@ def test_scene_file_with_missing_mtl_texture_still_renders(tmp_path, caplog):
 
 
 def test_scene_file_with_nan_mesh_vertices_is_repaired(tmp_path, caplog):
-    _write(tmp_path / "m.obj", "v -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\nv nan 0 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n")
-    path = _write(tmp_path / "s.toml", "[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n"
-                                       "[[objects]]\nmesh = \"m.obj\"\ncolor = [0.5, 0.25, 1.0]\n")
+    _write(
+        tmp_path / "m.obj", "v -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\nv nan 0 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n"
+    )
+    path = _write(
+        tmp_path / "s.toml",
+        "[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n"
+        '[[objects]]\nmesh = "m.obj"\ncolor = [0.5, 0.25, 1.0]\n',
+    )
     with caplog.at_level(logging.WARNING, logger="rcp"):
         scene = load_scene_file(path)
     geometry, _ = scene.geometry()
@@ -261,12 +291,17 @@ def test_glb_with_embedded_texture_round_trips_and_renders_the_texture_color(tmp
     box = trimesh.creation.box(extents=(2, 2, 2))
     uv = np.random.default_rng(0).uniform(0.2, 0.8, (len(box.vertices), 2))
     box.visual = trimesh.visual.TextureVisuals(
-        uv=uv, material=trimesh.visual.material.PBRMaterial(baseColorTexture=image))
+        uv=uv, material=trimesh.visual.material.PBRMaterial(baseColorTexture=image)
+    )
     path = tmp_path / "box.glb"
     path.write_bytes(box.export(file_type="glb"))
     scene = load_scene(str(path))
     geometry, _ = scene.geometry()
-    assert len(geometry.texture_width) == 1 and geometry.texture_width[0] == 4 and np.all(geometry.texture_id == 0)
+    assert (
+        len(geometry.texture_width) == 1
+        and geometry.texture_width[0] == 4
+        and np.all(geometry.texture_id == 0)
+    )
     np.testing.assert_allclose(geometry.texels, np.broadcast_to(texel / 255.0, (16, 3)), atol=1e-6)
     scene.light = None  # unlit: a pixel shows the surface's color itself
     camera = Camera((0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=30)
@@ -276,9 +311,12 @@ def test_glb_with_embedded_texture_round_trips_and_renders_the_texture_color(tmp
 
 
 def test_placement_rotates_scales_and_translates(tmp_path):
-    path = _write(tmp_path / "s.toml", "[camera]\neye = [0, 0, 9]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-                                       "primitive = { type = \"box\", extents = [1, 2, 3] }\n"
-                                       "rotate = [0, 90, 0]\nscale = 2.0\ntranslate = [1, 2, 3]\n")
+    path = _write(
+        tmp_path / "s.toml",
+        "[camera]\neye = [0, 0, 9]\nlook_at = [0, 0, 0]\n[[objects]]\n"
+        'primitive = { type = "box", extents = [1, 2, 3] }\n'
+        "rotate = [0, 90, 0]\nscale = 2.0\ntranslate = [1, 2, 3]\n",
+    )
     tri = load_scene_file(path).geometry()[0].triangles.reshape(-1, 3)
     lo, hi = tri.min(axis=0), tri.max(axis=0)
     # a quarter turn about y swaps the x and z extents; the box's base sits at y = 0 before placement
