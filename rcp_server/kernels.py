@@ -79,14 +79,15 @@ def cast_rays(eye, basis, tan_half, aspect, full_width, full_height, x0, y0, wid
                 noise_scale, v_p)
     _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise,
                 noise_scale, v_e)
-    # plane point = centre + sx * r + ty * u; centre = eye + f
+    # plane point = centre + sx * r + ty * u with centre = eye + f; sx, ty affine in the sample position
     cx = eye[0] + basis[2, 0]
     cy = eye[1] + basis[2, 1]
     cz = eye[2] + basis[2, 2]
+    sx_scale = 2.0 * aspect * tan_half / full_width
+    ty_scale = 2.0 * tan_half / full_height
     bad = 0
     for row in range(n_pix // width):  # nested loops: an integer division per pixel costs more than a ray
-        j = y0 + row
-        ty0 = (1.0 - 2.0 * j / full_height) * tan_half
+        ty0 = tan_half - (y0 + row) * ty_scale
         for col in range(width):
             pix = row * width + col
             i = x0 + col
@@ -94,8 +95,8 @@ def cast_rays(eye, basis, tan_half, aspect, full_width, full_height, x0, y0, wid
             oy = eye[1] + v_e[pix, 1]
             oz = eye[2] + v_e[pix, 2]
             for k in range(spp):
-                sx = (2.0 * (i + xi[pix, k]) / full_width - 1.0) * aspect * tan_half
-                ty = ty0 - 2.0 * eta[pix, k] / full_height * tan_half
+                sx = (i + xi[pix, k]) * sx_scale - aspect * tan_half
+                ty = ty0 - eta[pix, k] * ty_scale
                 dx = cx + sx * basis[0, 0] + ty * basis[1, 0] + v_p[pix, 0] - ox
                 dy = cy + sx * basis[0, 1] + ty * basis[1, 1] + v_p[pix, 1] - oy
                 dz = cz + sx * basis[0, 2] + ty * basis[1, 2] + v_p[pix, 2] - oz

@@ -184,7 +184,6 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scra
     Returns how many rays came out non-finite (they must not reach Embree)."""
     pitch = frame.camera.pixel_pitch(frame.region.full_height)
     moves = not state.blank and state.has(params.reads())
-    data = _mapping_input(state, frame, z0) if moves else None
 
     def plan(name: str, scale: float) -> tuple[int, float, np.ndarray]:
         mapping = get_mapping(name)
@@ -192,7 +191,8 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scra
             return kernels.FIELD_ZERO, 0.0, _DUMMY[2]
         if mapping.fused != kernels.FIELD_GIVEN:
             return mapping.fused, scale, _DUMMY[2]
-        return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(mapping.field(data), dtype=np.float32)
+        field = mapping.field(_mapping_input(state, frame, z0))
+        return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(field, dtype=np.float32)
 
     target = plan(params.mapping, params.lambda_p * pitch)
     eye = plan(params.eye_mapping, params.lambda_e)
