@@ -644,3 +644,38 @@ def test_animated_object_moves_with_time():
     # the static scene shares its geometry across times
     static = make_scene([facing_plane(4.0)])
     assert static.geometry(0.0)[0] is static.geometry(5.0)[0]
+
+
+def test_default_focus_depth_is_the_distance_to_look_at(gradient_scene):
+    camera = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -4.0))  # look_at on the plane: z0 = 4 by default
+    plain = paint(gradient_scene, camera, W, H, PaintParams(iterations=1)).image
+    focused = paint(
+        gradient_scene, camera, W, H, PaintParams(mapping="depth", lambda_p=12.0, iterations=3)
+    ).image
+    np.testing.assert_allclose(focused, plain, rtol=0, atol=1e-5)
+    near = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0))  # z0 = 1: the plane is 3 units out of focus
+    assert (
+        np.abs(
+            paint(gradient_scene, near, W, H, PaintParams(mapping="depth", lambda_p=12.0)).image - plain
+        ).max()
+        > 1e-2
+    )
+
+
+def test_temporal_mode_uses_the_new_frames_camera_and_time():
+    plane = facing_plane(4.0, size=(40.0, 40.0), colors_of=gradient)
+    mover = SceneObject("mover", plane.part, plane.instances, motion=lambda time: translate(0.0, -time, 0.0))
+    scene = make_scene([mover])
+    params = PaintParams(mapping="depth", iterations=2, lambda_p=5.0)
+    first = paint(scene, CAMERA, W, H, params, time=0.0)
+    moved_camera = CAMERA.moved(eye=(0.5, 0.2, 0.0), look_at=(0.5, 0.2, -1.0))
+    # lambda = 0: continuing from any state is the new frame's plain render
+    still = PaintParams(mapping="depth", iterations=1, lambda_p=0.0)
+    np.testing.assert_array_equal(
+        paint(scene, moved_camera, W, H, still, previous=first.state, time=1.0).image,
+        paint(scene, moved_camera, W, H, still, time=1.0).image,
+    )
+    # and the recursion sees the new time's geometry: the plane is now at depth 5
+    second = paint(scene, moved_camera, W, H, params, previous=first.state, time=1.0)
+    np.testing.assert_allclose(second.state.depth, 5.0, rtol=1e-6)
+    assert not np.array_equal(second.image, paint(scene, moved_camera, W, H, params, time=1.0).image)
