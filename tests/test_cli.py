@@ -127,3 +127,11 @@ def test_every_shipped_scene_loads_and_paints(tmp_path, capsys):
         out = tmp_path / f"{name}.png"
         assert main(["render", name, "--out", str(out), "--width", "32", "--height", "18", "--time", "0.5"]) == 0
         assert np.asarray(Image.open(out)).std() > 1, name
+
+
+def test_bench_speed_prints_the_stage_split_and_the_ratio_to_embree_alone(capsys):
+    assert main(["bench", "speed", "--width", "64", "--height", "36", "--iterations", "2", "--repeats", "1"]) == 0
+    out = capsys.readouterr().out
+    for needle in ("triangles", "camera", "intersect", "shade", "bookkeeping",
+                   "Embree alone", "ratio iteration / Embree alone"):
+        assert needle in out, needle
