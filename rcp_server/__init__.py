@@ -5,5 +5,15 @@ from .mappings import MappingInput, register_mapping
 from .painting import PaintParams, PaintResult, PaintState, paint
 from .scenefile import SceneError, load_scene
 
-__all__ = ["Camera", "MappingInput", "PaintParams", "PaintResult", "PaintState", "Region", "SceneError",
-           "load_scene", "paint", "register_mapping"]
+__all__ = [
+    "Camera",
+    "MappingInput",
+    "PaintParams",
+    "PaintResult",
+    "PaintState",
+    "Region",
+    "SceneError",
+    "load_scene",
+    "paint",
+    "register_mapping",
+]

@@ -32,12 +32,15 @@ def _embree_alone(tracer, origins, directions, tiles, pool) -> float:
 def speed(scene_name: str, width: int, height: int, iterations: int, repeats: int, threads: int | None) -> None:
     scene = load_scene(scene_name)
     threads = threads or default_threads()
-    params = PaintParams(mapping="color", iterations=iterations, spp=1,
-                         lambda_p=float(scene.paint.get("lambda_p", 8.0)))
+    params = PaintParams(
+        mapping="color", iterations=iterations, spp=1, lambda_p=float(scene.paint.get("lambda_p", 8.0))
+    )
     camera = scene.camera
     geometry, tracer = scene.geometry(0.0)
-    print(f"scene {scene_name!r}: {geometry.face_count} triangles; {width}x{height}, 1 spp, "
-          f"{iterations} iterations, color mapping, {threads} threads")
+    print(
+        f"scene {scene_name!r}: {geometry.face_count} triangles; {width}x{height}, 1 spp, "
+        f"{iterations} iterations, color mapping, {threads} threads"
+    )
     paint(scene, camera, width, height, params, threads=threads)  # compile kernels, build the BVH
 
     # the rays of a real painted iteration (the last one), cast in the same row bands as the painting
@@ -65,8 +68,10 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     per_iteration, embree = statistics.median(painted), statistics.median(alone)
     thread_total = sum(stage_sums.values())
     print(f"rays hitting geometry: {hit_fraction:.0%}")
-    print(f"one iteration (wall, median of {repeats}): {per_iteration * 1e3:7.2f} ms   "
-          f"{n / per_iteration / 1e6:5.2f} M samples/s")
+    print(
+        f"one iteration (wall, median of {repeats}): {per_iteration * 1e3:7.2f} ms   "
+        f"{n / per_iteration / 1e6:5.2f} M samples/s"
+    )
     for stage in STAGES:
         share = stage_sums[stage] / thread_total if thread_total else 0.0
         print(f"  {stage:12s} {stage_sums[stage] * 1e3:7.2f} ms thread time  {share:6.1%}")

@@ -107,8 +107,14 @@ class Region:
             object.__setattr__(self, "height", self.full_height - self.y0)
         if self.full_width < 1 or self.full_height < 1:
             raise ValueError(f"image size must be at least 1x1, got {self.full_width}x{self.full_height}")
-        if not (0 <= self.x0 and self.x0 + self.width <= self.full_width and self.width >= 1
-                and 0 <= self.y0 and self.y0 + self.height <= self.full_height and self.height >= 1):
+        if not (
+            0 <= self.x0
+            and self.x0 + self.width <= self.full_width
+            and self.width >= 1
+            and 0 <= self.y0
+            and self.y0 + self.height <= self.full_height
+            and self.height >= 1
+        ):
             raise ValueError(f"region {self} lies outside the {self.full_width}x{self.full_height} image")
 
     @property
@@ -121,14 +127,15 @@ class Region:
 
     def pixel_coords(self) -> tuple[np.ndarray, np.ndarray]:
         """``(i, j)``: absolute column and row of each pixel of the region, row-major, each (n,) int64."""
-        j, i = np.mgrid[self.y0:self.y0 + self.height, self.x0:self.x0 + self.width]
+        j, i = np.mgrid[self.y0 : self.y0 + self.height, self.x0 : self.x0 + self.width]
         return i.ravel().astype(np.int64), j.ravel().astype(np.int64)
 
     def tiles(self, rows: int) -> list[Region]:
         """Horizontal bands of at most ``rows`` rows covering this region."""
-        return [Region(self.full_width, self.full_height, self.x0, y, self.width,
-                       min(rows, self.y0 + self.height - y))
-                for y in range(self.y0, self.y0 + self.height, rows)]
+        return [
+            Region(self.full_width, self.full_height, self.x0, y, self.width, min(rows, self.y0 + self.height - y))
+            for y in range(self.y0, self.y0 + self.height, rows)
+        ]
 
 
 def plane_points(camera: Camera, region: Region, s: np.ndarray, t: np.ndarray) -> np.ndarray:

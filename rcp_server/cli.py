@@ -72,8 +72,12 @@ def _parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("render", help="paint a still, its iterations, or a sequence")
     r.add_argument("scene", help="a scene name (see 'rcp scenes'), a scene .toml file, or a mesh file")
-    r.add_argument("--out", required=True, type=Path,
-                   help="image file (.png, .jpg); with --frames, frames go to OUT's stem _0000, _0001, ...")
+    r.add_argument(
+        "--out",
+        required=True,
+        type=Path,
+        help="image file (.png, .jpg); with --frames, frames go to OUT's stem _0000, _0001, ...",
+    )
     r.add_argument("--width", type=_positive_int, default=640)
     r.add_argument("--height", type=_positive_int, default=360)
     _add_paint_options(r)
@@ -81,17 +85,30 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--time", type=_finite, default=0.0, help="scene time in seconds (animated scenes)")
     r.add_argument("--save-iterations", type=Path, metavar="DIR", help="also write every iteration to DIR")
     r.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
-    r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100",
-                   help="JPEG quality")
+    r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100", help="JPEG quality")
     s = r.add_argument_group("sequences")
     s.add_argument("--frames", type=_positive_int, default=1, help="number of frames")
     s.add_argument("--fps", type=_finite, default=24.0, help="frames per second of scene time")
-    s.add_argument("--orbit", type=_finite, default=0.0, metavar="DEG",
-                   help="turn the eye this many degrees around look-at over the sequence")
-    s.add_argument("--walk", type=_finite, default=0.0, metavar="DIST",
-                   help="move eye and look-at this far forward over the sequence")
-    s.add_argument("--temporal", type=_positive_int, metavar="K",
-                   help="temporal mode: after the first frame, run K iterations from the previous frame")
+    s.add_argument(
+        "--orbit",
+        type=_finite,
+        default=0.0,
+        metavar="DEG",
+        help="turn the eye this many degrees around look-at over the sequence",
+    )
+    s.add_argument(
+        "--walk",
+        type=_finite,
+        default=0.0,
+        metavar="DIST",
+        help="move eye and look-at this far forward over the sequence",
+    )
+    s.add_argument(
+        "--temporal",
+        type=_positive_int,
+        metavar="K",
+        help="temporal mode: after the first frame, run K iterations from the previous frame",
+    )
 
     sub.add_parser("scenes", help="list the shipped scenes")
 
@@ -109,17 +126,18 @@ def _parser() -> argparse.ArgumentParser:
 def paint_params(scene_defaults: dict, args: argparse.Namespace) -> PaintParams:
     """The scene's painting defaults, overridden by whatever the command line gives."""
     values = dict(scene_defaults)
-    for name in ("iterations", "spp", "mapping", "eye_mapping", "lambda_p", "lambda_e", "z0", "z_max",
-                 "noise", "seed"):
+    for name in ("iterations", "spp", "mapping", "eye_mapping", "lambda_p", "lambda_e", "z0", "z_max", "noise", "seed"):
         if getattr(args, name, None) is not None:
             values[name] = getattr(args, name)
     return PaintParams.from_dict(values)
 
 
 def _camera(default: Camera, args: argparse.Namespace) -> Camera:
-    changes = {k: tuple(v) if isinstance(v, list) else v
-               for k, v in (("eye", args.eye), ("look_at", args.look_at), ("up", args.up), ("fov", args.fov))
-               if v is not None}
+    changes = {
+        k: tuple(v) if isinstance(v, list) else v
+        for k, v in (("eye", args.eye), ("look_at", args.look_at), ("up", args.up), ("fov", args.fov))
+        if v is not None
+    }
     return default.moved(**changes)
 
 
@@ -148,8 +166,16 @@ def _render(args: argparse.Namespace) -> None:
     params = paint_params(scene.paint, args)
     base = _camera(scene.camera, args)
     if args.frames == 1:
-        result = paint(scene, base, args.width, args.height, params, time=args.time, threads=args.threads,
-                       keep_iterations=args.save_iterations is not None)
+        result = paint(
+            scene,
+            base,
+            args.width,
+            args.height,
+            params,
+            time=args.time,
+            threads=args.threads,
+            keep_iterations=args.save_iterations is not None,
+        )
         images.save(args.out, result.image, args.quality)
         if args.save_iterations is not None:
             for k, image in enumerate(result.iterations, start=1):
@@ -164,8 +190,16 @@ def _render(args: argparse.Namespace) -> None:
         frame_params = params
         if args.temporal and previous is not None:
             frame_params = replace(params, iterations=args.temporal)
-        result = paint(scene, camera, args.width, args.height, frame_params, time=args.time + index / args.fps,
-                       previous=previous if args.temporal else None, threads=args.threads)
+        result = paint(
+            scene,
+            camera,
+            args.width,
+            args.height,
+            frame_params,
+            time=args.time + index / args.fps,
+            previous=previous if args.temporal else None,
+            threads=args.threads,
+        )
         previous = result.state
         images.save(_frame_path(args.out, index), result.image, args.quality)
 

@@ -56,10 +56,36 @@ def _fill_field(kind, scale, basis, color, depth, normal, direction, z0, given, 
 
 
 @_jit
-def cast_rays(eye, basis, tan_half, aspect, full_width, full_height, x0, y0, width, xi, eta,
-              color, depth, normal, direction, z0,
-              target_kind, target_scale, target_given, eye_kind, eye_scale, eye_given, noise, noise_scale,
-              v_p, v_e, origins, directions):
+def cast_rays(
+    eye,
+    basis,
+    tan_half,
+    aspect,
+    full_width,
+    full_height,
+    x0,
+    y0,
+    width,
+    xi,
+    eta,
+    color,
+    depth,
+    normal,
+    direction,
+    z0,
+    target_kind,
+    target_scale,
+    target_given,
+    eye_kind,
+    eye_scale,
+    eye_given,
+    noise,
+    noise_scale,
+    v_p,
+    v_e,
+    origins,
+    directions,
+):
     """Per-pixel cameras for every sample: camera assignment fused with the mapping. Returns the number
     of rays that came out non-finite (a NaN or infinite input), so the caller masks only when needed.
 
@@ -75,10 +101,10 @@ def cast_rays(eye, basis, tan_half, aspect, full_width, full_height, x0, y0, wid
     P_p' = P_p(s, t) + V_p with P_p as in camera.py. A non-finite displacement moves nothing.
     """
     n_pix, spp = xi.shape
-    _fill_field(target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise,
-                noise_scale, v_p)
-    _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise,
-                noise_scale, v_e)
+    _fill_field(
+        target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise, noise_scale, v_p
+    )
+    _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise, noise_scale, v_e)
     # plane point = centre + sx * r + ty * u with centre = eye + f; sx, ty affine in the sample position
     cx = eye[0] + basis[2, 0]
     cy = eye[1] + basis[2, 1]
@@ -126,8 +152,9 @@ def fast_atan2(y, x):
         return 0.0
     z = min(ax, ay) / big
     z2 = z * z
-    a = z * (0.99997726 + z2 * (-0.33262347 + z2 * (0.19354346 + z2 * (-0.11643287
-                                                                      + z2 * (0.05265332 + z2 * -0.01172120)))))
+    a = z * (
+        0.99997726 + z2 * (-0.33262347 + z2 * (0.19354346 + z2 * (-0.11643287 + z2 * (0.05265332 + z2 * -0.01172120))))
+    )
     if ay > ax:
         a = 0.5 * math.pi - a
     if x < 0.0:
@@ -160,15 +187,41 @@ def _bilinear(texels, offset, width, height, x, y, wrap_y, out):
     w10 = (1.0 - fx) * fy
     w11 = fx * fy
     for c in range(3):
-        out[c] = (w00 * texels[a + c0, c] + w01 * texels[a + c1, c]
-                  + w10 * texels[b + c0, c] + w11 * texels[b + c1, c])
+        out[c] = w00 * texels[a + c0, c] + w01 * texels[a + c1, c] + w10 * texels[b + c0, c] + w11 * texels[b + c1, c]
 
 
 @_jit
-def shade(origins, directions, face, t, b1, b2, spp,
-          normals, colors, uv, texture_id, texels, texture_offset, texture_width, texture_height,
-          environment, light_dir, ambient, lit, eye, forward, z_max,
-          out_color, out_depth, out_normal, out_direction, need_depth, need_normal, need_direction):
+def shade(
+    origins,
+    directions,
+    face,
+    t,
+    b1,
+    b2,
+    spp,
+    normals,
+    colors,
+    uv,
+    texture_id,
+    texels,
+    texture_offset,
+    texture_width,
+    texture_height,
+    environment,
+    light_dir,
+    ambient,
+    lit,
+    eye,
+    forward,
+    z_max,
+    out_color,
+    out_depth,
+    out_normal,
+    out_direction,
+    need_depth,
+    need_normal,
+    need_direction,
+):
     """Shade every sample and average the samples of each pixel.
 
     origins, directions : (n*spp, 3) float32 rays; face, t, b1, b2 : their hits (face -1 on a miss)
@@ -230,9 +283,11 @@ def shade(origins, directions, face, t, b1, b2, spp,
                         rgb[c] *= shade_k
                 if need_depth:
                     ts = t[s]
-                    acc_z += ((origins[s, 0] + ts * dx - eye[0]) * forward[0]
-                              + (origins[s, 1] + ts * dy - eye[1]) * forward[1]
-                              + (origins[s, 2] + ts * dz - eye[2]) * forward[2])
+                    acc_z += (
+                        (origins[s, 0] + ts * dx - eye[0]) * forward[0]
+                        + (origins[s, 1] + ts * dy - eye[1]) * forward[1]
+                        + (origins[s, 2] + ts * dz - eye[2]) * forward[2]
+                    )
                 if need_normal:
                     for c in range(3):
                         acc_n[c] += nrm[c]
@@ -244,8 +299,16 @@ def shade(origins, directions, face, t, b1, b2, spp,
                 elif finite:
                     lon = fast_atan2(dx, -dz)
                     lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
-                    _bilinear(env_flat, 0, env_w, env_h, (lon / (2.0 * math.pi) + 0.5) * env_w,
-                              lat / math.pi * env_h, False, rgb)
+                    _bilinear(
+                        env_flat,
+                        0,
+                        env_w,
+                        env_h,
+                        (lon / (2.0 * math.pi) + 0.5) * env_w,
+                        lat / math.pi * env_h,
+                        False,
+                        rgb,
+                    )
                 else:
                     for c in range(3):
                         rgb[c] = 0.0

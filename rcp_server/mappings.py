@@ -63,8 +63,9 @@ class Mapping:
 MAPPINGS: dict[str, Mapping] = {}
 
 
-def register_mapping(name: str, reads, field: Callable[[MappingInput], np.ndarray] | None = None, *,
-                     fused: int = FIELD_GIVEN):
+def register_mapping(
+    name: str, reads, field: Callable[[MappingInput], np.ndarray] | None = None, *, fused: int = FIELD_GIVEN
+):
     """Register ``field`` (or decorate it) as mapping ``name`` reading the channels ``reads``.
 
     ``fused`` is for the built-in mappings only: the branch of ``kernels.cast_rays`` that computes the

@@ -64,8 +64,9 @@ def corner_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = twice the area
     face_n = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-30)
     index = faces.ravel()
-    vertex_n = np.stack([np.bincount(index, np.repeat(cross[:, k], 3), minlength=len(vertices))
-                         for k in range(3)], axis=1)
+    vertex_n = np.stack(
+        [np.bincount(index, np.repeat(cross[:, k], 3), minlength=len(vertices)) for k in range(3)], axis=1
+    )
     vertex_n /= np.maximum(np.linalg.norm(vertex_n, axis=1, keepdims=True), 1e-30)
     corner_n = vertex_n[faces]
     crease = np.einsum("fck,fk->fc", corner_n, face_n) < CREASE_COS
@@ -81,8 +82,14 @@ def repaired(part: Part, source: str) -> Part:
         area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     keep = finite & (area2 > 1e-20)
     if not keep.all():
-        log.warning("%s: dropped %d of %d faces (%d with non-finite vertices, %d with zero area)",
-                    source, int((~keep).sum()), len(keep), int((~finite).sum()), int((finite & ~keep).sum()))
+        log.warning(
+            "%s: dropped %d of %d faces (%d with non-finite vertices, %d with zero area)",
+            source,
+            int((~keep).sum()),
+            len(keep),
+            int((~finite).sum()),
+            int((finite & ~keep).sum()),
+        )
     if not keep.any():
         raise MeshError(f"{source}: mesh has no usable triangles")
     uv = None if part.corner_uv is None else part.corner_uv[keep]
@@ -161,14 +168,14 @@ def load_mesh_file(path: Path) -> list[Part]:
 
 # ---- primitives: base on y = 0 and axis along +y (box, cylinder, cone); sphere about the origin ----
 
+
 def _y_up(mesh: trimesh.Trimesh, lift: float) -> trimesh.Trimesh:
     mesh.apply_transform(trimesh.transformations.rotation_matrix(-math.pi / 2, [1, 0, 0]))
     mesh.apply_translation([0.0, lift, 0.0])
     return mesh
 
 
-def grid(size=(10.0, 10.0), divisions=(10, 10), uv_repeat=(1.0, 1.0)) -> tuple[np.ndarray, np.ndarray,
-                                                                                  np.ndarray]:
+def grid(size=(10.0, 10.0), divisions=(10, 10), uv_repeat=(1.0, 1.0)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A subdivided rectangle in the xz plane facing +y: vertices (V,3), faces (F,3), uv (V,2)."""
     nx, nz = int(divisions[0]), int(divisions[1])
     x = np.linspace(-size[0] / 2, size[0] / 2, nx + 1)
@@ -185,8 +192,9 @@ def grid(size=(10.0, 10.0), divisions=(10, 10), uv_repeat=(1.0, 1.0)) -> tuple[n
 def primitive(kind: str, **p) -> Part:
     """A procedural mesh: ``box``, ``sphere``, ``cylinder``, ``cone`` or ``grid`` (with UVs)."""
     if kind == "grid":
-        vertices, faces, uv = grid(p.get("size", (10.0, 10.0)), p.get("divisions", (10, 10)),
-                                   p.get("uv_repeat", (1.0, 1.0)))
+        vertices, faces, uv = grid(
+            p.get("size", (10.0, 10.0)), p.get("divisions", (10, 10)), p.get("uv_repeat", (1.0, 1.0))
+        )
         return Part(vertices, faces, _grey(len(faces)), uv[faces].astype(np.float32))
     if kind == "box":
         mesh = trimesh.creation.box(extents=p.get("extents", (1.0, 1.0, 1.0)))
@@ -195,11 +203,17 @@ def primitive(kind: str, **p) -> Part:
         mesh = trimesh.creation.icosphere(subdivisions=p.get("subdivisions", 3), radius=p.get("radius", 1.0))
     elif kind == "cylinder":
         height = p.get("height", 1.0)
-        mesh = _y_up(trimesh.creation.cylinder(radius=p.get("radius", 0.5), height=height,
-                                               sections=p.get("sections", 24)), height / 2)
+        mesh = _y_up(
+            trimesh.creation.cylinder(radius=p.get("radius", 0.5), height=height, sections=p.get("sections", 24)),
+            height / 2,
+        )
     elif kind == "cone":
-        mesh = _y_up(trimesh.creation.cone(radius=p.get("radius", 0.5), height=p.get("height", 1.0),
-                                           sections=p.get("sections", 24)), 0.0)
+        mesh = _y_up(
+            trimesh.creation.cone(
+                radius=p.get("radius", 0.5), height=p.get("height", 1.0), sections=p.get("sections", 24)
+            ),
+            0.0,
+        )
     else:
         raise MeshError(f"unknown primitive {kind!r}")
     faces = np.asarray(mesh.faces, dtype=np.int64)

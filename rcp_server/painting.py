@@ -100,8 +100,10 @@ class PaintState:
         """The part of this state that covers ``tile`` (full-width rows of this region)."""
         a = (tile.y0 - self.region.y0) * self.region.width
         b = a + tile.pixel_count
-        pick = {name: None if getattr(self, name) is None else getattr(self, name)[a:b]
-                for name in ("color", "depth", "normal", "direction")}
+        pick = {
+            name: None if getattr(self, name) is None else getattr(self, name)[a:b]
+            for name in ("color", "depth", "normal", "direction")
+        }
         return PaintState(tile, blank=self.blank, **pick)
 
     def has(self, channels) -> bool:
@@ -147,8 +149,9 @@ def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
         return _Frame(camera, region, half, half, None)
     i, j = region.pixel_coords()
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
-    noise = (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) \
-        if params.noise > 0 else None
+    noise = (
+        (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) if params.noise > 0 else None
+    )
     return _Frame(camera, region, xi, eta, noise)
 
 
@@ -158,8 +161,7 @@ def _mapping_input(state: PaintState, frame: _Frame, z0: float) -> MappingInput:
     return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
 
 
-def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: float) -> tuple[np.ndarray,
-                                                                                                np.ndarray]:
+def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: float) -> tuple[np.ndarray, np.ndarray]:
     """``(V_p, V_e)`` per pixel from ``I_{n-1}`` in plain numpy: two (n, 3) float64, scene units.
 
     The reference for what ``kernels.cast_rays`` computes fused; a non-finite displacement moves nothing.
@@ -177,8 +179,7 @@ def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: flo
     return scaled(params.mapping, params.lambda_p * pitch), scaled(params.eye_mapping, params.lambda_e)
 
 
-def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scratch: tuple[np.ndarray, ...]
-          ) -> int:
+def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scratch: tuple[np.ndarray, ...]) -> int:
     """Camera assignment: fill ``scratch`` = (V_p, V_e, origins, directions) from ``I_{n-1}``.
 
     Returns how many rays came out non-finite (they must not reach Embree)."""
@@ -198,15 +199,33 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scra
     eye = plan(params.eye_mapping, params.lambda_e)
     region = frame.region
     return kernels.cast_rays(
-        np.asarray(frame.camera.eye, np.float64), np.stack(frame.camera.basis()), frame.camera.half_height(),
-        region.full_width / region.full_height, region.full_width, region.full_height, region.x0, region.y0,
-        region.width, frame.xi, frame.eta, state.color, _or_dummy(state.depth, 1), _or_dummy(state.normal, 2), _or_dummy(state.direction, 2),
-        float(z0), *target, *eye, _or_dummy(frame.noise, 2), float(params.noise) if moves else 0.0, *scratch,
+        np.asarray(frame.camera.eye, np.float64),
+        np.stack(frame.camera.basis()),
+        frame.camera.half_height(),
+        region.full_width / region.full_height,
+        region.full_width,
+        region.full_height,
+        region.x0,
+        region.y0,
+        region.width,
+        frame.xi,
+        frame.eta,
+        state.color,
+        _or_dummy(state.depth, 1),
+        _or_dummy(state.normal, 2),
+        _or_dummy(state.direction, 2),
+        float(z0),
+        *target,
+        *eye,
+        _or_dummy(frame.noise, 2),
+        float(params.noise) if moves else 0.0,
+        *scratch,
     )
 
 
-def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, state: PaintState,
-                keep: list[np.ndarray] | None) -> tuple[PaintState, dict[str, float]]:
+def _paint_tile(
+    scene: Scene, time: float, frame: _Frame, params: PaintParams, state: PaintState, keep: list[np.ndarray] | None
+) -> tuple[PaintState, dict[str, float]]:
     geometry, tracer = scene.geometry(time)
     light = scene.light
     light_dir = np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64)
@@ -218,8 +237,12 @@ def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, s
     n_pix = frame.region.pixel_count
     n_rays = n_pix * params.spp
     seconds = dict.fromkeys(STAGES, 0.0)
-    scratch = (np.empty((n_pix, 3)), np.empty((n_pix, 3)), np.empty((n_rays, 3), RAY_DTYPE),
-               np.empty((n_rays, 3), RAY_DTYPE))
+    scratch = (
+        np.empty((n_pix, 3)),
+        np.empty((n_pix, 3)),
+        np.empty((n_rays, 3), RAY_DTYPE),
+        np.empty((n_rays, 3), RAY_DTYPE),
+    )
     origins, directions = scratch[2:]
     for iteration in range(params.iterations):
         # ---- camera assignment ----
@@ -238,19 +261,42 @@ def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, s
         seconds["intersect"] += now - clock
         clock = now
         new = PaintState(
-            frame.region, np.empty((n_pix, 3), np.float32),
+            frame.region,
+            np.empty((n_pix, 3), np.float32),
             depth=np.empty(n_pix, np.float32) if "depth" in reads else None,
             normal=np.empty((n_pix, 3), np.float32) if "normal" in reads else None,
             direction=np.empty((n_pix, 3), np.float32) if "direction" in reads else None,
         )
         kernels.shade(
-            origins, directions, hits.face, hits.t, hits.b1, hits.b2, params.spp,
-            geometry.normals, geometry.colors, geometry.uv, geometry.texture_id, geometry.texels,
-            geometry.texture_offset, geometry.texture_width, geometry.texture_height,
-            scene.environment.image, light_dir, float(light.ambient if light else 1.0), light is not None,
-            eye, forward, float(z_max),
-            new.color, _or_dummy(new.depth, 1), _or_dummy(new.normal, 2), _or_dummy(new.direction, 2),
-            new.depth is not None, new.normal is not None, new.direction is not None,
+            origins,
+            directions,
+            hits.face,
+            hits.t,
+            hits.b1,
+            hits.b2,
+            params.spp,
+            geometry.normals,
+            geometry.colors,
+            geometry.uv,
+            geometry.texture_id,
+            geometry.texels,
+            geometry.texture_offset,
+            geometry.texture_width,
+            geometry.texture_height,
+            scene.environment.image,
+            light_dir,
+            float(light.ambient if light else 1.0),
+            light is not None,
+            eye,
+            forward,
+            float(z_max),
+            new.color,
+            _or_dummy(new.depth, 1),
+            _or_dummy(new.normal, 2),
+            _or_dummy(new.direction, 2),
+            new.depth is not None,
+            new.normal is not None,
+            new.direction is not None,
         )
         # ---- bookkeeping ----
         now = _time.perf_counter()
@@ -259,7 +305,7 @@ def _paint_tile(scene: Scene, time: float, frame: _Frame, params: PaintParams, s
         state = new
         if keep is not None:
             a = frame.region.y0 * frame.region.width
-            keep[iteration].reshape(-1, 3)[a:a + n_pix] = state.color
+            keep[iteration].reshape(-1, 3)[a : a + n_pix] = state.color
         seconds["bookkeeping"] += _time.perf_counter() - clock
     return state, seconds
 
@@ -276,9 +322,19 @@ def default_threads() -> int:
     return max(1, min(len(os.sched_getaffinity(0)), 32))
 
 
-def paint(scene: Scene, camera: Camera, width: int, height: int, params: PaintParams, *, time: float = 0.0,
-          previous: PaintState | None = None, region: Region | None = None, threads: int | None = None,
-          keep_iterations: bool = False) -> PaintResult:
+def paint(
+    scene: Scene,
+    camera: Camera,
+    width: int,
+    height: int,
+    params: PaintParams,
+    *,
+    time: float = 0.0,
+    previous: PaintState | None = None,
+    region: Region | None = None,
+    threads: int | None = None,
+    keep_iterations: bool = False,
+) -> PaintResult:
     """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera``.
 
     Per-frame mode: ``previous=None`` starts from ``I_0`` and runs ``params.iterations`` iterations.
@@ -294,8 +350,7 @@ def paint(scene: Scene, camera: Camera, width: int, height: int, params: PaintPa
     scene.geometry(time)  # build (or fetch) the BVH once, before the tiles ask for it
     # about four tiles a thread balances the load; bands of whole rows keep tiles contiguous in memory
     tiles = region.tiles(max(1, -(-region.height // (threads * 4))))
-    keep = ([np.empty((height, width, 3), np.float32) for _ in range(params.iterations)]
-            if keep_iterations else None)
+    keep = [np.empty((height, width, 3), np.float32) for _ in range(params.iterations)] if keep_iterations else None
     if keep is not None and region != Region(width, height):
         raise ValueError("keep_iterations needs the full image")
 

@@ -156,9 +156,13 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
         colors=np.concatenate(colors).astype(np.float32) if colors else np.zeros((0, 3, 3), np.float32),
         uv=np.concatenate(uvs).astype(np.float32) if uvs else np.zeros((0, 3, 2), np.float32),
         texture_id=np.concatenate(tex_ids) if tex_ids else np.zeros(0, np.int32),
-        texels=(np.concatenate([im.reshape(-1, 3) for im in images]).astype(np.float32) if images
-                else np.zeros((1, 3), np.float32)),
-        texture_offset=np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64) if images
+        texels=(
+            np.concatenate([im.reshape(-1, 3) for im in images]).astype(np.float32)
+            if images
+            else np.zeros((1, 3), np.float32)
+        ),
+        texture_offset=np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        if images
         else np.zeros(1, np.int64),
         texture_width=np.array([im.shape[1] for im in images] or [1], dtype=np.int64),
         texture_height=np.array([im.shape[0] for im in images] or [1], dtype=np.int64),

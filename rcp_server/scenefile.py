@@ -155,6 +155,7 @@ class SceneSpec(_Model):
 
 # ---- from spec to scene ----
 
+
 def _instances(spec: ObjectSpec) -> list[np.ndarray]:
     if spec.scatter is None:
         return [p.matrix() for p in spec.instances] or [np.eye(4)]
@@ -258,8 +259,7 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
         env = spec.environment
         if (env.image is None) == (env.color is None):
             raise SceneError("environment: give exactly one of 'image' or 'color'")
-        environment = (Environment(load_texture(folder / env.image)) if env.image
-                       else Environment.constant(env.color))
+        environment = Environment(load_texture(folder / env.image)) if env.image else Environment.constant(env.color)
         light = None
         if spec.light is not None:
             d = np.asarray(spec.light.direction, dtype=np.float64)
@@ -275,8 +275,9 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
     except (SceneError, MeshError, CameraError, ValueError) as exc:
         message = str(exc)
         raise SceneError(message if message.startswith(str(path)) else f"{path}: {message}") from None
-    return Scene(name or path.stem, spec.title or path.stem, camera, environment, light, objects,
-                 dict(spec.paint), spec.z_max)
+    return Scene(
+        name or path.stem, spec.title or path.stem, camera, environment, light, objects, dict(spec.paint), spec.z_max
+    )
 
 
 def frame_camera(parts: list[Part], fov: float = 45.0) -> Camera:
@@ -297,8 +298,9 @@ def mesh_scene(path: Path) -> Scene:
         raise SceneError(str(exc)) from None
     objects = [SceneObject(f"{Path(path).name}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
     light = Light(tuple(np.array([-0.4, -1.0, -0.5]) / np.linalg.norm([-0.4, -1.0, -0.5])), 0.35)
-    return Scene(Path(path).stem, Path(path).name, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)),
-                 light, objects)
+    return Scene(
+        Path(path).stem, Path(path).name, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects
+    )
 
 
 def scene_names(folder: Path = SCENES_DIR) -> list[str]:

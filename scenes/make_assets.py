@@ -30,6 +30,7 @@ SUN_ELEVATION = 28.0  # degrees above the horizon
 
 # ---- tileable value noise ----
 
+
 def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cells: tuple[int, int]) -> np.ndarray:
     """Smooth noise in [0, 1], periodic in both axes: (h, w) float64 from a (cells_y, cells_x) lattice."""
     h, w = shape
@@ -46,13 +47,14 @@ def _value_noise(rng: np.random.Generator, shape: tuple[int, int], cells: tuple[
     return top * (1 - fy[:, None]) + bottom * fy[:, None]
 
 
-def fbm(rng: np.random.Generator, shape: tuple[int, int], cells: tuple[int, int], octaves: int,
-        gain: float = 0.5) -> np.ndarray:
+def fbm(
+    rng: np.random.Generator, shape: tuple[int, int], cells: tuple[int, int], octaves: int, gain: float = 0.5
+) -> np.ndarray:
     """Fractal sum of value noise, normalised to [0, 1]: (h, w) float64."""
     total = np.zeros(shape)
     amplitude, norm = 1.0, 0.0
     for k in range(octaves):
-        total += amplitude * _value_noise(rng, shape, (cells[0] * 2 ** k, cells[1] * 2 ** k))
+        total += amplitude * _value_noise(rng, shape, (cells[0] * 2**k, cells[1] * 2**k))
         norm += amplitude
         amplitude *= gain
     return total / norm
@@ -92,6 +94,7 @@ def _save(name: str, rgb: np.ndarray, colors: int | None = None) -> None:
 
 # ---- sky ----
 
+
 def sky(width: int = 1024, height: int = 512) -> np.ndarray:
     rng = np.random.default_rng(7)
     lat = (np.arange(height) + 0.5) / height * math.pi  # polar angle: 0 straight up
@@ -116,9 +119,9 @@ def sky(width: int = 1024, height: int = 512) -> np.ndarray:
     px, py = d[..., 0] / height_above, d[..., 2] / height_above
     density, norm = np.zeros((height, width)), 0.0
     for octave in range(5):
-        lattice, k = rng.random((64, 64)), 2.0 ** octave
-        density += 0.55 ** octave * noise_at(lattice, 1.3 * k * px + 17.0, 0.7 * k * py + 29.0)
-        norm += 0.55 ** octave
+        lattice, k = rng.random((64, 64)), 2.0**octave
+        density += 0.55**octave * noise_at(lattice, 1.3 * k * px + 17.0, 0.7 * k * py + 29.0)
+        norm += 0.55**octave
     density /= norm
     band = _smoothstep(1.5, 8.0, elevation)
     clear = 1 - 0.85 * _smoothstep(math.cos(math.radians(14)), math.cos(math.radians(5)), cos_sun)
@@ -152,14 +155,16 @@ def ground(size: int = 1024) -> np.ndarray:
     # patchwork fields on a jittered lattice of 16-unit cells, away from the village
     cell = 16.0
     ci, cj = np.floor((x + 8) / cell).astype(int), np.floor((z + 8) / cell).astype(int)
-    field_colors = np.array([
-        (0.98, 0.82, 0.08),  # rapeseed yellow
-        (0.62, 0.38, 0.85),  # lavender
-        (0.90, 0.20, 0.12),  # poppies
-        (0.96, 0.55, 0.10),  # pumpkins
-        (0.55, 0.80, 0.20),  # young wheat
-        (0.80, 0.62, 0.30),  # stubble
-    ])
+    field_colors = np.array(
+        [
+            (0.98, 0.82, 0.08),  # rapeseed yellow
+            (0.62, 0.38, 0.85),  # lavender
+            (0.90, 0.20, 0.12),  # poppies
+            (0.96, 0.55, 0.10),  # pumpkins
+            (0.55, 0.80, 0.20),  # young wheat
+            (0.80, 0.62, 0.30),  # stubble
+        ]
+    )
     pick = rng.integers(0, len(field_colors), (32, 32))
     stripe_dir = rng.uniform(0, math.pi, (32, 32))
     kind = pick[cj % 32, ci % 32]
@@ -192,6 +197,7 @@ def ground(size: int = 1024) -> np.ndarray:
 
 
 # ---- sea ----
+
 
 def sea(size: int = 256) -> np.ndarray:
     rng = np.random.default_rng(23)
