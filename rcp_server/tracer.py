@@ -13,8 +13,11 @@ from .camera import RAY_DTYPE
 
 @dataclass
 class Hits:
-    """Closest hits of n rays. face : (n,) int32, -1 on a miss; t : (n,) float32 distance along the
-    (unit) direction, meaningless on a miss; b1, b2 : (n,) float32 barycentric weights of the face's 2nd and 3rd corners."""
+    """Closest hits of n rays.
+
+    face : (n,) int32, -1 on a miss;  t : (n,) float32 distance along the (unit) direction, meaningless on
+    a miss;  b1, b2 : (n,) float32 barycentric weights of the face's second and third corners
+    """
 
     face: np.ndarray
     t: np.ndarray
