@@ -18,9 +18,7 @@ CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0)
 SKY = (0.2, 0.35, 0.6)
 
 # grid faces +y in the xz plane; a quarter turn about +x makes it face +z (towards the standard camera)
-FACE_PLUS_Z = np.array(
-    [[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]]
-)
+FACE_PLUS_Z = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 0.0, -1.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]])
 
 
 def translate(x=0.0, y=0.0, z=0.0) -> np.ndarray:
@@ -90,9 +88,9 @@ def busy_scene() -> Scene:
     """Lit, textured and colored objects at several depths in front of a gradient sky: every mapping moves."""
     rng = np.random.default_rng(0)
     texture = rng.uniform(0, 1, (8, 8, 3)).astype(np.float32)
-    sky = np.stack(
-        [*np.meshgrid(np.linspace(0, 1, 32), np.linspace(0, 1, 16)), np.full((16, 32), 0.3)], axis=2
-    ).astype(np.float32)
+    sky = np.stack([*np.meshgrid(np.linspace(0, 1, 32), np.linspace(0, 1, 16)), np.full((16, 32), 0.3)], axis=2).astype(
+        np.float32
+    )
     objects = [
         facing_plane(9.0, size=(10.0, 6.0), divisions=(3, 2), texture=texture, center=(0.0, -2.0)),
         sphere((-1.2, 0.3, -4.5), 1.0, 2, (0.9, 0.2, 0.1), "red"),

@@ -40,17 +40,12 @@ def test_plane_points_formula_and_corners():
     tan_half = math.tan(math.radians(47.0) / 2)
     a = 40 / 25
     expected = (
-        np.asarray(cam.eye)
-        + f
-        + ((2 * s - 1) * a * tan_half)[:, None] * r
-        + ((1 - 2 * t) * tan_half)[:, None] * u
+        np.asarray(cam.eye) + f + ((2 * s - 1) * a * tan_half)[:, None] * r + ((1 - 2 * t) * tan_half)[:, None] * u
     )
     np.testing.assert_allclose(plane_points(cam, region, s, t), expected, rtol=0, atol=1e-13)
     # (s, t) = (0, 0) is the top-left corner: left of centre along r, above along u
     top_left = plane_points(cam, region, np.array([0.0]), np.array([0.0]))[0]
-    np.testing.assert_allclose(
-        top_left, np.asarray(cam.eye) + f - a * tan_half * r + tan_half * u, atol=1e-13
-    )
+    np.testing.assert_allclose(top_left, np.asarray(cam.eye) + f - a * tan_half * r + tan_half * u, atol=1e-13)
     centre = plane_points(cam, region, np.array([0.5]), np.array([0.5]))[0]
     np.testing.assert_allclose(centre, np.asarray(cam.eye) + f, atol=1e-15)
 
@@ -137,9 +132,7 @@ def test_region_pixel_coords_are_absolute_row_major():
     assert Region(10, 8, 2, 3).shape == (5, 8)
 
 
-@pytest.mark.parametrize(
-    "args", [(0, 5), (5, 0), (10, 8, 8, 0, 3, 1), (10, 8, 0, 7, 1, 2), (10, 8, -1, 0, 2, 2)]
-)
+@pytest.mark.parametrize("args", [(0, 5), (5, 0), (10, 8, 8, 0, 3, 1), (10, 8, 0, 7, 1, 2), (10, 8, -1, 0, 2, 2)])
 def test_region_outside_the_image_is_refused(args):
     with pytest.raises(ValueError):
         Region(*args)

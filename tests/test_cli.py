@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rcp_server.cli import camera_path, main
 from rcp_server.camera import Camera
+from rcp_server.cli import camera_path, main
 from rcp_server.scenefile import scene_names
 
 SMALL = ["--width", "48", "--height", "32"]
@@ -52,8 +52,17 @@ def test_render_writes_the_painting(tmp_path):
 
 def test_save_iterations_writes_every_iteration_and_the_last_is_the_output(tmp_path):
     out = tmp_path / "still.png"
-    argv = ["render", str(_scene_file(tmp_path)), "--out", str(out), *SMALL, "--iterations", "4",
-            "--save-iterations", str(tmp_path / "its")]
+    argv = [
+        "render",
+        str(_scene_file(tmp_path)),
+        "--out",
+        str(out),
+        *SMALL,
+        "--iterations",
+        "4",
+        "--save-iterations",
+        str(tmp_path / "its"),
+    ]
     assert main(argv) == 0
     files = sorted((tmp_path / "its").glob("iteration_*.png"))
     assert [f.name for f in files] == [f"iteration_{k}.png" for k in range(1, 5)]
@@ -62,8 +71,20 @@ def test_save_iterations_writes_every_iteration_and_the_last_is_the_output(tmp_p
 
 def test_frames_over_time_write_a_numbered_sequence_that_moves(tmp_path):
     out = tmp_path / "seq.png"
-    argv = ["-q", "render", str(_scene_file(tmp_path)), "--out", str(out), *SMALL, "--frames", "3",
-            "--fps", "2", "--temporal", "2"]
+    argv = [
+        "-q",
+        "render",
+        str(_scene_file(tmp_path)),
+        "--out",
+        str(out),
+        *SMALL,
+        "--frames",
+        "3",
+        "--fps",
+        "2",
+        "--temporal",
+        "2",
+    ]
     assert main(argv) == 0
     frames = [np.asarray(Image.open(tmp_path / f"seq_{k:04d}.png")) for k in range(3)]
     assert not np.array_equal(frames[0], frames[1])  # the box spins 45 degrees a frame
@@ -86,10 +107,31 @@ def test_camera_path_orbits_around_the_target_and_walks_forward():
         (["render", "{scene}", "--out", "x.png", "--mapping", "swirly"], "valid mappings: color, depth, normal"),
         (["render", "{scene}", "--out", "x.png", "--width", "0"], "positive integer"),
         (["render", "{scene}", "--out", "x.png", "--lambda-p", "nan"], "finite"),
-        (["render", "{scene}", "--out", "x.png", "--eye", "0", "0.5", "0", "--look-at", "0", "0.5", "0"],
-         "eye and look_at coincide"),
-        (["render", "{scene}", "--out", "x.png", "--up", "0", "0", "1", "--eye", "0", "0", "5",
-          "--look-at", "0", "0", "0"], "up is parallel"),
+        (
+            ["render", "{scene}", "--out", "x.png", "--eye", "0", "0.5", "0", "--look-at", "0", "0.5", "0"],
+            "eye and look_at coincide",
+        ),
+        (
+            [
+                "render",
+                "{scene}",
+                "--out",
+                "x.png",
+                "--up",
+                "0",
+                "0",
+                "1",
+                "--eye",
+                "0",
+                "0",
+                "5",
+                "--look-at",
+                "0",
+                "0",
+                "0",
+            ],
+            "up is parallel",
+        ),
         (["render", "{scene}", "--out", "x.png", "--fov", "180"], "fov"),
         (["render", "{scene}"], "--out"),
         (["paint"], "invalid choice"),
@@ -110,8 +152,20 @@ def test_unwritable_output_is_a_one_line_error(tmp_path, capsys):
 
 
 def test_console_script_exit_code_and_no_traceback(tmp_path):
-    done = subprocess.run([sys.executable, "-m", "rcp_server.cli", "render", str(tmp_path / "broken.toml"),
-                           "--out", str(tmp_path / "x.png")], capture_output=True, text=True, timeout=120)
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "rcp_server.cli",
+            "render",
+            str(tmp_path / "broken.toml"),
+            "--out",
+            str(tmp_path / "x.png"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert done.returncode == 2
     assert "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1
 
@@ -132,6 +186,13 @@ def test_every_shipped_scene_loads_and_paints(tmp_path, capsys):
 def test_bench_speed_prints_the_stage_split_and_the_ratio_to_embree_alone(capsys):
     assert main(["bench", "speed", "--width", "64", "--height", "36", "--iterations", "2", "--repeats", "1"]) == 0
     out = capsys.readouterr().out
-    for needle in ("triangles", "camera", "intersect", "shade", "bookkeeping",
-                   "Embree alone", "ratio iteration / Embree alone"):
+    for needle in (
+        "triangles",
+        "camera",
+        "intersect",
+        "shade",
+        "bookkeeping",
+        "Embree alone",
+        "ratio iteration / Embree alone",
+    ):
         assert needle in out, needle

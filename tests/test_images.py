@@ -16,9 +16,7 @@ def _decode(data: bytes) -> np.ndarray:
 
 
 def test_to_uint8_rounds_to_nearest_and_clamps():
-    image = np.array(
-        [[[0.0, 1.0, 0.5], [-3.0, 7.0, np.nan], [1 / 255, 0.5 / 255 - 1e-6, 254.5 / 255]]], np.float32
-    )
+    image = np.array([[[0.0, 1.0, 0.5], [-3.0, 7.0, np.nan], [1 / 255, 0.5 / 255 - 1e-6, 254.5 / 255]]], np.float32)
     out = to_uint8(image)
     assert out.dtype == np.uint8
     np.testing.assert_array_equal(out, [[[0, 255, 128], [0, 255, 0], [1, 0, 255]]])

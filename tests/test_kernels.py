@@ -132,9 +132,7 @@ def test_cast_rays_matches_numpy_reference(target_kind, eye_kind, noise_scale):
     z0 = 4.5
     target = (KINDS[target_kind], 0.07)
     eye = (KINDS[eye_kind], 0.3)
-    bad, v_p, v_e, origins, directions = _run_cast(
-        camera, region, xi, eta, data, z0, target, eye, noise_scale
-    )
+    bad, v_p, v_e, origins, directions = _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale)
     basis = np.stack(camera.basis())
     ref_vp = ref_field(
         target[0],
@@ -196,9 +194,7 @@ def test_cast_rays_agrees_with_the_painting_reference():
     camera = Camera((1.0, 0.5, 4.0), (0.0, 0.0, 0.0), fov=45.0)
     region = Region(20, 14, 4, 3, 9, 7)
     for mapping in ("color", "depth", "normal"):
-        params = PaintParams(
-            mapping=mapping, eye_mapping="depth", lambda_p=6.0, lambda_e=0.2, noise=0.4, spp=2
-        )
+        params = PaintParams(mapping=mapping, eye_mapping="depth", lambda_p=6.0, lambda_e=0.2, noise=0.4, spp=2)
         frame = _frame(camera, region, params)
         data, _, _ = _cast_inputs(3, region, 2)
         state = PaintState(region, data["color"], data["depth"], data["normal"].copy(), data["direction"])
@@ -219,12 +215,8 @@ def test_cast_rays_agrees_with_the_painting_reference():
         # the mappings' numpy fields are float32 (the state's dtype); the kernel sums in float64
         np.testing.assert_allclose(kv_p, v_p, rtol=1e-6, atol=1e-7)
         np.testing.assert_allclose(kv_e, v_e, rtol=1e-6, atol=1e-7)
-        target = (
-            frame.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
-        )
-        np.testing.assert_allclose(
-            directions, target / np.linalg.norm(target, axis=1, keepdims=True), atol=2e-7
-        )
+        target = frame.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
+        np.testing.assert_allclose(directions, target / np.linalg.norm(target, axis=1, keepdims=True), atol=2e-7)
 
 
 # ---- shade ----
@@ -290,9 +282,7 @@ def ref_shade(
     z = np.full(n, float(z_max))
     # ---- hits ----
     f = face[hit]
-    w = np.stack([1.0 - b1.astype(np.float64) - b2, b1.astype(np.float64), b2.astype(np.float64)], axis=1)[
-        hit
-    ]
+    w = np.stack([1.0 - b1.astype(np.float64) - b2, b1.astype(np.float64), b2.astype(np.float64)], axis=1)[hit]
     albedo = np.einsum("nc,nck->nk", w, colors[f].astype(np.float64))
     nr = np.einsum("nc,nck->nk", w, normals[f].astype(np.float64))
     length = np.linalg.norm(nr, axis=1, keepdims=True)
@@ -303,9 +293,7 @@ def ref_shade(
         uvs = np.einsum("nc,nck->nk", w[textured], uv[f][textured].astype(np.float64))
         k = tid[textured]
         tw, th = texture_width[k], texture_height[k]
-        albedo[textured] *= ref_bilinear(
-            texels, texture_offset[k], tw, th, uvs[:, 0] * tw, (1 - uvs[:, 1]) * th, True
-        )
+        albedo[textured] *= ref_bilinear(texels, texture_offset[k], tw, th, uvs[:, 0] * tw, (1 - uvs[:, 1]) * th, True)
     dh = d[hit]
     if lit:
         facing = np.where((nr * dh).sum(axis=1) > 0, -1.0, 1.0)
@@ -453,13 +441,11 @@ def test_shade_constant_environment_and_channels_not_needed_are_not_written():
     ref = ref_shade(**inputs)
     np.testing.assert_allclose(color, ref[0], rtol=0, atol=1e-6)
     assert np.all(depth == -9.0) and np.all(normal == -9.0) and np.all(direction == -9.0)
-    sky_only = (inputs["face"].reshape(-1, 2) < 0).all(axis=1) & np.isfinite(inputs["directions"]).all(
-        axis=1
-    ).reshape(-1, 2).all(axis=1)
+    sky_only = (inputs["face"].reshape(-1, 2) < 0).all(axis=1) & np.isfinite(inputs["directions"]).all(axis=1).reshape(
+        -1, 2
+    ).all(axis=1)
     assert sky_only.sum() > 3
-    np.testing.assert_array_equal(
-        color[sky_only], np.broadcast_to(inputs["environment"][0, 0], (sky_only.sum(), 3))
-    )
+    np.testing.assert_array_equal(color[sky_only], np.broadcast_to(inputs["environment"][0, 0], (sky_only.sum(), 3)))
 
 
 def test_bilinear_texture_tiles_in_both_directions():

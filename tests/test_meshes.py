@@ -154,12 +154,8 @@ def test_obj_with_missing_texture_keeps_its_flat_color_and_warns(tmp_path, caplo
     with caplog.at_level(logging.WARNING, logger="rcp"):
         parts = load_mesh_file(path)
     assert parts[0].texture is None
-    np.testing.assert_allclose(
-        parts[0].corner_colors, np.broadcast_to([0.2, 0.6, 0.4], (1, 3, 3)), atol=1 / 255
-    )
-    assert any(
-        str(path) in r.getMessage() and "texture" in r.getMessage() for r in caplog.records if r.name == "rcp"
-    )
+    np.testing.assert_allclose(parts[0].corner_colors, np.broadcast_to([0.2, 0.6, 0.4], (1, 3, 3)), atol=1 / 255)
+    assert any(str(path) in r.getMessage() and "texture" in r.getMessage() for r in caplog.records if r.name == "rcp")
 
 
 def test_obj_with_texture_loads_uv_and_image(tmp_path):
@@ -187,9 +183,7 @@ def test_primitives_sit_on_the_ground_with_outward_normals():
     sphere = primitive("sphere", subdivisions=2, radius=2.0)
     np.testing.assert_allclose(np.linalg.norm(sphere.vertices, axis=1), 2.0, rtol=1e-12)
     n = corner_normals(sphere.vertices, sphere.faces)
-    np.testing.assert_allclose(
-        np.einsum("fck,fck->fc", n, sphere.vertices[sphere.faces] / 2.0), 1.0, atol=1e-3
-    )
+    np.testing.assert_allclose(np.einsum("fck,fck->fc", n, sphere.vertices[sphere.faces] / 2.0), 1.0, atol=1e-3)
     box = primitive("box", extents=(2, 2, 2))
     bn = corner_normals(box.vertices, box.faces)
     # crisp box: every corner keeps its face normal, one of the six axes

@@ -22,9 +22,7 @@ def _state(region, color, depth=None, normal=None, direction=None) -> PaintState
     def full(value, shape):
         return None if value is None else np.ascontiguousarray(np.broadcast_to(np.float32(value), shape))
 
-    return PaintState(
-        region, full(color, (n, 3)), full(depth, (n,)), full(normal, (n, 3)), full(direction, (n, 3))
-    )
+    return PaintState(region, full(color, (n, 3)), full(depth, (n,)), full(normal, (n, 3)), full(direction, (n, 3)))
 
 
 def _hits(state: PaintState, camera: Camera = CAMERA) -> np.ndarray:
@@ -50,9 +48,7 @@ def test_iteration_one_is_the_plain_render_for_every_mapping(busy_scene, mapping
         keep_iterations=True,
     )
     np.testing.assert_array_equal(result.iterations[0], plain)
-    alone = paint(
-        busy_scene, CAMERA, W, H, PaintParams(mapping=mapping, iterations=1, lambda_p=6.0, lambda_e=0.2)
-    )
+    alone = paint(busy_scene, CAMERA, W, H, PaintParams(mapping=mapping, iterations=1, lambda_p=6.0, lambda_e=0.2))
     np.testing.assert_array_equal(alone.image, plain)
     # and the painting does move afterwards, so the equality above is not vacuous
     assert not np.array_equal(result.iterations[2], plain)
@@ -128,9 +124,7 @@ def test_color_displacement_is_lambda_p_pixels_along_the_basis(color, axis):
     expected = np.broadcast_to(sign * 5.0 * p * basis[axis], v_p.shape)
     np.testing.assert_allclose(v_p, expected, rtol=1e-6, atol=1e-12)
     np.testing.assert_allclose(np.linalg.norm(v_p, axis=1), 5.0 * p, rtol=1e-6)
-    np.testing.assert_allclose(
-        v_e, np.broadcast_to(sign * 0.3 * basis[axis], v_e.shape), rtol=1e-6, atol=1e-12
-    )
+    np.testing.assert_allclose(v_e, np.broadcast_to(sign * 0.3 * basis[axis], v_e.shape), rtol=1e-6, atol=1e-12)
 
 
 def test_red_moves_the_target_right_green_up_blue_in_on_the_image(gradient_scene):
@@ -181,9 +175,7 @@ def test_pixels_at_the_focus_depth_do_not_move():
     v_p, _ = displacements(state, _frame(CAMERA, region, params), params, 4.25)
     np.testing.assert_allclose(
         v_p,
-        displacements(
-            PaintState(region, colors), _frame(CAMERA, region, params), PaintParams(lambda_p=9.0), 0.0
-        )[0],
+        displacements(PaintState(region, colors), _frame(CAMERA, region, params), PaintParams(lambda_p=9.0), 0.0)[0],
         rtol=1e-6,
         atol=1e-12,
     )
@@ -281,9 +273,7 @@ def test_eye_displacement_changes_the_image_of_a_two_depth_scene():
 def test_recorded_depth_of_a_facing_plane_is_its_distance_and_a_miss_is_z_max():
     scene = make_scene([facing_plane(5.0, size=(4.0, 4.0), divisions=(2, 2))], z_max=77.0)
     for spp in (1, 4):
-        state = paint(
-            scene, CAMERA, W, H, PaintParams(mapping="depth", iterations=2, spp=spp, lambda_p=0.0)
-        ).state
+        state = paint(scene, CAMERA, W, H, PaintParams(mapping="depth", iterations=2, spp=spp, lambda_p=0.0)).state
         # the plane spans |x|, |y| < 2 at depth 5: pixel centres inside that square hit it
         hit = np.abs(state.depth - 5.0) < 1e-5
         miss = state.depth == np.float32(77.0)
@@ -370,9 +360,7 @@ def test_environment_orientation():
         np.testing.assert_allclose(pixel[:2], expected, atol=1e-4)
     # straight up is the top row
     up = Camera((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), up=(0.0, 0.0, -1.0))
-    assert paint(scene, up, 1, 1, PaintParams(iterations=1)).image[0, 0, 1] == pytest.approx(
-        0.5 / rows, abs=1e-4
-    )
+    assert paint(scene, up, 1, 1, PaintParams(iterations=1)).image[0, 0, 1] == pytest.approx(0.5 / rows, abs=1e-4)
 
 
 # ---- seeds, tiles, threads, time ----
@@ -511,9 +499,7 @@ def _pixel_of(point, width, height):
 def test_nan_and_degenerate_geometry_neither_crashes_nor_poisons_pixels(busy_scene, params):
     light = busy_scene.light
     good = make_scene(busy_scene.objects, light=light, environment=busy_scene.environment, z_max=30.0)
-    bad = make_scene(
-        busy_scene.objects + [_bad_faces()], light=light, environment=busy_scene.environment, z_max=30.0
-    )
+    bad = make_scene(busy_scene.objects + [_bad_faces()], light=light, environment=busy_scene.environment, z_max=30.0)
     assert bad.geometry()[0].face_count == good.geometry()[0].face_count + 5  # the bad faces reach Embree
     clean = paint(good, CAMERA, W, H, params)
     broken = paint(bad, CAMERA, W, H, params)
@@ -619,9 +605,7 @@ def test_paint_params_validation():
             PaintParams(**bad)
     with pytest.raises(ValueError, match="smudge"):
         PaintParams.from_dict({"smudge": 1})
-    assert PaintParams.from_dict({"mapping": "depth", "iterations": 2}) == PaintParams(
-        mapping="depth", iterations=2
-    )
+    assert PaintParams.from_dict({"mapping": "depth", "iterations": 2}) == PaintParams(mapping="depth", iterations=2)
     assert PaintParams().iterations == 6 and "color" in MAPPINGS
 
 
@@ -649,15 +633,11 @@ def test_animated_object_moves_with_time():
 def test_default_focus_depth_is_the_distance_to_look_at(gradient_scene):
     camera = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -4.0))  # look_at on the plane: z0 = 4 by default
     plain = paint(gradient_scene, camera, W, H, PaintParams(iterations=1)).image
-    focused = paint(
-        gradient_scene, camera, W, H, PaintParams(mapping="depth", lambda_p=12.0, iterations=3)
-    ).image
+    focused = paint(gradient_scene, camera, W, H, PaintParams(mapping="depth", lambda_p=12.0, iterations=3)).image
     np.testing.assert_allclose(focused, plain, rtol=0, atol=1e-5)
     near = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0))  # z0 = 1: the plane is 3 units out of focus
     assert (
-        np.abs(
-            paint(gradient_scene, near, W, H, PaintParams(mapping="depth", lambda_p=12.0)).image - plain
-        ).max()
+        np.abs(paint(gradient_scene, near, W, H, PaintParams(mapping="depth", lambda_p=12.0)).image - plain).max()
         > 1e-2
     )
 

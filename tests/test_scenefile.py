@@ -106,8 +106,7 @@ BROKEN = {
     "missing_env_image": '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[environment]\nimage = "sky.png"\n',
     "zero_light": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[light]\ndirection = [0, 0, 0]\n",
     "mesh_and_primitive": (
-        '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\n'
-        'primitive = { type = "box" }\n'
+        '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\nprimitive = { type = "box" }\n'
     ),
     "neither_mesh_nor_primitive": '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nname = "x"\n',
     "unknown_primitive": (
@@ -119,14 +118,12 @@ BROKEN = {
         'primitive = { type = "grid" }\ntexture = "nope.png"\n'
     ),
     "texture_without_uv": (
-        "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-        'primitive = { type = "box" }\ntexture = "t.png"\n'
+        '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nprimitive = { type = "box" }\ntexture = "t.png"\n'
     ),
     "unknown_paint_key": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\nsmudge = 3\n",
     "bad_paint_value": "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\niterations = 0\n",
     "negative_radius": (
-        "[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\n"
-        'primitive = { type = "sphere", radius = -1.0 }\n'
+        '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nprimitive = { type = "sphere", radius = -1.0 }\n'
     ),
     "not_utf8": b'title = "\xff\xfe"\n[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n',
 }
@@ -158,9 +155,7 @@ def test_broken_scene_messages_say_what_is_wrong(tmp_path):
     assert "zoom" in message(BROKEN["unknown_key"])
     assert "camera" in message(BROKEN["missing_camera"])
     assert "eye" in message(BROKEN["nan"])
-    assert "mesh" in message(BROKEN["mesh_and_primitive"]) and "primitive" in message(
-        BROKEN["mesh_and_primitive"]
-    )
+    assert "mesh" in message(BROKEN["mesh_and_primitive"]) and "primitive" in message(BROKEN["mesh_and_primitive"])
     assert "nope.obj" in message(BROKEN["missing_mesh"])
 
 
@@ -171,9 +166,7 @@ def test_unreadable_scene_file(tmp_path):
 
 
 def test_unknown_mapping_in_paint_lists_the_valid_ones(tmp_path):
-    path = _write(
-        tmp_path / "s.toml", '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\nmapping = "swirly"\n'
-    )
+    path = _write(tmp_path / "s.toml", '[camera]\neye = [0, 0, 5]\nlook_at = [0, 0, 0]\n[paint]\nmapping = "swirly"\n')
     with pytest.raises(SceneError) as info:
         load_scene_file(path)
     message = _one_line_error(path, info)
@@ -256,9 +249,7 @@ def test_scene_file_with_missing_mtl_texture_still_renders(tmp_path, caplog):
         "mtllib m.mtl\nv -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\n"
         "vt 0 0\nvt 1 0\nvt 0 1\nvt 1 1\nusemtl m\nf 1/1 2/2 3/3\nf 2/2 4/4 3/3\n",
     )
-    path = _write(
-        tmp_path / "s.toml", '[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\n'
-    )
+    path = _write(tmp_path / "s.toml", '[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\n')
     with caplog.at_level(logging.WARNING, logger="rcp"):
         scene = load_scene_file(path)
     assert any("texture" in r.getMessage() for r in caplog.records if r.name == "rcp")
@@ -267,13 +258,10 @@ def test_scene_file_with_missing_mtl_texture_still_renders(tmp_path, caplog):
 
 
 def test_scene_file_with_nan_mesh_vertices_is_repaired(tmp_path, caplog):
-    _write(
-        tmp_path / "m.obj", "v -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\nv nan 0 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n"
-    )
+    _write(tmp_path / "m.obj", "v -1 -1 0\nv 1 -1 0\nv -1 1 0\nv 1 1 0\nv nan 0 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n")
     path = _write(
         tmp_path / "s.toml",
-        "[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n"
-        '[[objects]]\nmesh = "m.obj"\ncolor = [0.5, 0.25, 1.0]\n',
+        '[camera]\neye = [0, 0, 4]\nlook_at = [0, 0, 0]\n[[objects]]\nmesh = "m.obj"\ncolor = [0.5, 0.25, 1.0]\n',
     )
     with caplog.at_level(logging.WARNING, logger="rcp"):
         scene = load_scene_file(path)
@@ -297,11 +285,7 @@ def test_glb_with_embedded_texture_round_trips_and_renders_the_texture_color(tmp
     path.write_bytes(box.export(file_type="glb"))
     scene = load_scene(str(path))
     geometry, _ = scene.geometry()
-    assert (
-        len(geometry.texture_width) == 1
-        and geometry.texture_width[0] == 4
-        and np.all(geometry.texture_id == 0)
-    )
+    assert len(geometry.texture_width) == 1 and geometry.texture_width[0] == 4 and np.all(geometry.texture_id == 0)
     np.testing.assert_allclose(geometry.texels, np.broadcast_to(texel / 255.0, (16, 3)), atol=1e-6)
     scene.light = None  # unlit: a pixel shows the surface's color itself
     camera = Camera((0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=30)
