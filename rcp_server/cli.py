@@ -232,6 +232,9 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, SceneError, CameraError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
+    except MemoryError:
+        print("rcp: error: not enough memory for this image size and sample count", file=sys.stderr)
+        return 2
     except OSError as exc:  # an output path that cannot be written
         print(f"rcp: error: {exc.filename or ''}: {exc.strerror or exc}", file=sys.stderr)
         return 2

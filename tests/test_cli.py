@@ -134,6 +134,7 @@ def test_camera_path_orbits_around_the_target_and_walks_forward():
         ),
         (["render", "{scene}", "--out", "x.png", "--fov", "180"], "fov"),
         (["render", "{scene}"], "--out"),
+        (["render", "{scene}", "--out", "x.png", "--width", "200000", "--height", "200000"], "not enough memory"),
         (["paint"], "invalid choice"),
     ],
 )
