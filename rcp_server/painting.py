@@ -14,7 +14,7 @@ import math
 import os
 import time as _time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -374,6 +374,3 @@ def _join(states: list[PaintState], region: Region) -> PaintState:
 
     return PaintState(region, cat("color"), cat("depth"), cat("normal"), cat("direction"))
 
-
-def with_overrides(params: PaintParams, **changes) -> PaintParams:
-    return replace(params, **{k: v for k, v in changes.items() if v is not None})
