@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections import Counter
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -74,22 +75,22 @@ def corner_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return corner_n
 
 
-def repaired(part: Part, source: str) -> Part:
-    """Drop faces with non-finite vertices or zero area, warning with counts; refuse an empty result."""
+def repaired(part: Part, source: str, tally: Counter | None = None) -> Part:
+    """Drop faces with non-finite vertices or zero area, warning with counts; refuse an empty result.
+
+    With a ``tally``, the counts (``faces``, ``non-finite``, ``zero area``) add up there instead, for one
+    warning about a whole file of many meshes.
+    """
     tri = part.vertices[part.faces]
     finite = np.all(np.isfinite(tri), axis=(1, 2))
     with np.errstate(invalid="ignore", over="ignore"):
         area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     keep = finite & (area2 > 1e-20)
-    if not keep.all():
-        log.warning(
-            "%s: dropped %d of %d faces (%d with non-finite vertices, %d with zero area)",
-            source,
-            int((~keep).sum()),
-            len(keep),
-            int((~finite).sum()),
-            int((finite & ~keep).sum()),
-        )
+    counts = Counter({"faces": len(keep), "non-finite": int((~finite).sum()), "zero area": int((finite & ~keep).sum())})
+    if tally is not None:
+        tally.update(counts)
+    elif not keep.all():
+        log.warning("%s: %s", source, dropped_faces(counts))
     if not keep.any():
         raise MeshError(f"{source}: mesh has no usable triangles")
     uv = None if part.corner_uv is None else part.corner_uv[keep]
@@ -97,6 +98,14 @@ def repaired(part: Part, source: str) -> Part:
         log.warning("%s: non-finite texture coordinates replaced by 0", source)
         uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0)
     return replace(part, faces=part.faces[keep], corner_colors=part.corner_colors[keep], corner_uv=uv)
+
+
+def dropped_faces(counts: Counter) -> str:
+    dropped = counts["non-finite"] + counts["zero area"]
+    return (
+        f"dropped {dropped} of {counts['faces']} faces ({counts['non-finite']} with non-finite vertices, "
+        f"{counts['zero area']} with zero area)"
+    )
 
 
 def _image_array(image) -> np.ndarray:
@@ -114,9 +123,14 @@ def load_texture(path: Path) -> np.ndarray:
         raise MeshError(f"{path}: cannot read texture image ({exc})") from None
 
 
-def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
+def _part_from_trimesh(
+    mesh: trimesh.Trimesh, world_from_mesh: np.ndarray, source: str, tally: Counter, images: dict
+) -> Part:
+    """A part from one trimesh placed by the file's transform; ``images`` caches textures by identity,
+    since a file's meshes share few images (the staircase interior: 348 textured meshes, 9 images)."""
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    vertices = np.asarray(mesh.vertices, dtype=np.float64)
+    with np.errstate(invalid="ignore", over="ignore"):  # non-finite vertices are repaired just below
+        vertices = np.asarray(mesh.vertices, dtype=np.float64) @ world_from_mesh[:3, :3].T + world_from_mesh[:3, 3]
     visual = mesh.visual
     colors = _grey(len(faces))
     uv = texture = None
@@ -131,17 +145,19 @@ def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
             factor = getattr(material, "diffuse", None)
         if factor is not None:
             colors[:] = np.asarray(factor, dtype=np.float32)[:3] / 255.0
+        # a material without an image is a flat color (a texture trimesh failed to read is reported by
+        # load_mesh_file, from trimesh's own log)
         if image is not None and visual.uv is not None and len(visual.uv) == len(vertices):
             uv = np.asarray(visual.uv, dtype=np.float32)[faces]
-            texture = _image_array(image)
-        else:
-            log.warning("%s: material has no readable texture; using its flat color", source)
+            if id(image) not in images:
+                images[id(image)] = _image_array(image)
+            texture = images[id(image)]
     elif kind == "vertex":
         colors = (np.asarray(visual.vertex_colors, dtype=np.float32)[:, :3] / 255.0)[faces]
     elif kind == "face":
         face_rgb = np.asarray(visual.face_colors, dtype=np.float32)[:, :3] / 255.0
         colors = np.repeat(face_rgb[:, None, :], 3, axis=1)
-    part = repaired(Part(vertices, faces, colors, uv, texture, colored), source)
+    part = repaired(Part(vertices, faces, colors, uv, texture, colored), source, tally)
     # weld corners that share a position (a triangle soup, UV seams) so normals shade smooth across
     # them; colors and UVs live per corner, so welding changes nothing else
     unique, inverse = trimesh.grouping.unique_rows(part.vertices[part.faces].reshape(-1, 3), digits=8)
@@ -149,21 +165,67 @@ def _part_from_trimesh(mesh: trimesh.Trimesh, source: str) -> Part:
     return replace(part, vertices=welded, faces=inverse.reshape(-1, 3).astype(np.int64))
 
 
+class _TrimeshTroubles(logging.Handler):
+    """Collects what trimesh says while it loads a file: it reports an unreadable texture only in its
+    debug log, and goes on without it."""
+
+    def __init__(self):
+        super().__init__(logging.DEBUG)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        cause = f" ({type(record.exc_info[1]).__name__}: {record.exc_info[1]})" if record.exc_info else ""
+        if "failed to load image" in record.getMessage():
+            self.messages.append(f"a texture image could not be read{cause}; its material shows its flat color")
+        elif record.levelno >= logging.WARNING:
+            self.messages.append(record.getMessage() + cause)
+
+
 def load_mesh_file(path: Path) -> list[Part]:
-    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied."""
+    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied.
+
+    Meshes of the file with no usable triangle are skipped with a warning; a file with none is an error.
+    """
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"{path}: no such mesh file")
+    troubles = _TrimeshTroubles()
+    trimesh_log = logging.getLogger("trimesh")
+    trimesh_log.addHandler(troubles)
+    level = trimesh_log.level
+    trimesh_log.setLevel(logging.DEBUG)
     try:
         # process=False: trimesh would silently drop non-finite vertices; repaired() reports them
         loaded = trimesh.load_scene(str(path), process=False)
-        meshes = [m for m in loaded.dump() if isinstance(m, trimesh.Trimesh)]
+        # walk the scene graph rather than dump(): dump() copies every mesh and its texture image
+        meshes = []
+        for node in loaded.graph.nodes_geometry:
+            world_from_mesh, name = loaded.graph[node]
+            mesh = loaded.geometry.get(name)
+            if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces):
+                meshes.append((mesh, np.asarray(world_from_mesh, dtype=np.float64)))
     except Exception as exc:  # trimesh raises anything from ValueError to KeyError on a bad file
         raise MeshError(f"{path}: trimesh cannot read it ({type(exc).__name__}: {exc})") from None
-    meshes = [m for m in meshes if len(m.faces)]
+    finally:
+        trimesh_log.removeHandler(troubles)
+        trimesh_log.setLevel(level)
+    for message in dict.fromkeys(troubles.messages):  # each distinct complaint once
+        log.warning("%s: %s", path, message)
     if not meshes:
         raise MeshError(f"{path}: the file holds no triangles")
-    return [_part_from_trimesh(m, str(path)) for m in meshes]
+    parts, unusable, tally, images = [], 0, Counter(), {}
+    for mesh, world_from_mesh in meshes:
+        try:
+            parts.append(_part_from_trimesh(mesh, world_from_mesh, str(path), tally, images))
+        except MeshError:
+            unusable += 1
+    if tally["non-finite"] or tally["zero area"]:
+        log.warning("%s: %s", path, dropped_faces(tally))
+    if unusable and parts:
+        log.warning("%s: skipped %d of %d meshes that hold no usable triangle", path, unusable, len(meshes))
+    if not parts:
+        raise MeshError(f"{path}: the file holds no usable triangles")
+    return parts
 
 
 # ---- primitives: base on y = 0 and axis along +y (box, cylinder, cone); sphere about the origin ----
