@@ -193,3 +193,29 @@ def test_primitives_sit_on_the_ground_with_outward_normals():
     assert grid.corner_uv[..., 1].max() == pytest.approx(2.0)
     with pytest.raises(MeshError, match="torus"):
         primitive("torus")
+
+
+def test_a_file_of_many_meshes_shares_its_textures_and_skips_unusable_meshes(tmp_path, caplog):
+    from PIL import Image
+
+    from rcp_server.scene import SceneObject, build_geometry
+
+    material = trimesh.visual.material.PBRMaterial(baseColorTexture=Image.new("RGB", (4, 4), (200, 30, 60)))
+    quad_uv = np.array([[0, 0], [1, 0], [0, 1], [1, 1]], float)
+    scene = trimesh.Scene()
+    for k in range(3):
+        vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], float) + [2.0 * k, 0, 0]
+        if k == 2:
+            vertices[:] = vertices[0]  # every face of this mesh has zero area
+        visual = trimesh.visual.TextureVisuals(uv=quad_uv, material=material)
+        scene.add_geometry(trimesh.Trimesh(vertices, [[0, 1, 2], [1, 3, 2]], visual=visual, process=False))
+    path = tmp_path / "many.glb"
+    path.write_bytes(scene.export(file_type="glb"))
+    with caplog.at_level(logging.WARNING, logger="rcp"):
+        parts = load_mesh_file(path)
+    assert len(parts) == 2
+    assert any("skipped 1 of 3 meshes" in r.getMessage() for r in caplog.records if r.name == "rcp")
+    objects = [SceneObject(f"m{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
+    geometry = build_geometry(objects, 0.0)
+    assert len(geometry.texture_width) == 1 and geometry.texels.shape == (16, 3)  # one image, not one per mesh
+    np.testing.assert_allclose(geometry.texels[0], np.array([200, 30, 60]) / 255.0, atol=1e-6)
