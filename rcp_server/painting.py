@@ -373,4 +373,3 @@ def _join(states: list[PaintState], region: Region) -> PaintState:
         return None if arrays[0] is None else np.concatenate(arrays)
 
     return PaintState(region, cat("color"), cat("depth"), cat("normal"), cat("direction"))
-
