@@ -13,8 +13,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from .camera import RAY_DTYPE, Region
-from .painting import STAGES, PaintParams, _cast, _frame, default_threads, paint
+from .camera import Region
+from .painting import STAGES, PaintParams, _cast, _frame, _Rays, default_threads, paint
 from .scenefile import load_scene
 
 
@@ -51,9 +51,9 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     state = paint(scene, camera, width, height, params, threads=threads).state
     frame = _frame(camera, region, params)
     n = region.pixel_count
-    scratch = (np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3), RAY_DTYPE), np.empty((n, 3), RAY_DTYPE))
-    _cast(state, frame, params, float(np.linalg.norm(np.subtract(camera.look_at, camera.eye))), scratch)
-    origins, directions = scratch[2:]
+    rays = _Rays.allocate(n, 1)
+    _cast(state, frame, params, float(np.linalg.norm(np.subtract(camera.look_at, camera.eye))), rays)
+    origins, directions = rays.origins, rays.directions
     rows = max(1, -(-height // (threads * 4)))
     bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(rows)]
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0

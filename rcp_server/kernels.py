@@ -84,6 +84,7 @@ def cast_rays(
     v_e,
     origins,
     directions,
+    write_origins,
 ):
     """Per-pixel cameras for every sample: camera assignment fused with the mapping. Returns the number
     of rays that came out non-finite (a NaN or infinite input), so the caller masks only when needed.
@@ -98,6 +99,7 @@ def cast_rays(
     inside a kernel costs more than the whole pass)
     origins, directions : (n*spp, 3) float32 out: P_e' = eye + V_e, unit direction to
     P_p' = P_p(s, t) + V_p with P_p as in camera.py. A non-finite displacement moves nothing.
+    write_origins : False when the eyes do not move and origins already hold the eye (saves a pass of writes)
     """
     n_pix, spp = xi.shape
     _fill_field(
@@ -132,9 +134,10 @@ def cast_rays(
                     inv = math.nan
                     bad += 1
                 s = pix * spp + k
-                origins[s, 0] = ox
-                origins[s, 1] = oy
-                origins[s, 2] = oz
+                if write_origins:
+                    origins[s, 0] = ox
+                    origins[s, 1] = oy
+                    origins[s, 2] = oz
                 directions[s, 0] = dx * inv
                 directions[s, 1] = dy * inv
                 directions[s, 2] = dz * inv

@@ -179,10 +179,28 @@ def displacements(state: PaintState, frame: _Frame, params: PaintParams, z0: flo
     return scaled(params.mapping, params.lambda_p * pitch), scaled(params.eye_mapping, params.lambda_e)
 
 
-def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scratch: tuple[np.ndarray, ...]) -> int:
-    """Camera assignment: fill ``scratch`` = (V_p, V_e, origins, directions) from ``I_{n-1}``.
+@dataclass
+class _Rays:
+    """One tile's buffers for camera assignment, reused over its iterations (a large allocation inside a
+    kernel costs more than the kernel). ``at_eye``: every origin already is the frame's eye."""
 
-    Returns how many rays came out non-finite (they must not reach Embree)."""
+    v_p: np.ndarray  # (n, 3) float64 target displacement per pixel
+    v_e: np.ndarray  # (n, 3) float64 eye displacement per pixel
+    origins: np.ndarray  # (n*spp, 3) float32
+    directions: np.ndarray  # (n*spp, 3) float32
+    at_eye: bool = False
+
+    @classmethod
+    def allocate(cls, pixels: int, spp: int) -> _Rays:
+        rays = pixels * spp
+        return cls(
+            np.empty((pixels, 3)), np.empty((pixels, 3)), np.empty((rays, 3), RAY_DTYPE), np.empty((rays, 3), RAY_DTYPE)
+        )
+
+
+def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, rays: _Rays) -> int:
+    """Camera assignment: fill ``rays`` from ``I_{n-1}``. Returns how many rays came out non-finite (they
+    must not reach Embree)."""
     pitch = frame.camera.pixel_pitch(frame.region.full_height)
     moves = not state.blank and state.has(params.reads())
 
@@ -197,8 +215,9 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scra
 
     target = plan(params.mapping, params.lambda_p * pitch)
     eye = plan(params.eye_mapping, params.lambda_e)
+    eye_fixed = eye[0] == kernels.FIELD_ZERO
     region = frame.region
-    return kernels.cast_rays(
+    bad = kernels.cast_rays(
         np.asarray(frame.camera.eye, np.float64),
         np.stack(frame.camera.basis()),
         frame.camera.half_height(),
@@ -219,8 +238,14 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, scra
         *eye,
         _or_dummy(frame.noise, 2),
         float(params.noise) if moves else 0.0,
-        *scratch,
+        rays.v_p,
+        rays.v_e,
+        rays.origins,
+        rays.directions,
+        not (eye_fixed and rays.at_eye),
     )
+    rays.at_eye = eye_fixed
+    return bad
 
 
 def _paint_tile(
@@ -237,17 +262,12 @@ def _paint_tile(
     n_pix = frame.region.pixel_count
     n_rays = n_pix * params.spp
     seconds = dict.fromkeys(STAGES, 0.0)
-    scratch = (
-        np.empty((n_pix, 3)),
-        np.empty((n_pix, 3)),
-        np.empty((n_rays, 3), RAY_DTYPE),
-        np.empty((n_rays, 3), RAY_DTYPE),
-    )
-    origins, directions = scratch[2:]
+    rays = _Rays.allocate(n_pix, params.spp)
+    origins, directions = rays.origins, rays.directions
     for iteration in range(params.iterations):
         # ---- camera assignment ----
         clock = _time.perf_counter()
-        invalid = _cast(state, frame, params, z0, scratch)
+        invalid = _cast(state, frame, params, z0, rays)
         # ---- intersection ----
         now = _time.perf_counter()
         seconds["camera"] += now - clock

@@ -117,6 +117,7 @@ def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
         v_e,
         origins,
         directions,
+        True,
     )
     return bad, v_p, v_e, origins, directions
 
@@ -474,3 +475,20 @@ def test_environment_texel_centres_are_exact():
     color = _run_shade(inputs)[0]
     # the fast atan2 is good to 1e-5 rad, 3e-5 texels here
     np.testing.assert_allclose(color, env[row.ravel(), col.ravel()], rtol=0, atol=5e-5)
+
+
+def test_cast_rays_leaves_origins_alone_when_told_they_already_hold_the_eye():
+    camera = Camera((0.5, 1.0, 2.0), (-1.0, 0.0, -3.0))
+    region = Region(6, 4)
+    n = region.pixel_count
+    data, xi, eta = _cast_inputs(4, region, 1)
+    origins = np.full((n, 3), 7.0, np.float32)
+    directions = np.empty_like(origins)
+    args = [np.asarray(camera.eye, np.float64), np.stack(camera.basis()), camera.half_height(), 1.5, 6, 4, 0, 0, 6]
+    args += [xi, eta, data["color"], data["depth"], data["normal"], data["direction"], 1.0]
+    args += [kernels.FIELD_COLOR, 0.1, data["given"], kernels.FIELD_ZERO, 0.0, data["given"], data["noise"], 0.0]
+    args += [np.empty((n, 3)), np.empty((n, 3))]
+    kernels.cast_rays(*args, origins, directions, False)
+    assert np.all(origins == 7.0)  # untouched
+    kernels.cast_rays(*args, origins, directions, True)
+    np.testing.assert_array_equal(origins, np.broadcast_to(np.float32(camera.eye), origins.shape))
