@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 # fast math without the no-NaN/no-inf assumptions: the kernels test for NaN rays on purpose
 _jit = numba.njit(nogil=True, cache=True, error_model="numpy")
@@ -253,98 +254,112 @@ def shade(
     env_w = environment.shape[1]
     env_flat = environment.reshape(env_h * env_w, 3)
     inv_spp = 1.0 / spp
-    # scalars rather than small arrays throughout: they stay in registers
-    for pix in range(n_pix):
-        acc_r = acc_g = acc_b = 0.0
-        acc_nx = acc_ny = acc_nz = 0.0
-        acc_dx = acc_dy = acc_dz = 0.0
-        acc_z = 0.0
-        for s in range(pix * spp, (pix + 1) * spp):
-            f = face[s]
-            dx = directions[s, 0]
-            dy = directions[s, 1]
-            dz = directions[s, 2]
-            finite = dx == dx and dy == dy and dz == dz  # a NaN ray misses and sees black
-            if f >= 0:
-                # ---- surface: albedo from corner colors (times texture), then light ----
-                w1 = b1[s]
-                w2 = b2[s]
-                w0 = 1.0 - w1 - w2
-                r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
-                g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
-                b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
-                tid = texture_id[f]
-                if tid >= 0:
-                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
-                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
-                    tw = texture_width[tid]
-                    th = texture_height[tid]
-                    tr, tg, tb = _bilinear(texels, texture_offset[tid], tw, th, u * tw, (1.0 - v) * th, True)
-                    r *= tr
-                    g *= tg
-                    b *= tb
-                nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
-                ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
-                nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
-                inv = _inverse_length(nx * nx + ny * ny + nz * nz)
-                if inv > 0.0:
-                    nx *= inv
-                    ny *= inv
-                    nz *= inv
-                if lit:
-                    # two-sided: light the side the ray sees
-                    facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-                    lambert = -facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2])
-                    k = ambient + (1.0 - ambient) * max(lambert, 0.0)
-                    r *= k
-                    g *= k
-                    b *= k
-                if need_depth:
-                    ts = t[s]
-                    acc_z += (
-                        (origins[s, 0] + ts * dx - eye[0]) * forward[0]
-                        + (origins[s, 1] + ts * dy - eye[1]) * forward[1]
-                        + (origins[s, 2] + ts * dz - eye[2]) * forward[2]
-                    )
-                if need_normal:
-                    acc_nx += nx
-                    acc_ny += ny
-                    acc_nz += nz
-            else:
-                # ---- miss: the environment, equirectangular ----
-                if not finite:
-                    r = g = b = 0.0
-                elif env_w * env_h == 1:
-                    r = env_flat[0, 0]
-                    g = env_flat[0, 1]
-                    b = env_flat[0, 2]
-                else:
+    panorama = env_w * env_h > 1
+    block = 256  # pixels
+    sky = np.empty((block * spp, 2))  # panorama texel coordinates of one block's misses
+    for first in range(0, n_pix, block):
+        last = min(first + block, n_pix)
+        base = first * spp
+        # ---- where this block's misses look in the panorama: the trigonometry runs in a short loop of its
+        # own, whose iterations the CPU overlaps; inside the shading loop it cost three times as much ----
+        if panorama:
+            for s in range(base, last * spp):
+                if face[s] < 0:
+                    dx = directions[s, 0]
+                    dy = directions[s, 1]
+                    dz = directions[s, 2]
                     lon = fast_atan2(dx, -dz)
                     lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
-                    r, g, b = _bilinear(
-                        env_flat, 0, env_w, env_h, (lon / (2.0 * math.pi) + 0.5) * env_w, lat / math.pi * env_h, False
-                    )
-                if need_depth:
-                    acc_z += z_max
-            acc_r += min(max(r, 0.0), 1.0)
-            acc_g += min(max(g, 0.0), 1.0)
-            acc_b += min(max(b, 0.0), 1.0)
-            if need_direction and finite:
-                acc_dx += dx
-                acc_dy += dy
-                acc_dz += dz
-        out_color[pix, 0] = acc_r * inv_spp
-        out_color[pix, 1] = acc_g * inv_spp
-        out_color[pix, 2] = acc_b * inv_spp
-        if need_depth:
-            out_depth[pix] = acc_z * inv_spp
-        if need_normal:
-            out_normal[pix, 0] = acc_nx * inv_spp
-            out_normal[pix, 1] = acc_ny * inv_spp
-            out_normal[pix, 2] = acc_nz * inv_spp
-        if need_direction:
-            dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
-            inv = 1.0 / dlen if dlen > 0.0 else 0.0
-            out_direction[pix, 0] = acc_dx * inv
-            out_direction[pix, 1] = acc_dy * inv
-            out_direction[pix, 2] = acc_dz * inv
+                    sky[s - base, 0] = (lon / (2.0 * math.pi) + 0.5) * env_w
+                    sky[s - base, 1] = lat / math.pi * env_h
+        # scalars rather than small arrays throughout: they stay in registers
+        for pix in range(first, last):
+            acc_r = acc_g = acc_b = 0.0
+            acc_nx = acc_ny = acc_nz = 0.0
+            acc_dx = acc_dy = acc_dz = 0.0
+            acc_z = 0.0
+            for s in range(pix * spp, (pix + 1) * spp):
+                f = face[s]
+                dx = directions[s, 0]
+                dy = directions[s, 1]
+                dz = directions[s, 2]
+                finite = dx == dx and dy == dy and dz == dz  # a NaN ray misses and sees black
+                if f >= 0:
+                    # ---- surface: albedo from corner colors (times texture), then light ----
+                    w1 = b1[s]
+                    w2 = b2[s]
+                    w0 = 1.0 - w1 - w2
+                    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
+                    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
+                    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
+                    tid = texture_id[f]
+                    if tid >= 0:
+                        u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
+                        v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
+                        tw = texture_width[tid]
+                        th = texture_height[tid]
+                        tr, tg, tb = _bilinear(texels, texture_offset[tid], tw, th, u * tw, (1.0 - v) * th, True)
+                        r *= tr
+                        g *= tg
+                        b *= tb
+                    nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
+                    ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
+                    nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
+                    inv = _inverse_length(nx * nx + ny * ny + nz * nz)
+                    if inv > 0.0:
+                        nx *= inv
+                        ny *= inv
+                        nz *= inv
+                    if lit:
+                        # two-sided: light the side the ray sees
+                        facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
+                        lambert = -facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2])
+                        k = ambient + (1.0 - ambient) * max(lambert, 0.0)
+                        r *= k
+                        g *= k
+                        b *= k
+                    if need_depth:
+                        ts = t[s]
+                        acc_z += (
+                            (origins[s, 0] + ts * dx - eye[0]) * forward[0]
+                            + (origins[s, 1] + ts * dy - eye[1]) * forward[1]
+                            + (origins[s, 2] + ts * dz - eye[2]) * forward[2]
+                        )
+                    if need_normal:
+                        acc_nx += nx
+                        acc_ny += ny
+                        acc_nz += nz
+                else:
+                    # ---- miss: the environment, equirectangular ----
+                    if not finite:
+                        r = g = b = 0.0
+                    elif env_w * env_h == 1:
+                        r = env_flat[0, 0]
+                        g = env_flat[0, 1]
+                        b = env_flat[0, 2]
+                    else:
+                        r, g, b = _bilinear(env_flat, 0, env_w, env_h, sky[s - base, 0], sky[s - base, 1], False)
+                    if need_depth:
+                        acc_z += z_max
+                acc_r += min(max(r, 0.0), 1.0)
+                acc_g += min(max(g, 0.0), 1.0)
+                acc_b += min(max(b, 0.0), 1.0)
+                if need_direction and finite:
+                    acc_dx += dx
+                    acc_dy += dy
+                    acc_dz += dz
+            out_color[pix, 0] = acc_r * inv_spp
+            out_color[pix, 1] = acc_g * inv_spp
+            out_color[pix, 2] = acc_b * inv_spp
+            if need_depth:
+                out_depth[pix] = acc_z * inv_spp
+            if need_normal:
+                out_normal[pix, 0] = acc_nx * inv_spp
+                out_normal[pix, 1] = acc_ny * inv_spp
+                out_normal[pix, 2] = acc_nz * inv_spp
+            if need_direction:
+                dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
+                inv = 1.0 / dlen if dlen > 0.0 else 0.0
+                out_direction[pix, 0] = acc_dx * inv
+                out_direction[pix, 1] = acc_dy * inv
+                out_direction[pix, 2] = acc_dz * inv
