@@ -92,21 +92,32 @@ def cast_rays(
 
     eye : (3,) float64;  basis : (3, 3) rows r, u, f;  tan_half : tan(fov/2);  aspect : W / H
     full_width, full_height : W, H;  x0, y0, width : the region's corner and width (pixels row-major)
-    xi, eta : (n, spp) float64 sub-pixel offsets of each sample
+    xi, eta : (n, spp) float64 sub-pixel offsets of each sample (not read at 1 spp: the centre)
     color, depth, normal, direction : I_{n-1} per pixel (dummies where the mapping does not read them)
     *_kind : FIELD_*; *_scale : lambda_p * p and lambda_e; *_given : (n, 3) precomputed fields (FIELD_GIVEN)
     noise : (n, 3) world-space random vectors, added to both fields times noise_scale
     v_p, v_e : (n, 3) float64 out: the displacements (scratch owned by the caller: a large allocation
-    inside a kernel costs more than the whole pass)
+    inside a kernel costs more than the whole pass); a field of kind FIELD_ZERO is not written
+    xi, eta at 1 spp are not read: that sample is the pixel centre
     origins, directions : (n*spp, 3) float32 out: P_e' = eye + V_e, unit direction to
     P_p' = P_p(s, t) + V_p with P_p as in camera.py. A non-finite displacement moves nothing.
     write_origins : False when the eyes do not move and origins already hold the eye (saves a pass of writes)
     """
     n_pix, spp = xi.shape
-    _fill_field(
-        target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise, noise_scale, v_p
-    )
-    _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise, noise_scale, v_e)
+    # what does not move is neither filled nor read: at this size every pass over memory counts
+    targets_move = target_kind != FIELD_ZERO
+    eyes_move = eye_kind != FIELD_ZERO
+    if targets_move:
+        _fill_field(
+            target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise, noise_scale, v_p
+        )
+    if eyes_move:
+        _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise, noise_scale, v_e)
+    px = py = pz = 0.0
+    ox = eye[0]
+    oy = eye[1]
+    oz = eye[2]
+    sx0 = 0.5
     # plane point = centre + sx * r + ty * u with centre = eye + f; sx, ty affine in the sample position
     cx = eye[0] + basis[2, 0]
     cy = eye[1] + basis[2, 1]
@@ -119,15 +130,21 @@ def cast_rays(
         for col in range(width):
             pix = row * width + col
             i = x0 + col
-            ox = eye[0] + v_e[pix, 0]
-            oy = eye[1] + v_e[pix, 1]
-            oz = eye[2] + v_e[pix, 2]
+            if targets_move:
+                px = v_p[pix, 0]
+                py = v_p[pix, 1]
+                pz = v_p[pix, 2]
+            if eyes_move:
+                ox = eye[0] + v_e[pix, 0]
+                oy = eye[1] + v_e[pix, 1]
+                oz = eye[2] + v_e[pix, 2]
             for k in range(spp):
-                sx = (i + xi[pix, k]) * sx_scale - aspect * tan_half
-                ty = ty0 - eta[pix, k] * ty_scale
-                dx = cx + sx * basis[0, 0] + ty * basis[1, 0] + v_p[pix, 0] - ox
-                dy = cy + sx * basis[0, 1] + ty * basis[1, 1] + v_p[pix, 1] - oy
-                dz = cz + sx * basis[0, 2] + ty * basis[1, 2] + v_p[pix, 2] - oz
+                # one sample sits at the pixel centre (MISSION.md); only jittered samples read their offsets
+                sx = (i + (xi[pix, k] if spp > 1 else sx0)) * sx_scale - aspect * tan_half
+                ty = ty0 - (eta[pix, k] if spp > 1 else sx0) * ty_scale
+                dx = cx + sx * basis[0, 0] + ty * basis[1, 0] + px - ox
+                dy = cy + sx * basis[0, 1] + ty * basis[1, 1] + py - oy
+                dz = cz + sx * basis[0, 2] + ty * basis[1, 2] + pz - oz
                 norm2 = dx * dx + dy * dy + dz * dz
                 if norm2 > 0.0 and norm2 < math.inf:
                     inv = 1.0 / math.sqrt(norm2)
