@@ -14,7 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from .camera import Region
-from .painting import STAGES, PaintParams, _cast, _frame, _Rays, default_threads, paint
+from .painting import STAGES, PaintParams, _cast, _frame, _Rays, default_threads, paint, tile_rows
 from .scenefile import load_scene
 
 
@@ -54,8 +54,7 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     rays = _Rays.allocate(n, 1)
     _cast(state, frame, params, float(np.linalg.norm(np.subtract(camera.look_at, camera.eye))), rays)
     origins, directions = rays.origins, rays.directions
-    rows = max(1, -(-height // (threads * 4)))
-    bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(rows)]
+    bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(tile_rows(region, threads))]
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0
 
     painted, alone, stage_sums = [], [], dict.fromkeys(STAGES, 0.0)
