@@ -124,13 +124,32 @@ class PaintResult:
 
 @dataclass
 class _Frame:
-    """What stays fixed over the iterations of one tile: sample offsets and the noise."""
+    """What stays fixed over the iterations of one tile: sample offsets, the noise, the camera's numbers."""
 
     camera: Camera
     region: Region
     xi: np.ndarray  # (n, spp) float64 sub-pixel offsets
     eta: np.ndarray
     noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
+    basis: np.ndarray = field(init=False)  # (3, 3) rows r, u, f
+    camera_args: tuple = field(init=False)  # the leading arguments of kernels.cast_rays
+
+    def __post_init__(self):
+        self.basis = np.stack(self.camera.basis())
+        region = self.region
+        self.camera_args = (
+            np.asarray(self.camera.eye, np.float64),
+            self.basis,
+            self.camera.half_height(),
+            region.full_width / region.full_height,
+            region.full_width,
+            region.full_height,
+            region.x0,
+            region.y0,
+            region.width,
+            self.xi,
+            self.eta,
+        )
 
     def pixel_coords(self) -> tuple[np.ndarray, np.ndarray]:
         return self.region.pixel_coords()
@@ -149,14 +168,12 @@ def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
         return _Frame(camera, region, half, half, None)
     i, j = region.pixel_coords()
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
-    noise = (
-        (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) if params.noise > 0 else None
-    )
+    noise = (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) if params.noise else None
     return _Frame(camera, region, xi, eta, noise)
 
 
 def _mapping_input(state: PaintState, frame: _Frame, z0: float) -> MappingInput:
-    r, u, f = frame.camera.basis()
+    r, u, f = frame.basis
     i, j = frame.pixel_coords()
     return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
 
@@ -210,25 +227,14 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, rays
             return kernels.FIELD_ZERO, 0.0, _DUMMY[2]
         if mapping.fused != kernels.FIELD_GIVEN:
             return mapping.fused, scale, _DUMMY[2]
-        field = mapping.field(_mapping_input(state, frame, z0))
-        return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(field, dtype=np.float32)
+        given = mapping.field(_mapping_input(state, frame, z0))
+        return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32)
 
     target = plan(params.mapping, params.lambda_p * pitch)
     eye = plan(params.eye_mapping, params.lambda_e)
     eye_fixed = eye[0] == kernels.FIELD_ZERO
-    region = frame.region
     bad = kernels.cast_rays(
-        np.asarray(frame.camera.eye, np.float64),
-        np.stack(frame.camera.basis()),
-        frame.camera.half_height(),
-        region.full_width / region.full_height,
-        region.full_width,
-        region.full_height,
-        region.x0,
-        region.y0,
-        region.width,
-        frame.xi,
-        frame.eta,
+        *frame.camera_args,
         state.color,
         _or_dummy(state.depth, 1),
         _or_dummy(state.normal, 2),
@@ -255,7 +261,7 @@ def _paint_tile(
     light = scene.light
     light_dir = np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64)
     eye = np.asarray(frame.camera.eye, np.float64)
-    _, _, forward = frame.camera.basis()
+    forward = frame.basis[2]
     z0 = params.z0 if params.z0 is not None else float(np.linalg.norm(np.subtract(frame.camera.look_at, eye)))
     z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
     reads = params.reads()
