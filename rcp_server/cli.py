@@ -15,7 +15,7 @@ from . import images
 from .camera import Camera, CameraError
 from .mappings import MAPPINGS
 from .painting import PaintParams, PaintState, paint
-from .scenefile import SceneError, load_scene, scene_names
+from .scenefile import SceneError, load_environment, load_scene, scene_names
 
 log = logging.getLogger("rcp")
 
@@ -83,6 +83,13 @@ def _parser() -> argparse.ArgumentParser:
     _add_paint_options(r)
     _add_camera_options(r)
     r.add_argument("--time", type=_finite, default=0.0, help="scene time in seconds (animated scenes)")
+    r.add_argument(
+        "--environment",
+        type=Path,
+        metavar="IMAGE",
+        help="replace what misses see: an equirectangular image or Radiance .hdr panorama",
+    )
+    r.add_argument("--exposure", type=_finite, default=0.0, help="stops of exposure for a .hdr environment")
     r.add_argument("--save-iterations", type=Path, metavar="DIR", help="also write every iteration to DIR")
     r.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
     r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100", help="JPEG quality")
@@ -163,6 +170,8 @@ def _frame_path(out: Path, index: int) -> Path:
 def _render(args: argparse.Namespace) -> None:
     images.image_format(args.out)  # refuse an unknown image type before painting anything
     scene = load_scene(args.scene)
+    if args.environment is not None:
+        scene.environment = load_environment(args.environment, args.exposure)
     params = paint_params(scene.paint, args)
     base = _camera(scene.camera, args)
     if args.frames == 1:

@@ -120,7 +120,7 @@ def load_texture(path: Path) -> np.ndarray:
         with Image.open(path) as image:
             return _image_array(image)
     except (OSError, UnidentifiedImageError) as exc:
-        raise MeshError(f"{path}: cannot read texture image ({exc})") from None
+        raise MeshError(f"{path}: cannot read the image ({exc})") from None
 
 
 def _part_from_trimesh(

@@ -23,6 +23,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from .camera import Camera, CameraError
 from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
+from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
 
 SCENES_DIR = Path(os.environ.get("RCP_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
@@ -56,6 +57,7 @@ class CameraSpec(_Model):
 class EnvironmentSpec(_Model):
     image: str | None = None
     color: Color | None = None
+    exposure: Finite = 0.0  # stops, for a Radiance .hdr image
 
 
 class LightSpec(_Model):
@@ -259,7 +261,9 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
         env = spec.environment
         if (env.image is None) == (env.color is None):
             raise SceneError("environment: give exactly one of 'image' or 'color'")
-        environment = Environment(load_texture(folder / env.image)) if env.image else Environment.constant(env.color)
+        environment = (
+            load_environment(folder / env.image, env.exposure) if env.image else Environment.constant(env.color)
+        )
         light = None
         if spec.light is not None:
             d = np.asarray(spec.light.direction, dtype=np.float64)
@@ -278,6 +282,14 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
     return Scene(
         name or path.stem, spec.title or path.stem, camera, environment, light, objects, dict(spec.paint), spec.z_max
     )
+
+
+def load_environment(path: Path, exposure: float = 0.0) -> Environment:
+    """An equirectangular panorama: a Radiance ``.hdr`` (tonemapped at ``exposure`` stops) or any image
+    Pillow reads (taken as display colors)."""
+    if Path(path).suffix.lower() == ".hdr":
+        return Environment(tonemap(read_radiance(path), exposure))
+    return Environment(load_texture(path))
 
 
 def frame_camera(parts: list[Part], fov: float = 45.0) -> Camera:
