@@ -58,7 +58,8 @@ class Waves:
 
 @dataclass
 class SceneObject:
-    """A part placed in the world by ``placement(time)`` (4x4 float64) in one or more instances."""
+    """A part placed in the world in one or more instances; it may move: ``motion(time)`` (4x4 float64,
+    applied in object space before each instance's placement) and ``waves`` deforming its vertices."""
 
     name: str
     part: Part
