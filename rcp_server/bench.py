@@ -46,13 +46,13 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     )
     paint(scene, camera, width, height, params, threads=threads)  # compile kernels, build the BVH
 
-    # the rays of a real painted iteration (the last one), cast in the same row bands as the painting
+    # the rays a painted iteration casts (those after the sixth), in the same row bands as the painting
     region = Region(width, height)
     state = paint(scene, camera, width, height, params, threads=threads).state
     frame = _frame(camera, region, params)
     n = region.pixel_count
     rays = _Rays.allocate(n, 1)
-    _cast(state, frame, params, float(np.linalg.norm(np.subtract(camera.look_at, camera.eye))), rays)
+    _cast(state, frame, params, params.focus(camera), rays)
     origins, directions = rays.origins, rays.directions
     bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(tile_rows(region, threads))]
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0
@@ -82,6 +82,9 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         print(f"  {stage:12s} {stage_sums[stage] * 1e3:7.2f} ms thread time  {share:6.1%}")
     frame_setup = per_iteration * threads - thread_total
     print(f"  {'(frame setup, threads, joins)':12s} ~{max(frame_setup, 0.0) * 1e3:.2f} ms thread time")
+    if tracer is None:
+        print("Embree alone: nothing to compare with, this scene has no triangles (every ray sees the sky)")
+        return
     print(f"Embree alone, same rays and threads:  {embree * 1e3:7.2f} ms   {n / embree / 1e6:5.2f} M rays/s")
     print(
         f"ratio iteration / Embree alone: {statistics.median(ratios):.2f}x median of {repeats} pairs "

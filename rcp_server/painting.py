@@ -66,6 +66,10 @@ class PaintParams:
             raise ValueError(f"unknown paint settings {sorted(unknown)}; known: {sorted(known)}")
         return cls(**values)
 
+    def focus(self, camera: Camera) -> float:
+        """``z0``: the focus depth given, or the view depth of the camera's look-at point."""
+        return self.z0 if self.z0 is not None else float(np.linalg.norm(np.subtract(camera.look_at, camera.eye)))
+
     def reads(self) -> frozenset[str]:
         """The channels of ``I_{n-1}`` this painting reads (the only ones it records)."""
         channels = get_mapping(self.mapping).reads
@@ -262,7 +266,7 @@ def _paint_tile(
     light_dir = np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64)
     eye = np.asarray(frame.camera.eye, np.float64)
     forward = frame.basis[2]
-    z0 = params.z0 if params.z0 is not None else float(np.linalg.norm(np.subtract(frame.camera.look_at, eye)))
+    z0 = params.focus(frame.camera)
     z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
     reads = params.reads()
     n_pix = frame.region.pixel_count
