@@ -11,8 +11,6 @@ import statistics
 import time
 from concurrent.futures import ThreadPoolExecutor
 
-import numpy as np
-
 from .camera import Region
 from .painting import STAGES, PaintParams, _cast, _frame, _Rays, default_threads, paint, tile_rows
 from .scenefile import load_scene
