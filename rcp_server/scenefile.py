@@ -8,6 +8,7 @@ format; every key is checked and a broken file is reported in one line naming th
 
 from __future__ import annotations
 
+import logging
 import math
 import os
 import re
@@ -25,6 +26,8 @@ from .camera import Camera, CameraError
 from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
 from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
+
+log = logging.getLogger("rcp")
 
 SCENES_DIR = Path(os.environ.get("RCP_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
 SCENE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z")  # \Z, not $: "$" lets a newline through
@@ -172,6 +175,13 @@ def _instances(spec: ObjectSpec) -> list[np.ndarray]:
         if any(math.hypot(x - cx, z - cz) < r for cx, cz, r in sc.keep_out):
             continue
         placed.append(Placement(translate=(x, 0.0, z), rotate=(0.0, yaw, 0.0), scale=scale).matrix())
+    if len(placed) < sc.count:
+        log.warning(
+            "%s: scatter placed %d of %d copies; the keep-out circles cover most of its area",
+            spec.name or "an object",
+            len(placed),
+            sc.count,
+        )
     return placed
 
 
