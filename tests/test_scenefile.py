@@ -307,3 +307,15 @@ def test_placement_rotates_scales_and_translates(tmp_path):
     np.testing.assert_allclose(hi - lo, (6, 4, 2), atol=1e-5)
     np.testing.assert_allclose(lo, (1 - 3, 2, 3 - 1), atol=1e-5)
     assert math.isclose(float(hi[1]), 6.0, abs_tol=1e-5)
+
+
+def test_scatter_that_cannot_place_every_copy_says_so(tmp_path, caplog):
+    path = _write(
+        tmp_path / "s.toml",
+        '[camera]\neye = [0, 1, 5]\nlook_at = [0, 0, 0]\n[[objects]]\nname = "t"\nprimitive = { type = "box" }\n'
+        "scatter = { count = 5, area = [-1, 1, -1, 1], keep_out = [[0, 0, 5]] }\n",
+    )
+    with caplog.at_level(logging.WARNING, logger="rcp"):
+        scene = load_scene_file(path)
+    assert [len(obj.instances) for obj in scene.objects] == [0]
+    assert any("scatter placed 0 of 5" in r.getMessage() for r in caplog.records if r.name == "rcp")
