@@ -119,7 +119,6 @@ class PaintResult:
     state: PaintState
     stage_seconds: dict[str, float]  # summed over tiles (thread time), all iterations
     iterations: list[np.ndarray] = field(default_factory=list)  # (h, w, 3) per iteration when kept
-    rays: int = 0
 
     @property
     def image(self) -> np.ndarray:
@@ -155,12 +154,9 @@ class _Frame:
             self.eta,
         )
 
-    def pixel_coords(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.region.pixel_coords()
-
     def plane(self) -> np.ndarray:
         """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
-        i, j = self.pixel_coords()
+        i, j = self.region.pixel_coords()
         s = ((i[:, None] + self.xi) / self.region.full_width).ravel()
         t = ((j[:, None] + self.eta) / self.region.full_height).ravel()
         return plane_points(self.camera, self.region, s, t)
@@ -178,7 +174,7 @@ def _frame(camera: Camera, region: Region, params: PaintParams) -> _Frame:
 
 def _mapping_input(state: PaintState, frame: _Frame, z0: float) -> MappingInput:
     r, u, f = frame.basis
-    i, j = frame.pixel_coords()
+    i, j = frame.region.pixel_coords()
     return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
 
 
@@ -400,7 +396,7 @@ def paint(
             parts = list(pool.map(run, tiles))
     state = _join([p[0] for p in parts], region)
     seconds = {stage: sum(p[1][stage] for p in parts) for stage in STAGES}
-    return PaintResult(state, seconds, keep or [], rays=region.pixel_count * params.spp * params.iterations)
+    return PaintResult(state, seconds, keep or [])
 
 
 def _join(states: list[PaintState], region: Region) -> PaintState:

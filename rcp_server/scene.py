@@ -15,6 +15,7 @@ import numpy as np
 
 from .camera import Camera
 from .meshes import Part, corner_normals
+from .tracer import Tracer
 
 
 @dataclass(frozen=True)
@@ -191,13 +192,11 @@ class Scene:
     def animated(self) -> bool:
         return any(obj.animated for obj in self.objects)
 
-    def geometry(self, time: float = 0.0) -> tuple[Geometry, object]:
+    def geometry(self, time: float = 0.0) -> tuple[Geometry, Tracer | None]:
         """The geometry at ``time`` and its ray tracer (None when the scene has no triangles).
 
         Cached: once for a static scene, per time (the newest few) for an animated one.
         """
-        from .tracer import Tracer  # the tracer owns the Embree handle; import here keeps scene data-only
-
         key = float(time) if self.animated else 0.0
         with self._lock:
             if key not in self._cache:
