@@ -13,7 +13,8 @@ from __future__ import annotations
 import math
 import os
 import time as _time
-from concurrent.futures import ThreadPoolExecutor
+from collections.abc import Callable
+from concurrent.futures import Executor, ThreadPoolExecutor
 from dataclasses import dataclass, field, fields
 
 import numpy as np
@@ -26,6 +27,10 @@ from .scene import Scene
 from .tracer import Hits
 
 STAGES = ("camera", "intersect", "shade", "bookkeeping")
+
+
+class Abandoned(Exception):
+    """A painting stopped between iterations because its ``should_stop`` said so (the camera moved on)."""
 
 
 @dataclass(frozen=True)
@@ -255,7 +260,13 @@ def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, rays
 
 
 def _paint_tile(
-    scene: Scene, time: float, frame: _Frame, params: PaintParams, state: PaintState, keep: list[np.ndarray] | None
+    scene: Scene,
+    time: float,
+    frame: _Frame,
+    params: PaintParams,
+    state: PaintState,
+    keep: list[np.ndarray] | None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> tuple[PaintState, dict[str, float]]:
     geometry, tracer = scene.geometry(time)
     light = scene.light
@@ -271,6 +282,8 @@ def _paint_tile(
     rays = _Rays.allocate(n_pix, params.spp)
     origins, directions = rays.origins, rays.directions
     for iteration in range(params.iterations):
+        if should_stop is not None and should_stop():
+            raise Abandoned
         # ---- camera assignment ----
         clock = _time.perf_counter()
         invalid = _cast(state, frame, params, z0, rays)
@@ -367,12 +380,18 @@ def paint(
     region: Region | None = None,
     threads: int | None = None,
     keep_iterations: bool = False,
+    pool: Executor | None = None,
+    should_stop: Callable[[], bool] | None = None,
 ) -> PaintResult:
     """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera``.
 
     Per-frame mode: ``previous=None`` starts from ``I_0`` and runs ``params.iterations`` iterations.
     Temporal mode: pass the previous frame's :attr:`PaintResult.state` to continue the recursion from it
     with this frame's camera and time (it must cover the same region; otherwise the canvas restarts).
+
+    Tiles run on ``pool`` when given (a server shares one pool between all its paintings, so their tiles
+    queue for the same cores; pass its size as ``threads``), else on a pool of this call's own. ``should_stop`` is
+    asked before every iteration of every tile; once it says yes the painting raises :class:`Abandoned`.
     """
     region = region or Region(width, height)
     if (region.full_width, region.full_height) != (width, height):
@@ -387,9 +406,11 @@ def paint(
         raise ValueError("keep_iterations needs the full image")
 
     def run(tile: Region):
-        return _paint_tile(scene, time, _frame(camera, tile, params), params, previous.rows(tile), keep)
+        return _paint_tile(scene, time, _frame(camera, tile, params), params, previous.rows(tile), keep, should_stop)
 
-    if threads == 1 or len(tiles) == 1:
+    if pool is not None:
+        parts = list(pool.map(run, tiles))
+    elif threads == 1 or len(tiles) == 1:
         parts = [run(tile) for tile in tiles]
     else:
         with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as pool:

@@ -659,3 +659,27 @@ def test_temporal_mode_uses_the_new_frames_camera_and_time():
     second = paint(scene, moved_camera, W, H, params, previous=first.state, time=1.0)
     np.testing.assert_allclose(second.state.depth, 5.0, rtol=1e-6)
     assert not np.array_equal(second.image, paint(scene, moved_camera, W, H, params, time=1.0).image)
+
+
+def test_shared_pool_paints_the_same_pixels(busy_scene):
+    from concurrent.futures import ThreadPoolExecutor
+
+    params = PaintParams(iterations=3, lambda_p=6.0)
+    alone = paint(busy_scene, CAMERA, W, H, params).image
+    with ThreadPoolExecutor(2) as pool:
+        shared = paint(busy_scene, CAMERA, W, H, params, pool=pool, threads=2).image
+    np.testing.assert_array_equal(shared, alone)
+
+
+def test_should_stop_abandons_between_iterations(busy_scene):
+    from rcp_server.painting import Abandoned
+
+    asked = []
+
+    def should_stop():
+        asked.append(1)
+        return len(asked) > 3  # let a few tile-iterations run, then stop
+
+    with pytest.raises(Abandoned):
+        paint(busy_scene, CAMERA, W, H, PaintParams(iterations=50), threads=1, should_stop=should_stop)
+    assert len(asked) == 4  # asked before every iteration and stopped at the first yes
