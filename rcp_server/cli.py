@@ -119,6 +119,10 @@ def _parser() -> argparse.ArgumentParser:
 
     sub.add_parser("scenes", help="list the shipped scenes")
 
+    v = sub.add_parser("serve", help="serve the walk-through client, REST renders and the WebSocket")
+    v.add_argument("--host", help="address to listen on (default 127.0.0.1, or RCP_HOST)")
+    v.add_argument("--port", type=int, help="port (default 8000, or RCP_PORT)")
+
     b = sub.add_parser("bench", help="benchmarks that print figures")
     b.add_argument("which", choices=["speed"])
     b.add_argument("--scene", default="default")
@@ -224,6 +228,25 @@ def _scenes() -> None:
             print(f"{name:12s} BROKEN: {exc}")
 
 
+def _serve(args: argparse.Namespace) -> None:
+    import uvicorn
+    from pydantic import ValidationError
+
+    from .service import create_app
+    from .service.settings import Settings
+
+    given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
+    try:
+        settings = Settings(**given)
+    except ValidationError as exc:
+        raise UsageError(f"bad setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}") from None
+    logging.getLogger("rcp").setLevel(logging.INFO)
+    for handler in logging.getLogger().handlers:
+        handler.setFormatter(logging.Formatter("rcp: %(levelname)s: %(message)s"))
+    print(f"rcp: serving on http://{settings.host}:{settings.port}/  (walk-through client; API docs at /docs)")
+    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
+
+
 def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(format="rcp: warning: %(message)s", level=logging.WARNING)
     try:
@@ -234,6 +257,8 @@ def main(argv: list[str] | None = None) -> int:
             _render(args)
         elif args.command == "scenes":
             _scenes()
+        elif args.command == "serve":
+            _serve(args)
         elif args.command == "bench":
             from .bench import speed
 

@@ -115,6 +115,21 @@ class PaintState:
         }
         return PaintState(tile, blank=self.blank, **pick)
 
+    def resized(self, width: int, height: int) -> PaintState:
+        """This state (of a full image) at another size, nearest pixel: a walk-through that changes its
+        resolution keeps painting where it was instead of starting over from the canvas."""
+        src = self.region
+        if (width, height) == (src.width, src.height):
+            return self
+        x = np.minimum((np.arange(width) + 0.5) * src.width / width, src.width - 1).astype(np.int64)
+        y = np.minimum((np.arange(height) + 0.5) * src.height / height, src.height - 1).astype(np.int64)
+        pick = (y[:, None] * src.width + x[None, :]).ravel()
+        channels = {
+            name: None if getattr(self, name) is None else getattr(self, name)[pick]
+            for name in ("color", "depth", "normal", "direction")
+        }
+        return PaintState(Region(width, height), blank=self.blank, **channels)
+
     def has(self, channels) -> bool:
         return all(getattr(self, name) is not None for name in channels)
 

@@ -1,0 +1,185 @@
+"""The wire protocol: every REST body and WebSocket message is a typed model, validated at the edge.
+
+WebSocket messages are JSON text tagged by ``type``; each frame is a ``frame`` text message followed by
+one binary message with its JPEG. The browser client mirrors these models through ``client/protocol.js``,
+which is generated from this module (``python -m rcp_server.service.protocol > client/protocol.js``) and
+checked by a test, so the two sides cannot drift apart.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
+
+from ..mappings import MAPPINGS
+
+Finite = Annotated[float, Field(allow_inf_nan=False)]
+Vec3 = tuple[Finite, Finite, Finite]
+Size = Annotated[int, Field(ge=1, le=4096)]
+Quality = Annotated[int, Field(ge=1, le=100)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class CameraModel(_Model):
+    """A pinhole camera (MISSION.md conventions): vertical ``fov`` in degrees."""
+
+    eye: Vec3
+    look_at: Vec3
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: Annotated[float, Field(gt=0, lt=180)] = 60.0
+
+
+class PaintModel(_Model):
+    """Painting settings; a field left out takes the scene's default, then the engine's."""
+
+    mapping: Literal[tuple(sorted(MAPPINGS))] | None = None  # type: ignore[valid-type]
+    eye_mapping: Literal[tuple(sorted(MAPPINGS))] | None = None  # type: ignore[valid-type]
+    iterations: Annotated[int, Field(ge=1, le=64)] | None = None
+    spp: Annotated[int, Field(ge=1, le=64)] | None = None
+    lambda_p: Annotated[float, Field(ge=-256, le=256)] | None = None
+    lambda_e: Annotated[float, Field(ge=-100, le=100)] | None = None
+    z0: Annotated[float, Field(gt=0, le=1e6)] | None = None
+    z_max: Annotated[float, Field(gt=0, le=1e6)] | None = None
+    noise: Annotated[float, Field(ge=0, le=16)] | None = None
+    seed: Annotated[int, Field(ge=0, le=2**31 - 1)] | None = None
+    method: Literal["raytrace", "image"] | None = None
+    edge: Literal["clamp", "wrap", "mirror"] | None = None
+
+    def given(self) -> dict:
+        return self.model_dump(exclude_none=True)
+
+
+class RenderRequest(_Model):
+    """``POST /api/render``: every field but ``scene`` has a default (the scene's camera and painting)."""
+
+    scene: Annotated[str, Field(min_length=1, max_length=64)]
+    width: Size = 640
+    height: Size = 360
+    camera: CameraModel | None = None
+    paint: PaintModel = PaintModel()
+    time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] = 0.0
+    format: Literal["png", "jpeg"] = "png"
+    quality: Quality = 92
+
+
+class SceneInfo(BaseModel):
+    name: str
+    title: str
+    camera: CameraModel
+    paint: dict
+    animated: bool
+    triangles: int
+
+
+# ---- WebSocket, client -> server ----
+
+
+class Hello(_Model):
+    """Open (or switch) a walk-through: the scene and the canvas size; the camera resets to the scene's."""
+
+    type: Literal["hello"]
+    scene: Annotated[str, Field(min_length=1, max_length=64)]
+    width: Size = 640
+    height: Size = 360
+    quality: Quality = 80
+
+
+class CameraMessage(CameraModel):
+    """The newest camera; ``id`` comes back on the frame that shows it (for measuring latency)."""
+
+    type: Literal["camera"]
+    id: Annotated[int, Field(ge=0)] | None = None
+
+
+class PaintMessage(PaintModel):
+    """Change painting settings; given fields replace earlier ones, ``null`` restores the scene's default."""
+
+    type: Literal["paint"]
+
+    def changes(self) -> dict:
+        return {name: getattr(self, name) for name in self.model_fields_set if name != "type"}
+
+
+class ModeMessage(_Model):
+    """``temporal``: each frame continues the recursion from the last one; ``animate``: scene time runs."""
+
+    type: Literal["mode"]
+    temporal: bool | None = None
+    animate: bool | None = None
+
+
+class ViewMessage(_Model):
+    """Resize the canvas or change the JPEG quality without leaving the scene."""
+
+    type: Literal["view"]
+    width: Size | None = None
+    height: Size | None = None
+    quality: Quality | None = None
+
+
+ClientMessage = Annotated[Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage, Field(discriminator="type")]
+client_message = TypeAdapter(ClientMessage)
+
+
+# ---- WebSocket, server -> client ----
+
+
+class Ready(BaseModel):
+    type: Literal["ready"] = "ready"
+    scene: SceneInfo
+    width: int
+    height: int
+    quality: int
+    temporal: bool
+    animate: bool
+
+
+class Frame(BaseModel):
+    """Sent before the binary JPEG it describes. ``phase``: ``walk`` while the camera moves (temporal or
+    reduced), ``refine`` once it rests; ``final`` when no further refinement follows."""
+
+    type: Literal["frame"] = "frame"
+    seq: int
+    width: int
+    height: int
+    render_ms: float
+    iteration: int  # iterations of the recursion behind this image (temporal mode keeps counting)
+    spp: int
+    scale: float  # frame size / canvas size
+    phase: Literal["walk", "refine"]
+    final: bool
+    temporal: bool
+    camera_id: int | None
+    time: float
+    dropped: int  # frames rendered but never sent, because a newer one replaced them
+
+
+class Error(BaseModel):
+    type: Literal["error"] = "error"
+    message: str
+
+
+def client_module() -> str:
+    """``client/protocol.js``: the JSON schema of every message, for the browser to build and check against."""
+    schemas = {
+        "client": {m.model_fields["type"].annotation.__args__[0]: m.model_json_schema() for m in _CLIENT},
+        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error)},
+        "paint": PaintModel.model_json_schema(),
+    }
+    body = json.dumps(schemas, indent=1, sort_keys=True)
+    return (
+        "// Generated by `python -m rcp_server.service.protocol > client/protocol.js`; do not edit.\n"
+        "// The JSON schemas of the WebSocket messages (rcp_server/service/protocol.py).\n"
+        f"export const PROTOCOL = {body};\n"
+    )
+
+
+_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage)
+
+if __name__ == "__main__":
+    print(client_module(), end="")

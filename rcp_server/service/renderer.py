@@ -1,0 +1,94 @@
+"""Rendering off the event loop: one pool of tile workers shared by every painting, taken in turns.
+
+A painting blocks while its tiles run, so each one waits on a thread of its own (at most ``max_renders``
+at once); its tiles go to the shared :class:`FairPool`. The pool serves tiles by their position in their
+painting, so paintings in progress take turns tile by tile: a small walk-through frame is not stuck behind
+every tile of a large render that came first.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import queue
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Executor, Future, ThreadPoolExecutor
+from functools import partial
+from typing import TypeVar
+
+from ..painting import PaintParams, PaintResult, paint
+from ..scene import Scene
+
+T = TypeVar("T")
+
+
+class FairPool(Executor):
+    """Worker threads that take the task with the lowest (position in its batch, arrival) first."""
+
+    def __init__(self, workers: int, name: str = "rcp-tile"):
+        self._tasks: queue.PriorityQueue = queue.PriorityQueue()
+        self._arrival = itertools.count()
+        self._threads = [threading.Thread(target=self._work, name=f"{name}-{k}", daemon=True) for k in range(workers)]
+        for thread in self._threads:
+            thread.start()
+
+    def _put(self, position: int, fn: Callable, args: tuple) -> Future:
+        future: Future = Future()
+        self._tasks.put((position, next(self._arrival), future, fn, args))
+        return future
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        return self._put(0, partial(fn, **kwargs), args)
+
+    def map(self, fn: Callable[..., T], *iterables: Iterable, timeout=None, chunksize=1) -> Iterator[T]:
+        futures = [self._put(k, fn, args) for k, args in enumerate(zip(*iterables, strict=True))]
+
+        def results() -> Iterator[T]:
+            try:
+                for future in futures:
+                    yield future.result(timeout)
+            finally:  # a failed or abandoned painting takes its queued tiles with it
+                for future in futures:
+                    future.cancel()
+
+        return results()
+
+    def _work(self) -> None:
+        while True:
+            _, _, future, fn, args = self._tasks.get()
+            if future is None:
+                return
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                future.set_result(fn(*args))
+            except BaseException as exc:  # handed to whoever waits on the future
+                future.set_exception(exc)
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        for _ in self._threads:
+            self._tasks.put((1 << 62, next(self._arrival), None, None, None))
+        if wait:
+            for thread in self._threads:
+                thread.join()
+
+
+class Renderer:
+    """Runs paintings (and whatever goes with them, such as encoding) off the event loop."""
+
+    def __init__(self, threads: int, max_renders: int):
+        self.threads = threads
+        self.tiles = FairPool(threads)
+        self._paintings = ThreadPoolExecutor(max_renders, thread_name_prefix="rcp-render")
+
+    def paint(self, scene: Scene, camera, width: int, height: int, params: PaintParams, **options) -> PaintResult:
+        """Blocking: paint on the shared tile pool (call it inside :meth:`run`)."""
+        return paint(scene, camera, width, height, params, pool=self.tiles, threads=self.threads, **options)
+
+    async def run(self, job: Callable[[], T]) -> T:
+        return await asyncio.get_running_loop().run_in_executor(self._paintings, job)
+
+    def close(self) -> None:
+        self._paintings.shutdown(wait=True, cancel_futures=True)
+        self.tiles.shutdown(wait=True)
