@@ -232,7 +232,7 @@ def _serve(args: argparse.Namespace) -> None:
     import uvicorn
     from pydantic import ValidationError
 
-    from .service import create_app
+    from .service.app import create_app
     from .service.settings import Settings
 
     given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}

@@ -107,3 +107,6 @@ def depth_mapping(data: MappingInput) -> np.ndarray:
 def normal_mapping(data: MappingInput) -> np.ndarray:
     """C x N, the previous ray direction across the world normal: smudges along surfaces (section 5)."""
     return np.cross(data.direction, data.normal)
+
+
+BUILT_IN = tuple(MAPPINGS)  # the mappings every server knows; register_mapping adds more for Python callers

@@ -683,3 +683,16 @@ def test_should_stop_abandons_between_iterations(busy_scene):
     with pytest.raises(Abandoned):
         paint(busy_scene, CAMERA, W, H, PaintParams(iterations=50), threads=1, should_stop=should_stop)
     assert len(asked) == 4  # asked before every iteration and stopped at the first yes
+
+
+def test_resized_state_picks_the_nearest_pixel():
+    region = Region(4, 2)
+    color = np.arange(24, dtype=np.float32).reshape(8, 3)
+    state = PaintState(region, color, depth=np.arange(8, dtype=np.float32))
+    assert state.resized(4, 2) is state
+    up = state.resized(8, 4)
+    assert up.region == Region(8, 4)
+    np.testing.assert_array_equal(up.depth.reshape(4, 8), np.repeat(np.repeat(state.depth.reshape(2, 4), 2, 0), 2, 1))
+    down = up.resized(4, 2)
+    np.testing.assert_array_equal(down.color, state.color)
+    assert down.normal is None and not down.blank

@@ -13,7 +13,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
-from ..mappings import MAPPINGS
+from ..mappings import BUILT_IN
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -37,8 +37,8 @@ class CameraModel(_Model):
 class PaintModel(_Model):
     """Painting settings; a field left out takes the scene's default, then the engine's."""
 
-    mapping: Literal[tuple(sorted(MAPPINGS))] | None = None  # type: ignore[valid-type]
-    eye_mapping: Literal[tuple(sorted(MAPPINGS))] | None = None  # type: ignore[valid-type]
+    mapping: Literal[BUILT_IN] | None = None  # type: ignore[valid-type]
+    eye_mapping: Literal[BUILT_IN] | None = None  # type: ignore[valid-type]
     iterations: Annotated[int, Field(ge=1, le=64)] | None = None
     spp: Annotated[int, Field(ge=1, le=64)] | None = None
     lambda_p: Annotated[float, Field(ge=-256, le=256)] | None = None

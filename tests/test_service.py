@@ -1,0 +1,316 @@
+"""The service against a real server on loopback: REST renders, the WebSocket walk-through, the protocol."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import httpx
+import numpy as np
+import pytest
+from PIL import Image
+from websockets.sync.client import connect
+
+from rcp_server import images
+from rcp_server.camera import Camera
+from rcp_server.painting import PaintParams, paint
+from rcp_server.service import protocol
+from rcp_server.service.renderer import FairPool
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def post(server, body: dict) -> httpx.Response:
+    return httpx.post(f"{server.url}/api/render", json=body, timeout=120)
+
+
+def decode(data: bytes) -> np.ndarray:
+    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
+
+
+# ---- REST ----
+
+
+def test_health_and_scenes(live_server):
+    health = httpx.get(f"{live_server.url}/api/health").json()
+    assert health["status"] == "ok" and health["scenes"] >= 3
+    scenes = {s["name"]: s for s in httpx.get(f"{live_server.url}/api/scenes").json()}
+    assert {"default", "sea", "sky"} <= set(scenes)
+    assert scenes["default"]["camera"]["fov"] > 0 and scenes["default"]["triangles"] > 0
+    assert scenes["sea"]["animated"] and not scenes["default"]["animated"]
+
+
+def test_render_is_exactly_the_engines_painting(live_server):
+    body = {"scene": "default", "width": 96, "height": 54, "paint": {"iterations": 3, "lambda_p": 5.0}}
+    response = post(live_server, body)
+    assert response.status_code == 200 and response.headers["content-type"] == "image/png"
+    scene = live_server.app.state.scenes["default"]
+    expected = paint(scene, scene.camera, 96, 54, PaintParams.from_dict({**scene.paint, **body["paint"]})).image
+    np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
+
+
+def test_render_takes_camera_time_and_jpeg(live_server):
+    camera = {"eye": [0, 6, 5], "look_at": [-4.0, 4.0, -30.0], "fov": 40}
+    body = {"scene": "sea", "width": 64, "height": 40, "camera": camera, "time": 1.5, "format": "jpeg"}
+    response = post(live_server, body)
+    assert response.status_code == 200 and response.headers["content-type"] == "image/jpeg"
+    assert decode(response.content).shape == (40, 64, 3)
+    still = decode(post(live_server, {**body, "time": 0.0}).content)
+    assert np.abs(decode(response.content).astype(int) - still).mean() > 0.5  # the waves moved
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "says"),
+    [
+        ({"scene": "atlantis"}, 404, "unknown scene 'atlantis'"),
+        ({"scene": "../scenes/default"}, 404, "unknown scene"),
+        ({}, 422, "scene"),
+        ({"scene": "default", "width": 0}, 422, "width"),
+        ({"scene": "default", "width": 4096, "height": 4096}, 422, "pixels"),
+        ({"scene": "default", "paint": {"spp": 0}}, 422, "spp"),
+        ({"scene": "default", "paint": {"mapping": "sepia"}}, 422, "mapping"),
+        ({"scene": "default", "paint": {"brush": 3}}, 422, "brush"),
+        ({"scene": "default", "camera": {"eye": [0, 0, 0], "look_at": [0, 0, 0]}}, 422, "eye"),
+        ({"scene": "default", "camera": {"eye": [0, 0, 0], "look_at": [0, 1, 0]}}, 422, "up"),
+        ({"scene": "default", "format": "gif"}, 422, "format"),
+    ],
+)
+def test_bad_render_requests_get_a_clear_4xx(live_server, body, status, says):
+    response = post(live_server, body)
+    assert response.status_code == status
+    assert says in json.dumps(response.json()["detail"])
+
+
+def test_rendering_never_blocks_the_event_loop(live_server):
+    big = {"scene": "default", "width": 640, "height": 360, "paint": {"spp": 8, "iterations": 6}}
+    with ThreadPoolExecutor(3) as pool:
+        renders = [pool.submit(post, live_server, big) for _ in range(2)]
+        time.sleep(0.2)
+        clock = time.perf_counter()
+        assert httpx.get(f"{live_server.url}/api/health", timeout=10).status_code == 200
+        answered = time.perf_counter() - clock
+        assert not all(r.done() for r in renders)  # health answered while both paintings ran
+        assert all(r.result().status_code == 200 for r in renders)
+    assert answered < 1.0
+
+
+def test_openapi_documents_the_render_body(live_server):
+    schema = httpx.get(f"{live_server.url}/openapi.json").json()
+    assert "/api/render" in schema["paths"] and "RenderRequest" in schema["components"]["schemas"]
+    assert httpx.get(f"{live_server.url}/docs").status_code == 200
+
+
+# ---- the fair pool ----
+
+
+def test_fair_pool_takes_paintings_in_turns():
+    pool = FairPool(1)
+    order: list[str] = []
+    gate = threading.Event()
+    pool.submit(gate.wait)  # hold the only worker while both batches queue
+    first = pool.map(order.append, [f"a{k}" for k in range(3)])
+    second = pool.map(order.append, [f"b{k}" for k in range(3)])
+    gate.set()
+    list(first), list(second)
+    pool.shutdown()
+    assert order == ["a0", "b0", "a1", "b1", "a2", "b2"]
+
+
+def test_fair_pool_passes_errors_and_drops_the_rest_of_a_failed_batch():
+    pool = FairPool(1)
+    gate = threading.Event()
+    pool.submit(gate.wait)
+    ran = []
+    failed = threading.Event()
+
+    def work(k):
+        ran.append(k)
+        if k == 0:
+            raise KeyError(k)
+        failed.wait(10)  # tile 1 runs on while the caller sees the error and drops tiles 2 and 3
+
+    results = pool.map(work, range(4))
+    gate.set()
+    with pytest.raises(KeyError):
+        list(results)
+    failed.set()
+    pool.shutdown()
+    assert ran == [0, 1]
+
+
+# ---- the WebSocket walk-through ----
+
+
+class Walk:
+    """A WebSocket client that reads frames as (meta, image)."""
+
+    def __init__(self, server):
+        self._stack = contextlib.ExitStack()
+        self.ws = self._stack.enter_context(connect(server.ws_url, max_size=None, open_timeout=30))
+
+    def send(self, **message) -> None:
+        self.ws.send(json.dumps(message))
+
+    def next(self, timeout: float = 30.0) -> dict:
+        return json.loads(self.ws.recv(timeout))
+
+    def frame(self, timeout: float = 30.0) -> tuple[dict, np.ndarray]:
+        while (meta := self.next(timeout))["type"] != "frame":
+            assert meta["type"] != "error", meta
+        image = self.ws.recv(timeout)
+        assert isinstance(image, bytes)
+        return meta, decode(image)
+
+    def until_final(self, timeout: float = 60.0) -> list[tuple[dict, np.ndarray]]:
+        frames = []
+        while not frames or not frames[-1][0]["final"]:
+            frames.append(self.frame(timeout))
+        return frames
+
+    def close(self) -> None:
+        self._stack.close()
+
+
+@pytest.fixture
+def walk(live_server):
+    client = Walk(live_server)
+    yield client
+    client.close()
+
+
+def test_hello_gives_ready_then_walk_and_refined_frames(walk):
+    walk.send(type="hello", scene="default", width=160, height=90)
+    ready = walk.next()
+    assert ready["type"] == "ready" and ready["scene"]["name"] == "default" and ready["temporal"]
+    frames = walk.until_final()
+    first, last = frames[0][0], frames[-1][0]
+    assert first["phase"] == "walk" and last["phase"] == "refine" and last["spp"] >= 4
+    assert (last["width"], last["height"]) == (160, 90) and frames[-1][1].shape == (90, 160, 3)
+    assert [m["seq"] for m, _ in frames] == list(range(1, len(frames) + 1))
+    for meta, image in frames:
+        assert image.shape == (meta["height"], meta["width"], 3) and meta["render_ms"] > 0
+
+
+def test_refined_frame_is_the_rest_painting(walk, live_server):
+    """At rest the walk-through shows what a REST render of the same view gives (what Save downloads)."""
+    walk.send(type="hello", scene="default", width=96, height=54, quality=100)
+    walk.next()
+    refined = [m for m in walk.until_final() if m[0]["phase"] == "refine"]
+    meta, image = refined[0]
+    body = {"scene": "default", "width": 96, "height": 54, "paint": {"spp": meta["spp"]}}
+    expected = decode(post(live_server, body).content).astype(int)
+    assert np.abs(image.astype(int) - expected).mean() < 2.0  # JPEG at quality 100
+
+
+def test_camera_messages_are_coalesced_and_the_newest_wins(walk):
+    walk.send(type="hello", scene="default", width=160, height=90)
+    walk.next()
+    walk.until_final()
+    for k in range(60):
+        walk.send(type="camera", eye=[0.8, 1.7, 38.0 - 0.2 * k], look_at=[0.0, 3.0, 0.0], id=k)
+    frames = walk.until_final()
+    assert len(frames) < 30  # far fewer frames than camera messages
+    assert frames[-1][0]["camera_id"] == 59  # and the last shows the newest camera
+    ids = [m["camera_id"] for m, _ in frames]
+    assert ids == sorted(ids)
+
+
+def test_temporal_walk_frames_continue_the_recursion(walk):
+    walk.send(type="hello", scene="default", width=160, height=90)
+    walk.next()
+    walk.until_final()
+    iterations = []
+    for k in range(4):
+        walk.send(type="camera", eye=[0.8 + 0.05 * k, 1.7, 38.0], look_at=[0.0, 3.0, 0.0], id=k)
+        meta, _ = walk.frame()
+        iterations.append(meta["iteration"])
+        assert meta["phase"] == "walk" and meta["temporal"] and meta["spp"] == 1
+    assert all(b > a for a, b in zip(iterations, iterations[1:], strict=False))
+    walk.send(type="mode", temporal=False)
+    meta, _ = walk.frame()
+    assert not meta["temporal"] and meta["iteration"] == 6
+
+
+def test_paint_message_changes_the_painting(walk):
+    walk.send(type="hello", scene="default", width=128, height=72)
+    walk.next()
+    before = walk.until_final()[-1][1].astype(int)
+    walk.send(type="paint", lambda_p=0.0)
+    after = walk.until_final()[-1][1].astype(int)
+    assert np.abs(after - before).mean() > 1.0
+    walk.send(type="paint", lambda_p=None)  # back to the scene's default
+    again = walk.until_final()[-1][1].astype(int)
+    assert np.abs(again - before).mean() < 1.0
+
+
+@pytest.mark.parametrize(
+    ("message", "says"),
+    [
+        ("not json", "bad message"),
+        (json.dumps({"type": "teleport"}), "teleport"),
+        (json.dumps({"type": "camera", "eye": [0, 0, 0], "look_at": [0, 0, 0]}), "eye"),
+        (json.dumps({"type": "camera", "eye": [0, 0], "look_at": [0, 0, 1]}), "eye"),
+        (json.dumps({"type": "paint", "spp": -1}), "spp"),
+        (json.dumps({"type": "paint", "mapping": "sepia"}), "mapping"),
+        (json.dumps({"type": "hello", "scene": "atlantis"}), "unknown scene"),
+        (json.dumps({"type": "view", "width": 4096, "height": 4096}), "pixels"),
+    ],
+)
+def test_bad_messages_get_an_error_and_the_session_goes_on(walk, message, says):
+    walk.send(type="hello", scene="sky", width=64, height=36)
+    walk.next()
+    walk.until_final()
+    walk.ws.send(message)
+    error = walk.next()
+    assert error["type"] == "error" and says in error["message"]
+    walk.send(type="camera", eye=[0, 0, 0], look_at=[0, 1, 1], id=7)
+    assert walk.until_final()[-1][0]["camera_id"] == 7
+
+
+def test_messages_before_hello_and_binary_messages_are_refused(walk):
+    walk.send(type="camera", eye=[0, 0, 0], look_at=[0, 0, 1])
+    assert "hello first" in walk.next()["message"]
+    walk.ws.send(b"\x00\x01")
+    assert "JSON text" in walk.next()["message"]
+    walk.send(type="hello", scene="sky", width=32, height=18)
+    assert walk.next()["type"] == "ready"
+
+
+def test_sessions_are_limited_and_freed_on_disconnect():
+    from conftest import LiveServer
+
+    with LiveServer(max_sessions=1, settle_ms=50) as server:
+        first = Walk(server)
+        first.send(type="hello", scene="sky", width=32, height=18)
+        first.next()
+        second = Walk(server)
+        assert "limit" in second.next()["message"]
+        with pytest.raises(Exception):  # noqa: B017 - the server closes the socket (code 1013)
+            second.next(5)
+        first.close()
+        deadline = time.monotonic() + 10
+        while httpx.get(f"{server.url}/api/health").json()["sessions"] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        third = Walk(server)
+        third.send(type="hello", scene="sky", width=32, height=18)
+        assert third.next()["type"] == "ready"
+        third.close()
+
+
+# ---- the protocol ----
+
+
+def test_client_protocol_module_is_generated_from_the_server_models():
+    assert (ROOT / "client" / "protocol.js").read_text() == protocol.client_module()
+
+
+def test_camera_message_builds_the_same_camera_as_the_engine():
+    message = protocol.client_message.validate_json(
+        json.dumps({"type": "camera", "eye": [1, 2, 3], "look_at": [0, 0, 0]})
+    )
+    assert Camera(message.eye, message.look_at, message.up, message.fov) == Camera((1, 2, 3), (0, 0, 0))
