@@ -1,0 +1,72 @@
+// The walk-through camera: a position, yaw and pitch, with world +y up (shared/MISSION.md conventions:
+// right-handed, y up, `fov` the vertical field of view in degrees).
+//
+// yaw 0 looks down -z, positive yaw turns right (towards +x); pitch is up from the horizon. In that frame
+//   forward f = (sin(yaw) cos(pitch), sin(pitch), -cos(yaw) cos(pitch)),  right r = f x up = (cos(yaw), 0, sin(yaw)).
+// The camera sent keeps `look_at` at the scene's own look distance ahead of the eye, so a focus depth
+// `z0` left at its default (the eye-to-look_at distance) stays the same while walking.
+
+export const UP = [0, 1, 0];
+const PITCH_LIMIT = (89 * Math.PI) / 180; // looking straight up or down would make f parallel to up
+export const FOV_RANGE = [10, 120];
+
+const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+const length = (a) => Math.hypot(a[0], a[1], a[2]);
+
+/** A walk camera from a protocol camera ({eye, look_at, up, fov}): yaw and pitch from its view direction. */
+export function fromCamera({ eye, look_at, fov }) {
+  const d = sub(look_at, eye);
+  const distance = length(d) || 1;
+  const f = d.map((x) => x / distance);
+  return {
+    eye: [...eye],
+    yaw: Math.atan2(f[0], -f[2]),
+    pitch: clampPitch(Math.asin(Math.max(-1, Math.min(1, f[1])))),
+    fov,
+    distance,
+  };
+}
+
+export function clampPitch(pitch) {
+  return Math.max(-PITCH_LIMIT, Math.min(PITCH_LIMIT, pitch));
+}
+
+export function forward({ yaw, pitch }) {
+  return [Math.sin(yaw) * Math.cos(pitch), Math.sin(pitch), -Math.cos(yaw) * Math.cos(pitch)];
+}
+
+export function right({ yaw }) {
+  return [Math.cos(yaw), 0, Math.sin(yaw)];
+}
+
+/** Move by `amount` (scene units) along forward, right and world up: amount = [forward, right, up]. */
+export function moved(walk, [ahead, side, rise]) {
+  const f = forward(walk);
+  const r = right(walk);
+  const eye = walk.eye.map((x, k) => x + ahead * f[k] + side * r[k] + rise * UP[k]);
+  return { ...walk, eye };
+}
+
+/** Turn by yaw and pitch deltas, in radians. */
+export function turned(walk, dyaw, dpitch) {
+  return { ...walk, yaw: walk.yaw + dyaw, pitch: clampPitch(walk.pitch + dpitch) };
+}
+
+const round = (x) => Math.round(x * 1e5) / 1e5; // 10 micro-units: shorter messages, no visible change
+
+/** The protocol camera ({eye, look_at, up, fov}) this walk camera shows. */
+export function toCamera(walk) {
+  const f = forward(walk);
+  const eye = walk.eye.map(round);
+  return {
+    eye,
+    look_at: walk.eye.map((x, k) => round(x + walk.distance * f[k])),
+    up: [...UP],
+    fov: round(walk.fov),
+  };
+}
+
+export function sameCamera(a, b) {
+  if (!a || !b) return false;
+  return a.fov === b.fov && [0, 1, 2].every((k) => a.eye[k] === b.eye[k] && a.look_at[k] === b.look_at[k]);
+}

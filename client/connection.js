@@ -1,0 +1,96 @@
+// The WebSocket to /ws, reconnected with exponential backoff whenever it drops.
+//
+// Frames arrive as a `frame` text message followed by one binary JPEG; the pair is handed on together.
+// The owner restores the walk-through (scene, camera, settings) in `onOpen`, as after any fresh start.
+
+const BACKOFF_MS = [250, 8000]; // first retry, longest wait
+
+export class Connection {
+  /**
+   * @param {string} url        ws:// or wss:// address of the walk-through
+   * @param {object} handlers   onOpen(), onMessage(msg), onFrame(meta, jpeg ArrayBuffer), onState(state, detail)
+   */
+  constructor(url, handlers) {
+    this.url = url;
+    this.handlers = handlers;
+    this.socket = null;
+    this.state = "idle"; // connecting | open | waiting (to reconnect) | stopped
+    this.backoff = BACKOFF_MS[0];
+    this.opens = 0; // connections opened so far (the tests watch reconnection through it)
+    this.meta = null; // the frame description waiting for its JPEG
+    this.timer = null;
+  }
+
+  start() {
+    this.stopped = false;
+    this.connect();
+  }
+
+  stop() {
+    this.stopped = true;
+    clearTimeout(this.timer);
+    this.socket?.close(1000, "client stopped");
+    this.setState("stopped");
+  }
+
+  /** The server accepted the session: the next drop retries quickly again. */
+  healthy() {
+    this.backoff = BACKOFF_MS[0];
+  }
+
+  send(msg) {
+    if (this.socket?.readyState !== WebSocket.OPEN) return false;
+    this.socket.send(JSON.stringify(msg));
+    return true;
+  }
+
+  connect() {
+    clearTimeout(this.timer);
+    this.setState("connecting");
+    const socket = new WebSocket(this.url);
+    socket.binaryType = "arraybuffer";
+    this.socket = socket;
+    this.meta = null;
+    socket.onopen = () => {
+      this.opens += 1;
+      this.setState("open");
+      this.handlers.onOpen();
+    };
+    socket.onmessage = (event) => this.receive(event.data);
+    socket.onclose = (event) => {
+      if (socket !== this.socket || this.stopped) return;
+      this.retry(event);
+    };
+  }
+
+  receive(data) {
+    if (typeof data !== "string") {
+      const meta = this.meta;
+      this.meta = null;
+      if (meta) this.handlers.onFrame(meta, data);
+      return;
+    }
+    let msg;
+    try {
+      msg = JSON.parse(data);
+    } catch {
+      this.handlers.onMessage({ type: "error", message: "the server sent a message that is not JSON" });
+      return;
+    }
+    if (msg.type === "frame") this.meta = msg;
+    else this.handlers.onMessage(msg);
+  }
+
+  retry(event) {
+    const wait = this.backoff * (0.8 + 0.4 * Math.random()); // jitter: many clients do not return at once
+    this.backoff = Math.min(this.backoff * 2, BACKOFF_MS[1]);
+    const why = event.code === 1013 ? "server busy" : event.code === 1006 ? "connection lost" : `closed (${event.code})`;
+    this.setState("waiting", { why, seconds: wait / 1000 });
+    this.timer = setTimeout(() => this.connect(), wait);
+  }
+
+  setState(state, detail = {}) {
+    this.state = state;
+    this.handlers.onState(state, detail);
+  }
+}
