@@ -124,13 +124,15 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--port", type=int, help="port (default 8000, or RCP_PORT)")
 
     b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("which", choices=["speed"])
+    b.add_argument("which", choices=["speed", "latency"], help="speed: the engine against Embree; latency: the service")
     b.add_argument("--scene", default="default")
     b.add_argument("--width", type=_positive_int, default=640)
     b.add_argument("--height", type=_positive_int, default=360)
     b.add_argument("--iterations", type=_positive_int, default=6)
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--threads", type=_positive_int)
+    b.add_argument("--seconds", type=_finite, default=4.0, help="latency: seconds of walking per size and mode")
+    b.add_argument("--steps", type=_positive_int, default=10, help="latency: single camera steps from rest")
     return parser
 
 
@@ -260,9 +262,14 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "serve":
             _serve(args)
         elif args.command == "bench":
-            from .bench import speed
+            if args.which == "latency":
+                from .service.latency import latency
 
-            speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
+                latency(args.scene, args.seconds, args.steps)
+            else:
+                from .bench import speed
+
+                speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
     except (UsageError, SceneError, CameraError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2

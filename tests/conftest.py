@@ -6,18 +6,14 @@ point's view depth is ``-z``. A "facing plane" is a grid turned to face the came
 
 from __future__ import annotations
 
-import socket
-import threading
-import time
-
 import numpy as np
 import pytest
-import uvicorn
 
 from rcp_server.camera import Camera
 from rcp_server.mappings import register_mapping
 from rcp_server.meshes import Part, primitive
 from rcp_server.scene import Environment, Light, Scene, SceneObject
+from rcp_server.service.background import BackgroundServer
 
 CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0)
 SKY = (0.2, 0.35, 0.6)
@@ -109,43 +105,8 @@ def busy_scene() -> Scene:
 # ---- a real server ----
 
 
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
-
-
-class LiveServer:
-    """``rcp serve`` in a thread: a real uvicorn on a free loopback port, serving the shipped scenes."""
-
-    def __init__(self, **settings):
-        from rcp_server.service.app import create_app
-        from rcp_server.service.settings import Settings
-
-        self.settings = Settings(host="127.0.0.1", port=free_port(), **settings)
-        self.app = create_app(self.settings)
-        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.settings.port, log_level="warning")
-        self.server = uvicorn.Server(config)
-        self.url = f"http://127.0.0.1:{self.settings.port}"
-        self.ws_url = f"ws://127.0.0.1:{self.settings.port}/ws"
-        self._thread = threading.Thread(target=self.server.run, name="live-server", daemon=True)
-
-    def __enter__(self) -> LiveServer:
-        self._thread.start()
-        deadline = time.monotonic() + 120  # the first start may compile the kernels
-        while not self.server.started:
-            if not self._thread.is_alive() or time.monotonic() > deadline:
-                raise RuntimeError("the test server did not start")
-            time.sleep(0.05)
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.server.should_exit = True
-        self._thread.join(30)
-
-
 @pytest.fixture(scope="session")
 def live_server():
     """One real server per test process (settles fast, so refinement starts soon after the camera rests)."""
-    with LiveServer(settle_ms=80) as server:
+    with BackgroundServer(settle_ms=80) as server:
         yield server

@@ -20,6 +20,7 @@ from rcp_server import images
 from rcp_server.camera import Camera
 from rcp_server.painting import PaintParams, paint
 from rcp_server.service import protocol
+from rcp_server.service.background import BackgroundServer
 from rcp_server.service.renderer import FairPool
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -282,9 +283,7 @@ def test_messages_before_hello_and_binary_messages_are_refused(walk):
 
 
 def test_sessions_are_limited_and_freed_on_disconnect():
-    from conftest import LiveServer
-
-    with LiveServer(max_sessions=1, settle_ms=50) as server:
+    with BackgroundServer(max_sessions=1, settle_ms=50) as server:
         first = Walk(server)
         first.send(type="hello", scene="sky", width=32, height=18)
         first.next()

@@ -1,0 +1,177 @@
+"""``rcp bench latency``: how the walk-through feels, measured over loopback against a real server.
+
+For each canvas size and mode (temporal, per-frame) a WebSocket client walks the default scene: it
+sends a camera message every 1/60 s along a straight path, as a held key does, and records for every
+frame the time from sending the camera message the frame shows to receiving the frame. Then it rests,
+and moves single steps, timing each step's first frame. Beside that, the same paintings timed alone in
+this process: one iteration from the last frame (temporal) and all of them from the canvas (per-frame).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import statistics
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+import websockets
+
+from ..painting import PaintParams, paint
+from .background import BackgroundServer
+
+SIZES = ((320, 180), (640, 360))
+RATE = 60.0  # camera messages per second while walking
+
+
+@dataclass
+class WalkFigures:
+    frames: int
+    seconds: float
+    latencies_ms: list[float]
+    render_ms: list[float]
+    scales: list[float]
+    step_ms: list[float]
+
+    @property
+    def fps(self) -> float:
+        return self.frames / self.seconds
+
+
+def _percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+async def _walk(url: str, scene: dict, width: int, height: int, temporal: bool, seconds: float, steps: int):
+    sent: dict[int, float] = {}
+    eye, target = np.array(scene["camera"]["eye"]), np.array(scene["camera"]["look_at"])
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    figures = WalkFigures(0, seconds, [], [], [], [])
+    async with websockets.connect(url, max_size=None) as ws:
+
+        async def frame() -> dict:
+            while (meta := json.loads(await ws.recv()))["type"] != "frame":
+                if meta["type"] == "error":
+                    raise RuntimeError(meta["message"])
+            await ws.recv()  # the JPEG
+            return meta
+
+        async def camera(k: int, offset: float) -> None:
+            sent[k] = time.perf_counter()
+            position = eye + offset * forward
+            message = {"type": "camera", "eye": list(position), "look_at": list(position + forward), "id": k}
+            await ws.send(json.dumps(message))
+
+        async def until_final() -> dict:
+            while not (meta := await frame())["final"]:
+                pass
+            return meta
+
+        await ws.send(json.dumps({"type": "hello", "scene": scene["name"], "width": width, "height": height}))
+        await ws.send(json.dumps({"type": "mode", "temporal": temporal}))
+        await until_final()
+
+        # ---- walk: a camera message every 1/RATE s, frames read as they come ----
+        messages = int(seconds * RATE)
+
+        async def held_key():
+            for k in range(messages):
+                await camera(k, 0.03 * k)
+                await asyncio.sleep(1 / RATE)
+
+        walker = asyncio.create_task(held_key())
+        clock = time.perf_counter()
+        while not walker.done() or figures.frames == 0:
+            try:
+                meta = await asyncio.wait_for(frame(), 5)
+            except TimeoutError:
+                break
+            if meta["phase"] != "walk" or meta["camera_id"] is None:
+                continue
+            figures.frames += 1
+            figures.latencies_ms.append((time.perf_counter() - sent[meta["camera_id"]]) * 1000)
+            figures.render_ms.append(meta["render_ms"])
+            figures.scales.append(meta["scale"])
+        figures.seconds = time.perf_counter() - clock
+        await walker
+        await until_final()
+
+        # ---- single steps from rest ----
+        for step in range(steps):
+            k = messages + step
+            await camera(k, 0.03 * messages - 0.05 * (step + 1))
+            while (meta := await frame())["camera_id"] != k:
+                pass
+            figures.step_ms.append((time.perf_counter() - sent[k]) * 1000)
+            await until_final()
+    return figures
+
+
+def _alone_ms(scene, width: int, height: int, params: PaintParams, temporal: bool, repeats: int = 7) -> float:
+    """The painting a full-size walk frame needs, timed in this process without the service."""
+    previous = paint(scene, scene.camera, width, height, params).state if temporal else None
+    frame_params = replace(params, iterations=1) if temporal else params
+    times = []
+    for _ in range(repeats):
+        clock = time.perf_counter()
+        paint(scene, scene.camera, width, height, frame_params, previous=previous)
+        times.append((time.perf_counter() - clock) * 1000)
+    return statistics.median(times)
+
+
+def latency(scene_name: str, seconds: float, steps: int) -> dict:
+    with BackgroundServer() as server:
+        scene = server.app.state.scenes[scene_name]
+        info = next(s for s in asyncio.run(_scenes(server.url)) if s["name"] == scene_name)
+        params = PaintParams.from_dict(scene.paint)
+        print(
+            f"rcp bench latency: scene {scene_name}, {server.settings.threads} threads, camera messages at "
+            f"{RATE:.0f} Hz for {seconds:.0f} s, then {steps} single steps from rest; frame budget "
+            f"{server.settings.frame_ms:.0f} ms"
+        )
+        header = (
+            f"{'size':>9} {'mode':>9} | {'alone ms':>8} | {'fps':>5} {'latency p50':>11} {'p95':>6} "
+            f"{'render p50':>10} {'scale':>5} | {'step p50':>8} {'p95':>6}"
+        )
+        print(header)
+        print("-" * len(header))
+        rows = []
+        for width, height in SIZES:
+            for temporal in (True, False):
+                alone = _alone_ms(scene, width, height, params, temporal)
+                f = asyncio.run(_walk(server.ws_url, info, width, height, temporal, seconds, steps))
+                row = {
+                    "width": width,
+                    "height": height,
+                    "temporal": temporal,
+                    "alone_ms": round(alone, 1),
+                    "fps": round(f.fps, 1),
+                    "latency_p50_ms": round(_percentile(f.latencies_ms, 50), 1),
+                    "latency_p95_ms": round(_percentile(f.latencies_ms, 95), 1),
+                    "render_p50_ms": round(_percentile(f.render_ms, 50), 1),
+                    "scale_mean": round(statistics.fmean(f.scales), 2) if f.scales else None,
+                    "step_p50_ms": round(_percentile(f.step_ms, 50), 1),
+                    "step_p95_ms": round(_percentile(f.step_ms, 95), 1),
+                }
+                rows.append(row)
+                mode = "temporal" if temporal else "per-frame"
+                print(
+                    f"{f'{width}x{height}':>9} {mode:>9} | {alone:8.1f} | {f.fps:5.1f} {row['latency_p50_ms']:11.1f} "
+                    f"{row['latency_p95_ms']:6.1f} {row['render_p50_ms']:10.1f} {row['scale_mean'] or 0:5.2f} | "
+                    f"{row['step_p50_ms']:8.1f} {row['step_p95_ms']:6.1f}"
+                )
+        print(
+            "alone: the painting of one full-size frame in this process (temporal: one iteration from the last "
+            "frame; per-frame: all iterations). latency: camera message sent -> its frame received, while walking. "
+            "render: the server's painting time per walk frame, at the resolution scale it chose. step: one camera "
+            "message from rest -> its first frame."
+        )
+        return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}
+
+
+async def _scenes(url: str) -> list[dict]:
+    import httpx
+
+    async with httpx.AsyncClient() as client:
+        return (await client.get(f"{url}/api/scenes")).json()
