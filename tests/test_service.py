@@ -50,7 +50,7 @@ def test_render_is_exactly_the_engines_painting(live_server):
     body = {"scene": "default", "width": 96, "height": 54, "paint": {"iterations": 3, "lambda_p": 5.0}}
     response = post(live_server, body)
     assert response.status_code == 200 and response.headers["content-type"] == "image/png"
-    scene = live_server.app.state.scenes["default"]
+    scene = live_server.app.state.service.scenes["default"]
     expected = paint(scene, scene.camera, 96, 54, PaintParams.from_dict({**scene.paint, **body["paint"]})).image
     np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import logging
 from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
 
 from fastapi import FastAPI, WebSocket
 from fastapi.staticfiles import StaticFiles
@@ -17,6 +18,30 @@ from .session import Session
 from .settings import Settings
 
 log = logging.getLogger("rcp.service")
+
+
+@dataclass
+class Service:
+    """What every request and session shares: settings, the scenes (and their descriptions, made once so a
+    listing never builds geometry on the event loop), the renderer, the open sessions."""
+
+    settings: Settings
+    scenes: dict[str, Scene]
+    infos: dict[str, protocol.SceneInfo]
+    renderer: Renderer
+    sessions: set = field(default_factory=set)
+
+
+def scene_info(scene: Scene) -> protocol.SceneInfo:
+    camera = scene.camera
+    return protocol.SceneInfo(
+        name=scene.name,
+        title=scene.title,
+        camera=protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov),
+        paint=scene.paint,
+        animated=scene.animated,
+        triangles=scene.geometry(0.0)[0].face_count,
+    )
 
 
 def load_scenes(settings: Settings) -> dict[str, Scene]:
@@ -37,39 +62,40 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        app.state.scenes = load_scenes(settings)
-        for scene in list(app.state.scenes.values())[:1]:  # load the compiled kernels before a visitor waits
+        scenes = load_scenes(settings)
+        for scene in list(scenes.values())[:1]:  # load the compiled kernels before a visitor waits for them
             paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
-        log.info("serving %d scenes: %s", len(app.state.scenes), ", ".join(app.state.scenes))
-        app.state.renderer = Renderer(settings.threads, settings.max_renders)
+        log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
+        infos = {name: scene_info(scene) for name, scene in scenes.items()}
+        service = Service(settings, scenes, infos, Renderer(settings.threads, settings.max_renders))
+        app.state.service = service
         try:
             yield
         finally:
-            for session in list(app.state.sessions):
+            for session in list(service.sessions):
                 session.closed = True
-            app.state.renderer.close()
+            service.renderer.close()
 
     app = FastAPI(
         title="rcp", summary="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.", lifespan=lifespan
     )
-    app.state.settings = settings
-    app.state.sessions = set()
     app.include_router(rest.router)
 
     @app.websocket("/ws")
     async def walk_through(ws: WebSocket):
+        service: Service = app.state.service
         await ws.accept()
-        if len(app.state.sessions) >= settings.max_sessions:
+        if len(service.sessions) >= settings.max_sessions:
             message = f"the server is at its limit of {settings.max_sessions} walk-throughs; try again later"
             await ws.send_text(protocol.Error(message=message).model_dump_json())
             await ws.close(code=1013, reason="too many sessions")
             return
-        session = Session(ws, app.state.scenes, app.state.renderer, settings)
-        app.state.sessions.add(session)
+        session = Session(ws, service)
+        service.sessions.add(session)
         try:
             await session.run()
         finally:
-            app.state.sessions.discard(session)
+            service.sessions.discard(session)
 
     if settings.client.is_dir():
         app.mount("/", StaticFiles(directory=settings.client, html=True), name="client")

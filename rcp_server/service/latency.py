@@ -122,8 +122,8 @@ def _alone_ms(scene, width: int, height: int, params: PaintParams, temporal: boo
 
 def latency(scene_name: str, seconds: float, steps: int) -> dict:
     with BackgroundServer() as server:
-        scene = server.app.state.scenes[scene_name]
-        info = next(s for s in asyncio.run(_scenes(server.url)) if s["name"] == scene_name)
+        scene = server.app.state.service.scenes[scene_name]
+        info = server.app.state.service.infos[scene_name].model_dump()
         params = PaintParams.from_dict(scene.paint)
         print(
             f"rcp bench latency: scene {scene_name}, {server.settings.threads} threads, camera messages at "
@@ -169,9 +169,3 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
         )
         return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}
 
-
-async def _scenes(url: str) -> list[dict]:
-    import httpx
-
-    async with httpx.AsyncClient() as client:
-        return (await client.get(f"{url}/api/scenes")).json()

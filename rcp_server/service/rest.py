@@ -8,7 +8,6 @@ from .. import images
 from ..camera import Camera, CameraError
 from ..painting import PaintParams
 from . import protocol
-from .session import scene_info
 
 router = APIRouter(prefix="/api")
 
@@ -17,18 +16,18 @@ MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
 
 @router.get("/health")
 def health(request: Request) -> dict:
-    state = request.app.state
+    service = request.app.state.service
     return {
         "status": "ok",
-        "scenes": len(state.scenes),
-        "sessions": len(state.sessions),
-        "threads": state.renderer.threads,
+        "scenes": len(service.scenes),
+        "sessions": len(service.sessions),
+        "threads": service.renderer.threads,
     }
 
 
 @router.get("/scenes")
 def scenes(request: Request) -> list[protocol.SceneInfo]:
-    return [scene_info(scene) for scene in request.app.state.scenes.values()]
+    return list(request.app.state.service.infos.values())
 
 
 @router.post(
@@ -41,21 +40,20 @@ def scenes(request: Request) -> list[protocol.SceneInfo]:
     },
 )
 async def render(body: protocol.RenderRequest, request: Request) -> Response:
-    state = request.app.state
-    scene = state.scenes.get(body.scene)
+    service = request.app.state.service
+    scene = service.scenes.get(body.scene)
     if scene is None:
-        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(state.scenes))}")
-    if body.width * body.height > state.settings.max_pixels:
-        raise HTTPException(
-            422, f"{body.width}x{body.height} is more than the {state.settings.max_pixels} pixels an image may have"
-        )
+        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+    limit = service.settings.max_pixels
+    if body.width * body.height > limit:
+        raise HTTPException(422, f"{body.width}x{body.height} is more than the {limit} pixels an image may have")
     try:
         camera = scene.camera if body.camera is None else Camera(**body.camera.model_dump())
         params = PaintParams.from_dict({**scene.paint, **body.paint.given()})
     except (CameraError, ValueError) as exc:
         raise HTTPException(422, str(exc)) from None
     fmt, media_type = MEDIA_TYPES[body.format]
-    renderer = state.renderer
+    renderer = service.renderer
 
     def job() -> bytes:
         result = renderer.paint(scene, camera, body.width, body.height, params, time=body.time)

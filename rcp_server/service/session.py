@@ -16,6 +16,7 @@ import collections
 import logging
 import time as _time
 from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
@@ -25,8 +26,9 @@ from ..camera import Camera, CameraError
 from ..painting import Abandoned, PaintParams, PaintResult, PaintState
 from ..scene import Scene
 from . import protocol
-from .renderer import Renderer
-from .settings import Settings
+
+if TYPE_CHECKING:
+    from .app import Service
 
 log = logging.getLogger("rcp.session")
 
@@ -65,8 +67,8 @@ class _Job:
 
 
 class Session:
-    def __init__(self, ws: WebSocket, scenes: dict[str, Scene], renderer: Renderer, settings: Settings):
-        self.ws, self.scenes, self.renderer, self.settings = ws, scenes, renderer, settings
+    def __init__(self, ws: WebSocket, service: Service):
+        self.ws, self.service, self.renderer, self.settings = ws, service, service.renderer, service.settings
         # ---- the view (set by the receiver) ----
         self.scene: Scene | None = None
         self.camera: Camera | None = None
@@ -148,10 +150,11 @@ class Session:
         self._changed()
 
     def _hello(self, msg: protocol.Hello) -> None:
-        if msg.scene not in self.scenes:
-            raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(self.scenes))}")
+        scenes = self.service.scenes
+        if msg.scene not in scenes:
+            raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(scenes))}")
         self._check_size(msg.width, msg.height)
-        self.scene = self.scenes[msg.scene]
+        self.scene = scenes[msg.scene]
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
         self.overrides, self.state, self.iteration = {}, None, 0
@@ -159,7 +162,7 @@ class Session:
         self.last_move = _time.monotonic()
         self._note(
             protocol.Ready(
-                scene=scene_info(self.scene),
+                scene=self.service.infos[msg.scene],
                 width=self.width,
                 height=self.height,
                 quality=self.quality,
@@ -346,14 +349,3 @@ class Session:
                 await self.ws.send_text(text)
                 await self.ws.send_bytes(jpeg)
 
-
-def scene_info(scene: Scene) -> protocol.SceneInfo:
-    camera = scene.camera
-    return protocol.SceneInfo(
-        name=scene.name,
-        title=scene.title,
-        camera=protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov),
-        paint=scene.paint,
-        animated=scene.animated,
-        triangles=scene.geometry(0.0)[0].face_count,
-    )
