@@ -1,0 +1,38 @@
+# rcp serve in a container: the walk-through client at /, REST renders under /api, the WebSocket at /ws.
+#   docker build -t rcp . && docker run --rm -p 8000:8000 rcp
+# Settings are RCP_* environment variables (rcp_server/service/settings.py), e.g. -e RCP_THREADS=4.
+
+# ---- builder: the project and its dependencies in a venv (no test extras) ----
+FROM python:3.11-slim AS builder
+ENV PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1
+RUN python -m venv /opt/venv
+ENV PATH=/opt/venv/bin:$PATH
+WORKDIR /src
+COPY pyproject.toml README.md ./
+COPY rcp_server/ rcp_server/
+RUN pip install --upgrade pip && pip install . && rm -rf /src
+
+# ---- runtime: the venv, the scenes and the client, run by a user without privileges ----
+FROM python:3.11-slim
+RUN groupadd --system rcp && useradd --system --gid rcp --create-home --home-dir /home/rcp rcp \
+ && mkdir -p /var/cache/rcp/numba && chown -R rcp:rcp /var/cache/rcp
+COPY --from=builder /opt/venv /opt/venv
+COPY scenes/ /opt/rcp/scenes/
+COPY client/ /opt/rcp/client/
+ENV PATH=/opt/venv/bin:$PATH \
+    PYTHONUNBUFFERED=1 \
+    RCP_HOST=0.0.0.0 \
+    RCP_PORT=8000 \
+    RCP_SCENES=/opt/rcp/scenes \
+    RCP_CLIENT=/opt/rcp/client \
+    NUMBA_CACHE_DIR=/var/cache/rcp/numba
+USER rcp
+WORKDIR /home/rcp
+# Compile numba's kernels now, as the user that serves, so that start-up and the first request don't wait.
+# (The cache is keyed on the CPU: on a host of another CPU model they compile once more at start-up.)
+RUN rcp scenes && rcp render default --width 32 --height 18 --iterations 2 --out /tmp/warm.png && rm /tmp/warm.png
+EXPOSE 8000
+# the port comes from RCP_PORT when the check runs, so `-e RCP_PORT=9000` keeps the check right
+HEALTHCHECK --interval=30s --timeout=5s --start-period=120s --retries=3 \
+  CMD ["python", "-c", "import os, urllib.request; urllib.request.urlopen('http://127.0.0.1:%s/api/health' % os.environ.get('RCP_PORT', '8000'), timeout=4)"]
+CMD ["rcp", "serve"]
