@@ -1,6 +1,6 @@
 // The rcp walk-through: a canvas showing the painting streamed over /ws, walk-through controls, a settings
 // panel and an overlay of live numbers. Query parameters: ?scene=NAME, ?width=W&height=H (a fixed painting
-// size instead of the window's).
+// size instead of the window's; the Resolution setting scales either), ?quality=Q (JPEG quality).
 //
 // `window.rcp` exposes the state, the messages sent and the frame statistics, for the tests.
 
@@ -187,8 +187,8 @@ function draw() {
 
 function wantedSize() {
   const fixed = [Number(query.get("width")), Number(query.get("height"))];
-  if (fixed[0] > 0 && fixed[1] > 0) return fixed.map((n) => Math.min(4096, Math.round(n)));
-  return [innerWidth, innerHeight].map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
+  const base = fixed[0] > 0 && fixed[1] > 0 ? fixed : [innerWidth, innerHeight];
+  return base.map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
 }
 
 function applySize() {
@@ -211,10 +211,15 @@ addEventListener("resize", () => {
 // ---- walking: keys, mouse, wheel, touch ----
 
 const held = new Set();
-const typing = (target) => target.matches?.("input, select, textarea");
+/** Keys a focused control needs for itself: typing into boxes, arrows on sliders. Other keys still walk. */
+function forControl(event) {
+  const target = event.target;
+  if (target.matches?.("textarea, select, input[type=number], input[type=text]")) return true;
+  return target.matches?.("input[type=range]") && event.code.startsWith("Arrow");
+}
 
 addEventListener("keydown", (event) => {
-  if (typing(event.target) || event.ctrlKey || event.metaKey || event.altKey) return;
+  if (forControl(event) || event.ctrlKey || event.metaKey || event.altKey) return;
   const code = event.code;
   if (code === "KeyR") resetCamera();
   else if (code === "KeyL") lockPointer();
@@ -367,13 +372,15 @@ function togglePanel() {
 }
 
 $("panel-toggle").addEventListener("click", togglePanel);
-$("scene").addEventListener("change", (event) => switchScene(event.target.value));
+$("scene").addEventListener("change", (event) => {
+  event.target.blur(); // keys walk again
+  switchScene(event.target.value);
+});
 $("reset-camera").addEventListener("click", resetCamera);
 $("reset-paint").addEventListener("click", () => {
-  const changes = Object.fromEntries(Object.keys(state.paint).map((name) => [name, null]));
+  for (const name of Object.keys(state.paint)) paintChanges[name] = null; // sent with this frame's edits
   state.paint = {};
   panel.show({});
-  if (Object.keys(changes).length) send(MESSAGES.paint(changes));
 });
 $("temporal").addEventListener("change", (event) => {
   state.temporal = event.target.checked;
@@ -389,6 +396,7 @@ $("quality").addEventListener("input", (event) => {
 });
 $("quality").addEventListener("change", () => send(MESSAGES.view(undefined, undefined, state.quality)));
 $("resolution").addEventListener("change", (event) => {
+  event.target.blur();
   state.resolution = Number(event.target.value);
   if (applySize() && state.scene) send(MESSAGES.view(state.size[0], state.size[1], state.quality));
 });

@@ -1,0 +1,244 @@
+"""The browser client in a real headless Chromium against a real server on loopback.
+
+Each test opens the client with a small painting (480x270) on the default scene and
+waits on conditions, never on fixed sleeps, except where holding a key *is* the input. Frames painted at
+rest are deterministic (seeded, same camera and settings give the same JPEG), so "the view came back"
+is checked as pixel equality.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import io
+import struct
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from rcp_server.painting import PaintParams
+from rcp_server.service import protocol
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+SIZE = (480, 270)  # the painting's size (small: fast frames); the window is larger, so the panel is open
+WINDOW = (1024, 576)
+WAIT_MS = 30_000  # two shared cores: a refined frame may take a few seconds under load
+
+pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        yield browser
+        browser.close()
+
+
+@pytest.fixture
+def page(browser, live_server):
+    """The client on the default scene, with its first refined frame shown; fails on any console error."""
+    context = browser.new_context(viewport={"width": WINDOW[0], "height": WINDOW[1]}, accept_downloads=True)
+    page = context.new_page()
+    problems = []
+    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.goto(f"{live_server.url}/?scene=default&width={SIZE[0]}&height={SIZE[1]}")
+    wait_final(page)
+    yield page
+    context.close()
+    assert problems == [], f"console errors: {problems}"
+
+
+# ---- helpers ----
+
+
+def wait_final(page, after_seq: int = 0, camera_id: int | None = None) -> dict:
+    """Wait for a frame at rest (fully refined) newer than ``after_seq`` (showing ``camera_id``); its description."""
+    page.wait_for_function(
+        """([seq, id]) => { const f = rcp.state.frame;
+            return f && f.final && f.seq > seq && (id === null || f.camera_id === id); }""",
+        arg=[after_seq, camera_id],
+        timeout=WAIT_MS,
+    )
+    return page.evaluate("rcp.state.frame")
+
+
+def canvas(page) -> np.ndarray:
+    """The canvas's pixels: (height, width, 3) uint8."""
+    url = page.evaluate("rcp.canvas.toDataURL('image/png')")
+    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"))
+
+
+def difference(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a.astype(np.int16) - b.astype(np.int16)).mean())
+
+
+def sent(page, kind: str | None = None) -> list[dict]:
+    return page.evaluate("([kind]) => rcp.sent.filter((m) => kind === null || m.type === kind)", [kind])
+
+
+def set_slider(page, field: str, value: float) -> None:
+    page.locator(f'[data-field="{field}"] input[type=range]').fill(str(value))
+
+
+# ---- tests ----
+
+
+def test_page_streams_refined_frames_into_the_canvas(page):
+    assert sent(page) == [{"type": "hello", "scene": "default", "width": SIZE[0], "height": SIZE[1], "quality": 80}]
+    assert page.evaluate("[rcp.canvas.width, rcp.canvas.height]") == list(SIZE)
+    image = canvas(page)
+    assert image.shape == (SIZE[1], SIZE[0], 3)
+    assert image.std() > 20 and len(np.unique(image.reshape(-1, 3), axis=0)) > 1000  # a picture, not a fill
+    assert page.text_content("#o-connection") == "connected"
+    page.wait_for_function("Number(document.getElementById('o-frames').textContent) >= 2", timeout=WAIT_MS)
+    assert page.text_content("#o-size") == f"{SIZE[0]}×{SIZE[1]}"
+    assert page.text_content("#o-phase") == "refined"
+    # the panel shows the scene's painting defaults (scenes/default.toml: lambda_p 12, 6 iterations)
+    assert page.input_value("#paint-lambda_p") == "12"
+    assert page.input_value("#paint-iterations") == "6"
+    assert page.get_attribute('#paint-mapping [data-value="color"]', "aria-pressed") == "true"
+
+
+def test_holding_w_walks_forward_and_the_view_follows(page):
+    before = canvas(page)
+    start = page.evaluate("rcp.state.lastCamera")
+    page.keyboard.down("w")
+    page.wait_for_timeout(300)  # the key is held this long: that is the input
+    page.keyboard.up("w")
+    page.wait_for_function("rcp.state.velocity.every((v) => v === 0)", timeout=WAIT_MS)
+    last_id = page.evaluate("rcp.state.cameraId")
+    wait_final(page, camera_id=last_id)
+
+    cameras = sent(page, "camera")
+    assert len(cameras) >= 3  # one per animation frame while moving, never more
+    assert [c["id"] for c in cameras] == list(range(1, last_id + 1))
+    offset = np.subtract(start["look_at"], start["eye"])
+    f0 = offset / np.linalg.norm(offset)
+    for previous, camera in zip([start, *cameras], cameras, strict=False):
+        step = np.subtract(camera["eye"], previous["eye"])
+        assert np.linalg.norm(step) > 0  # only changed cameras are sent
+        assert step @ f0 > 0.999 * np.linalg.norm(step)  # straight ahead
+        assert np.allclose(np.subtract(camera["look_at"], camera["eye"]), offset, atol=1e-3)  # no turning
+        assert camera["up"] == [0, 1, 0] and camera["fov"] == start["fov"]
+    walked = np.subtract(cameras[-1]["eye"], start["eye"]) @ f0
+    assert 0.3 < walked < 10  # about 0.3 s at the scene's walking speed (eased)
+    assert difference(canvas(page), before) > 3
+    assert page.text_content("#o-latency").endswith(" ms")
+
+
+def test_a_slider_repaints_and_its_reset_restores_the_painting(page):
+    before, seq = canvas(page), page.evaluate("rcp.state.frame.seq")
+    set_slider(page, "lambda_p", 40)
+    page.wait_for_function("rcp.sent.some((m) => m.type === 'paint')", timeout=WAIT_MS)
+    assert sent(page, "paint") == [{"type": "paint", "lambda_p": 40}]
+    assert "changed" in page.get_attribute('[data-field="lambda_p"]', "class")
+    seq = wait_final(page, after_seq=seq)["seq"]
+    assert difference(canvas(page), before) > 2
+
+    # a value outside the server's range is refused in the panel and never sent
+    page.fill("#paint-iterations", "999")
+    page.press("#paint-iterations", "Enter")
+    assert "invalid" in page.get_attribute("#paint-iterations", "class")
+
+    page.click('[data-field="lambda_p"] .reset')
+    page.wait_for_function("rcp.sent.filter((m) => m.type === 'paint').length === 2", timeout=WAIT_MS)
+    assert sent(page, "paint")[-1] == {"type": "paint", "lambda_p": None}
+    assert page.input_value("#paint-lambda_p") == "12"
+    wait_final(page, after_seq=seq)
+    assert np.array_equal(canvas(page), before)  # the scene's painting again, exactly
+
+
+def test_save_downloads_the_view_as_a_full_size_png(page):
+    with page.expect_request("**/api/render") as request, page.expect_download(timeout=WAIT_MS) as download:
+        page.click("#save")
+    body = request.value.post_data_json
+    protocol.RenderRequest.model_validate(body)
+    assert body["scene"] == "default" and body["format"] == "png"
+    assert (body["width"], body["height"]) == SIZE
+    assert body["camera"] == page.evaluate("rcp.state.lastCamera")
+    assert body["paint"]["spp"] >= 4  # at least the samples of the refined view
+    assert download.value.suggested_filename.startswith("rcp-default-")
+    data = Path(download.value.path()).read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert struct.unpack(">II", data[16:24]) == SIZE  # IHDR: width, height
+    assert page.text_content("#save") == "Save PNG"
+
+
+def test_a_dropped_connection_comes_back_with_the_same_view(page):
+    set_slider(page, "lambda_p", 30)
+    page.click("#view", position={"x": 100, "y": 300})  # back to the view: arrows turn the camera again
+    page.keyboard.down("ArrowLeft")
+    page.wait_for_timeout(200)  # the key is held this long: that is the input
+    page.keyboard.up("ArrowLeft")
+    camera_id = page.evaluate("rcp.state.cameraId")
+    assert camera_id > 0
+    wait_final(page, camera_id=camera_id)
+    before, camera = canvas(page), page.evaluate("rcp.state.lastCamera")
+    hellos, frames = len(sent(page)), page.evaluate("rcp.stats.frames")
+
+    page.evaluate("rcp.connection.socket.close()")  # the socket drops under the client
+    page.wait_for_function("rcp.connection.opens === 2 && rcp.stats.readies === 2", timeout=WAIT_MS)
+    assert page.text_content("#o-connection") in ("connected", "connecting…")
+    restored = sent(page)[hellos:]
+    assert restored[0]["type"] == "hello" and restored[0]["scene"] == "default"
+    cameras = [m for m in restored if m["type"] == "camera"]
+    assert [(c["eye"], c["look_at"]) for c in cameras] == [(camera["eye"], camera["look_at"])]
+    assert {"type": "paint", "lambda_p": 30} in restored
+
+    wait_final(page, camera_id=cameras[0]["id"])
+    assert page.evaluate("rcp.stats.frames") > frames
+    assert np.array_equal(canvas(page), before)  # the same painting as before the drop
+
+
+def test_every_message_the_client_sends_is_in_the_protocol(page):
+    schema = page.evaluate("rcp.PROTOCOL")
+    # the panel has a control for every painting field, and no other
+    assert sorted(page.evaluate("rcp.panel.fields")) == sorted(set(schema["paint"]["properties"]) - {"type"})
+    # engine defaults the panel shows for fields a scene leaves out are the engine's
+    engine = {f.name: f.default for f in dataclasses.fields(PaintParams)}
+    mirrored = page.evaluate("rcp.ENGINE_DEFAULTS")
+    assert {k: v for k, v in mirrored.items() if k in engine} == {k: engine[k] for k in mirrored if k in engine}
+
+    # use every control that sends something
+    page.click('#paint-mapping [data-value="depth"]')
+    set_slider(page, "iterations", 3)
+    page.click("#reset-paint")
+    page.uncheck("#temporal")
+    page.locator("#quality").fill("60")
+    page.select_option("#resolution", "0.5")
+    page.select_option("#scene", "sea")
+    page.wait_for_function("rcp.state.scene && rcp.state.scene.name === 'sea'", timeout=WAIT_MS)
+    page.check("#animate")
+    page.keyboard.down("d")
+    page.wait_for_timeout(100)
+    page.keyboard.up("d")
+    page.mouse.move(100, 150)
+    page.mouse.wheel(0, 200)
+    page.wait_for_function("rcp.sent.filter((m) => m.type === 'camera').length >= 2", timeout=WAIT_MS)
+
+    messages = sent(page)
+    assert {m["type"] for m in messages} == set(page.evaluate("Object.keys(rcp.MESSAGES)")) <= set(schema["client"])
+    for message in messages:
+        assert set(message) <= set(schema["client"][message["type"]]["properties"]), message
+        protocol.client_message.validate_python(message)  # the server's own models take it
+    paints = [m for m in messages if m["type"] == "paint"]
+    assert any(m.get("mapping") == "depth" for m in paints) and any(m.get("iterations") == 3 for m in paints)
+    assert paints[-1] == {"type": "paint", "mapping": None, "iterations": None}
+    assert {"type": "view", "width": SIZE[0] // 2, "height": SIZE[1] // 2, "quality": 60} in messages
+    assert {"type": "mode", "animate": True} in messages
+    assert page.evaluate("rcp.stats.errors") == []  # the server accepted every one
