@@ -10,7 +10,9 @@ ENV PATH=/opt/venv/bin:$PATH
 WORKDIR /src
 COPY pyproject.toml README.md ./
 COPY rcp_server/ rcp_server/
-RUN pip install --upgrade pip && pip install . && rm -rf /src
+RUN pip install --upgrade pip && pip install . \
+ && pip uninstall -y pip setuptools  # the runtime installs nothing
+WORKDIR /
 
 # ---- runtime: the venv, the scenes and the client, run by a user without privileges ----
 FROM python:3.11-slim
