@@ -83,7 +83,25 @@ const connection = new Connection(wsUrl.href, {
 
 function receive(msg) {
   if (msg.type === "ready") ready(msg);
-  else if (msg.type === "error") problem(msg.message);
+  else if (msg.type === "error") refused(msg.message);
+}
+
+// The server keeps its old settings when it refuses a paint message. Errors do not say which message they
+// answer, so one naming a field of the paint message just sent undoes that message in the panel too.
+let lastPaint = null; // {changes, before: state.paint as it was, at: ms}
+
+function refused(text) {
+  const fields = lastPaint && performance.now() - lastPaint.at < 5000 ? Object.keys(lastPaint.changes) : [];
+  if (fields.some((name) => text.includes(name))) {
+    for (const name of fields) {
+      if (name in lastPaint.before) state.paint[name] = lastPaint.before[name];
+      else delete state.paint[name];
+    }
+    panel.show(state.paint);
+    lastPaint = null;
+    text = `Refused: ${text}`;
+  }
+  problem(text);
 }
 
 function ready(msg) {
@@ -360,10 +378,16 @@ const panel = paintPanel($("paint"), (name, value) => {
   paintChanges[name] = value;
 });
 
+let paintBefore = {}; // state.paint before this frame's edits
+
 function flushPaint() {
-  if (!Object.keys(paintChanges).length || !state.scene) return;
-  send(MESSAGES.paint(paintChanges));
+  if (!Object.keys(paintChanges).length || !state.scene) {
+    paintBefore = { ...state.paint };
+    return;
+  }
+  if (send(MESSAGES.paint(paintChanges))) lastPaint = { changes: paintChanges, before: paintBefore, at: performance.now() };
   paintChanges = {};
+  paintBefore = { ...state.paint };
 }
 
 function togglePanel() {
@@ -515,6 +539,7 @@ async function loadScenes() {
 
 async function start() {
   if (matchMedia("(max-width: 700px)").matches) togglePanel();
+  if (matchMedia("(pointer: coarse)").matches) $("hint").textContent = "One finger looks · two fingers move";
   $("quality").value = state.quality;
   $("quality-value").textContent = state.quality;
   applySize();
