@@ -112,6 +112,11 @@ def test_page_streams_refined_frames_into_the_canvas(page):
     assert page.input_value("#paint-lambda_p") == "12"
     assert page.input_value("#paint-iterations") == "6"
     assert page.get_attribute('#paint-mapping [data-value="color"]', "aria-pressed") == "true"
+    # the walk camera (yaw, pitch) derived from the scene's camera gives back the scene's camera
+    scene, walk = page.evaluate("[rcp.state.scene.camera, rcp.state.lastCamera]")
+    for key in ("eye", "look_at", "up"):
+        assert np.allclose(walk[key], scene[key], atol=1e-4), key
+    assert walk["fov"] == scene["fov"]
 
 
 def test_holding_w_walks_forward_and_the_view_follows(page):
@@ -139,6 +144,18 @@ def test_holding_w_walks_forward_and_the_view_follows(page):
     assert 0.3 < walked < 10  # about 0.3 s at the scene's walking speed (eased)
     assert difference(canvas(page), before) > 3
     assert page.text_content("#o-latency").endswith(" ms")
+
+    # dragging the mouse to the right turns the view to the right, at the same height
+    page.mouse.move(200, 300)
+    page.mouse.down()
+    page.mouse.move(260, 300, steps=4)
+    page.mouse.up()
+    page.wait_for_function(f"rcp.state.cameraId > {last_id}", timeout=WAIT_MS)
+    turned = sent(page, "camera")[-1]
+    f1 = np.subtract(turned["look_at"], turned["eye"]) / np.linalg.norm(offset)
+    right = np.cross(f0, [0, 1, 0])
+    assert f1 @ right > 0.05 and abs(f1[1] - f0[1]) < 1e-4
+    assert turned["eye"] == cameras[-1]["eye"]
 
 
 def test_a_slider_repaints_and_its_reset_restores_the_painting(page):
