@@ -764,9 +764,8 @@ def test_image_method_temporal_mode_continues_the_lookups(busy_scene):
     # with a new camera, the lookups read the new camera's plain render
     moved = CAMERA.moved(eye=(0.3, 0.0, 0.0), look_at=(0.3, 0.0, -1.0))
     temporal = paint(busy_scene, moved, W, H, replace(params, iterations=1, lambda_p=0.0), previous=first.state)
-    np.testing.assert_array_equal(
-        temporal.image, paint(busy_scene, moved, W, H, PaintParams(spp=2, iterations=1)).image
-    )
+    plain = paint(busy_scene, moved, W, H, PaintParams(spp=2, iterations=1))
+    np.testing.assert_array_equal(temporal.image, plain.image)
 
 
 def test_image_method_on_a_shared_pool_and_abandoned_between_iterations(busy_scene):
