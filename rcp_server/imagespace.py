@@ -154,7 +154,9 @@ def look_up(
     has_depth = depth.shape[0] == n_full
     has_normal = normal.shape[0] == n_full
     has_direction = direction.shape[0] == n_full
-    pitch = 2.0 * tan_half / full_height
+    inv_pitch = full_height / (2.0 * tan_half)
+    last_x = float(full_width - 1)
+    last_y = float(full_height - 1)
     rows = n_pix // width
     span_x = float(full_width) if edge == EDGE_WRAP else 2.0 * full_width
     span_y = float(full_height) if edge == EDGE_WRAP else 2.0 * full_height
@@ -173,26 +175,35 @@ def look_up(
                 vf = v_p[pix, 0] * basis[2, 0] + v_p[pix, 1] * basis[2, 1] + v_p[pix, 2] * basis[2, 2]
                 ahead = 1.0 + vf
                 if ahead > 0.0:
-                    dx = (vr - sx * vf) / ahead / pitch
-                    dy = -(vu - ty * vf) / ahead / pitch
+                    scale = inv_pitch / ahead
+                    dx = (vr - sx * vf) * scale
+                    dy = (ty * vf - vu) * scale
                     if math.isfinite(dx) and math.isfinite(dy):
                         x += dx
                         y += dy
-            # ---- into a range whose integer neighbours fit, then the four pixels by the edge mode ----
-            if edge == EDGE_CLAMP:
-                x = min(max(x, -1.0), float(full_width))
-                y = min(max(y, -1.0), float(full_height))
+            if 0.0 <= x < last_x and 0.0 <= y < last_y:  # on screen, all four neighbours too: most pixels
+                c0 = int(x)
+                r0 = int(y)
+                fx = x - c0
+                fy = y - r0
+                c1 = c0 + 1
+                r1 = r0 + 1
             else:
-                x %= span_x
-                y %= span_y
-            fx0 = math.floor(x)
-            fy0 = math.floor(y)
-            fx = x - fx0
-            fy = y - fy0
-            c0 = _edge(int(fx0), full_width, edge)
-            c1 = _edge(int(fx0) + 1, full_width, edge)
-            r0 = _edge(int(fy0), full_height, edge)
-            r1 = _edge(int(fy0) + 1, full_height, edge)
+                # ---- into a range whose integer neighbours fit, then the four pixels by the edge mode ----
+                if edge == EDGE_CLAMP:
+                    x = min(max(x, -1.0), float(full_width))
+                    y = min(max(y, -1.0), float(full_height))
+                else:
+                    x %= span_x
+                    y %= span_y
+                fx0 = math.floor(x)
+                fy0 = math.floor(y)
+                fx = x - fx0
+                fy = y - fy0
+                c0 = _edge(int(fx0), full_width, edge)
+                c1 = _edge(int(fx0) + 1, full_width, edge)
+                r0 = _edge(int(fy0), full_height, edge)
+                r1 = _edge(int(fy0) + 1, full_height, edge)
             a0 = r0 * full_width + c0
             a1 = r0 * full_width + c1
             b0 = r1 * full_width + c0
