@@ -290,7 +290,7 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "bench":
             from .stability import run
 
-            run(args.out, quick=args.quick, threads=args.threads)
+            run(args.out, quick=args.quick)
     except (UsageError, SceneError, CameraError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
