@@ -49,9 +49,9 @@ def lookup_coords(v_p: np.ndarray, camera: Camera, region: Region) -> tuple[np.n
     # the pixel centre on the plane: eye + f + sx r + ty u
     sx = (2.0 * (i + 0.5) / region.full_width - 1.0) * aspect * tan_half
     ty = (1.0 - 2.0 * (j + 0.5) / region.full_height) * tan_half
-    vr, vu, vf = v_p @ r, v_p @ u, v_p @ f
-    ahead = 1.0 + vf  # P_p' - eye along f: the plane is at 1
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # non-finite input: refused below
+        vr, vu, vf = v_p @ r, v_p @ u, v_p @ f
+        ahead = 1.0 + vf  # P_p' - eye along f: the plane is at 1
         # the projection of P_p' minus that of P_p, in pixels (t, and so y, runs down)
         dx = (vr - sx * vf) / ahead / pitch
         dy = -(vu - ty * vf) / ahead / pitch
