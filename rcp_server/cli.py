@@ -14,7 +14,7 @@ import numpy as np
 from . import images
 from .camera import Camera, CameraError
 from .mappings import MAPPINGS
-from .painting import PaintParams, PaintState, paint
+from .painting import EDGES, METHODS, PaintParams, PaintState, paint
 from .scenefile import SceneError, load_environment, load_scene, scene_names
 
 log = logging.getLogger("rcp")
@@ -55,6 +55,12 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
     g.add_argument("--z-max", type=_finite, help="depth recorded for a miss (default: beyond the scene)")
     g.add_argument("--noise", type=_finite, help="strength of a seeded random vector added per pixel")
     g.add_argument("--seed", type=int, help="seed of the jitter and the noise")
+    g.add_argument(
+        "--method",
+        choices=METHODS,
+        help="raytrace (default: right everywhere) or image (look up the plain render: fast, needs lambda_e 0)",
+    )
+    g.add_argument("--edge", choices=EDGES, help="how the image method reads off screen (default mirror)")
 
 
 def _add_camera_options(p: argparse.ArgumentParser) -> None:
@@ -123,8 +129,15 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--host", help="address to listen on (default 127.0.0.1, or RCP_HOST)")
     v.add_argument("--port", type=int, help="port (default 8000, or RCP_PORT)")
 
-    b = sub.add_parser("bench", help="benchmarks that print figures")
-    b.add_argument("which", choices=["speed", "latency"], help="speed: the engine against Embree; latency: the service")
+    b = sub.add_parser("bench", help="benchmarks that print figures (accuracy and stability also chart them)")
+    b.add_argument(
+        "which",
+        choices=["speed", "latency", "accuracy", "stability"],
+        help="speed: the engine against Embree; latency: the service; accuracy: time against error of both "
+        "methods; stability: where each method breaks",
+    )
+    b.add_argument("--out", type=Path, default=Path("bench-out"), help="accuracy, stability: folder for JSON and PNG")
+    b.add_argument("--quick", action="store_true", help="accuracy, stability: a smaller run (minutes)")
     b.add_argument("--scene", default="default")
     b.add_argument("--width", type=_positive_int, default=640)
     b.add_argument("--height", type=_positive_int, default=360)
@@ -139,7 +152,8 @@ def _parser() -> argparse.ArgumentParser:
 def paint_params(scene_defaults: dict, args: argparse.Namespace) -> PaintParams:
     """The scene's painting defaults, overridden by whatever the command line gives."""
     values = dict(scene_defaults)
-    for name in ("iterations", "spp", "mapping", "eye_mapping", "lambda_p", "lambda_e", "z0", "z_max", "noise", "seed"):
+    names = ("iterations", "spp", "mapping", "eye_mapping", "lambda_p", "lambda_e", "z0", "z_max", "noise", "seed")
+    for name in (*names, "method", "edge"):
         if getattr(args, name, None) is not None:
             values[name] = getattr(args, name)
     return PaintParams.from_dict(values)
@@ -261,15 +275,22 @@ def main(argv: list[str] | None = None) -> int:
             _scenes()
         elif args.command == "serve":
             _serve(args)
+        elif args.command == "bench" and args.which == "latency":
+            from .service.latency import latency
+
+            latency(args.scene, args.seconds, args.steps)
+        elif args.command == "bench" and args.which == "speed":
+            from .bench import speed
+
+            speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
+        elif args.command == "bench" and args.which == "accuracy":
+            from .accuracy import run
+
+            run(args.out, quick=args.quick, threads=args.threads)
         elif args.command == "bench":
-            if args.which == "latency":
-                from .service.latency import latency
+            from .stability import run
 
-                latency(args.scene, args.seconds, args.steps)
-            else:
-                from .bench import speed
-
-                speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
+            run(args.out, quick=args.quick)
     except (UsageError, SceneError, CameraError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2

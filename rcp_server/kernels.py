@@ -23,7 +23,7 @@ FIELD_ZERO, FIELD_COLOR, FIELD_DEPTH, FIELD_NORMAL, FIELD_GIVEN = 0, 1, 2, 3, 4
 
 
 @_jit
-def _fill_field(kind, scale, basis, color, depth, normal, direction, z0, given, noise, noise_scale, out):
+def fill_field(kind, scale, basis, color, depth, normal, direction, z0, given, noise, noise_scale, out):
     """``scale * (D + noise_scale * noise)`` for every pixel into out (n, 3) float64; see mappings.py for D.
 
     One loop per kind (a branch per pixel costs more than the field itself). Non-finite values move nothing.
@@ -108,11 +108,11 @@ def cast_rays(
     targets_move = target_kind != FIELD_ZERO
     eyes_move = eye_kind != FIELD_ZERO
     if targets_move:
-        _fill_field(
+        fill_field(
             target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise, noise_scale, v_p
         )
     if eyes_move:
-        _fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise, noise_scale, v_e)
+        fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise, noise_scale, v_e)
     px = py = pz = 0.0
     ox = eye[0]
     oy = eye[1]

@@ -15,11 +15,11 @@ import os
 import time as _time
 from collections.abc import Callable
 from concurrent.futures import Executor, ThreadPoolExecutor
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
-from . import kernels
+from . import imagespace, kernels
 from .camera import RAY_DTYPE, Camera, Region, plane_points
 from .mappings import MappingInput, get_mapping
 from .sampling import noise_vectors, stratified_offsets
@@ -27,6 +27,11 @@ from .scene import Scene
 from .tracer import Hits
 
 STAGES = ("camera", "intersect", "shade", "bookkeeping")
+CHANNEL_NAMES = ("color", "depth", "normal", "direction")
+METHODS = ("raytrace", "image")
+"""How later iterations see their displaced targets: traced (right everywhere), or looked up in the plain
+render (``imagespace.py``: fast, needs ``lambda_e = 0``, wrong off screen)."""
+EDGES = imagespace.EDGES
 
 
 class Abandoned(Exception):
@@ -36,7 +41,9 @@ class Abandoned(Exception):
 @dataclass(frozen=True)
 class PaintParams:
     """How to paint. ``lambda_p`` in pixels, ``lambda_e`` in scene units; ``z0`` (focus depth) defaults to
-    the distance from the eye to ``look_at``; ``z_max`` (depth of a miss) to the scene's size."""
+    the distance from the eye to ``look_at``; ``z_max`` (depth of a miss) to the scene's size.
+    ``method`` is one of :data:`METHODS`; ``edge`` (one of :data:`EDGES`) is how the image method reads
+    off screen."""
 
     mapping: str = "color"
     eye_mapping: str = "color"
@@ -48,8 +55,14 @@ class PaintParams:
     noise: float = 0.0
     seed: int = 0
     z_max: float | None = None
+    method: str = "raytrace"
+    edge: str = "mirror"
 
     def __post_init__(self):
+        if self.method not in METHODS:
+            raise ValueError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        if self.edge not in EDGES:
+            raise ValueError(f"unknown edge mode {self.edge!r}; choose one of {', '.join(EDGES)}")
         get_mapping(self.mapping)
         get_mapping(self.eye_mapping)
         if self.iterations < 1:
@@ -62,6 +75,11 @@ class PaintParams:
                 raise ValueError(f"{name} must be a finite number, got {value}")
         if self.noise < 0:
             raise ValueError(f"noise must not be negative, got {self.noise}")
+        if self.method == "image" and self.lambda_e != 0.0:
+            raise ValueError(
+                f"the image-space method cannot represent eye displacement (lambda_e = {self.lambda_e}): "
+                "use lambda_e 0, or method raytrace"
+            )
 
     @classmethod
     def from_dict(cls, values: dict) -> PaintParams:
@@ -235,23 +253,26 @@ class _Rays:
         )
 
 
+def _plan(
+    state: PaintState, frame: _Frame, z0: float, name: str, scale: float, moves: bool
+) -> tuple[int, float, np.ndarray]:
+    """How ``kernels.fill_field`` computes one displacement field: ``(FIELD_* kind, scale, given field)``."""
+    mapping = get_mapping(name)
+    if not moves or scale == 0.0:
+        return kernels.FIELD_ZERO, 0.0, _DUMMY[2]
+    if mapping.fused != kernels.FIELD_GIVEN:
+        return mapping.fused, scale, _DUMMY[2]
+    given = mapping.field(_mapping_input(state, frame, z0))
+    return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32)
+
+
 def _cast(state: PaintState, frame: _Frame, params: PaintParams, z0: float, rays: _Rays) -> int:
     """Camera assignment: fill ``rays`` from ``I_{n-1}``. Returns how many rays came out non-finite (they
     must not reach Embree)."""
     pitch = frame.camera.pixel_pitch(frame.region.full_height)
     moves = not state.blank and state.has(params.reads())
-
-    def plan(name: str, scale: float) -> tuple[int, float, np.ndarray]:
-        mapping = get_mapping(name)
-        if not moves or scale == 0.0:
-            return kernels.FIELD_ZERO, 0.0, _DUMMY[2]
-        if mapping.fused != kernels.FIELD_GIVEN:
-            return mapping.fused, scale, _DUMMY[2]
-        given = mapping.field(_mapping_input(state, frame, z0))
-        return kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32)
-
-    target = plan(params.mapping, params.lambda_p * pitch)
-    eye = plan(params.eye_mapping, params.lambda_e)
+    target = _plan(state, frame, z0, params.mapping, params.lambda_p * pitch, moves)
+    eye = _plan(state, frame, z0, params.eye_mapping, params.lambda_e, moves)
     eye_fixed = eye[0] == kernels.FIELD_ZERO
     bad = kernels.cast_rays(
         *frame.camera_args,
@@ -411,6 +432,8 @@ def paint(
     region = region or Region(width, height)
     if (region.full_width, region.full_height) != (width, height):
         raise ValueError("region belongs to an image of another size")
+    if params.method == "image" and region != Region(width, height):
+        raise ValueError("the image-space method needs the full image: its lookups reach anywhere on screen")
     if previous is None or previous.region != region:
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
@@ -420,19 +443,136 @@ def paint(
     if keep is not None and region != Region(width, height):
         raise ValueError("keep_iterations needs the full image")
 
-    def run(tile: Region):
-        return _paint_tile(scene, time, _frame(camera, tile, params), params, previous.rows(tile), keep, should_stop)
+    def on_tiles(run) -> list:
+        nonlocal pool
+        if pool is not None:
+            return list(pool.map(run, tiles))
+        if threads == 1 or len(tiles) == 1:
+            return [run(tile) for tile in tiles]
+        with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as own:
+            return list(own.map(run, tiles))
 
-    if pool is not None:
-        parts = list(pool.map(run, tiles))
-    elif threads == 1 or len(tiles) == 1:
-        parts = [run(tile) for tile in tiles]
+    if params.method == "raytrace":
+        parts = on_tiles(
+            lambda tile: _paint_tile(
+                scene, time, _frame(camera, tile, params), params, previous.rows(tile), keep, should_stop
+            )
+        )
     else:
-        with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as pool:
-            parts = list(pool.map(run, tiles))
+        # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
+        temporal = not previous.blank
+        once = replace(params, iterations=1)
+        plain_keep = keep[:1] if keep is not None and not temporal else None
+        canvas = PaintState.canvas(region)
+        traced = on_tiles(
+            lambda tile: _paint_tile(
+                scene, time, _frame(camera, tile, once), once, canvas.rows(tile), plain_keep, should_stop
+            )
+        )
+        plain = _join([p[0] for p in traced], region)
+        # ---- the later iterations (all of them in temporal mode), looked up tile by tile ----
+        start = previous if temporal else plain
+        lookups = params.iterations if temporal else params.iterations - 1
+        kept = (keep if temporal else keep[1:]) if keep is not None else None
+        looked = on_tiles(
+            lambda tile: _look_up_tile(
+                _frame(camera, tile, params), params, plain, start.rows(tile), lookups, kept, should_stop
+            )
+        )
+        parts = [(state, {k: traced[n][1][k] + looked[n][1][k] for k in STAGES}) for n, (state, _) in enumerate(looked)]
     state = _join([p[0] for p in parts], region)
     seconds = {stage: sum(p[1][stage] for p in parts) for stage in STAGES}
     return PaintResult(state, seconds, keep or [])
+
+
+def _look_up_tile(
+    frame: _Frame,
+    params: PaintParams,
+    plain: PaintState,
+    state: PaintState,
+    iterations: int,
+    keep: list[np.ndarray] | None,
+    should_stop: Callable[[], bool] | None,
+) -> tuple[PaintState, dict[str, float]]:
+    """``iterations`` image-space iterations of one tile: each pixel looks up ``plain`` (the full frame's plain
+    render, every recorded channel) where its displaced target projects, one bilinear lookup per pixel at
+    its centre (samples per pixel only antialias the plain render). Stage times: "camera" is the
+    displacement, "shade" the projection and lookup. A state that cannot move a pixel (the canvas, a
+    missing channel) leaves it its plain value.
+    """
+    region = frame.region
+    camera = frame.camera
+    z0 = params.focus(camera)
+    reads = params.reads()
+    seconds = dict.fromkeys(STAGES, 0.0)
+    pitch = camera.pixel_pitch(region.full_height)
+    edge = EDGES.index(params.edge)
+    v_p = np.zeros((region.pixel_count, 3))
+    for iteration in range(iterations):
+        if should_stop is not None and should_stop():
+            raise Abandoned
+        # ---- camera assignment: V_p, the same fused fields as the traced method ----
+        clock = _time.perf_counter()
+        moves = not state.blank and state.has(reads)
+        kind, scale, given = _plan(state, frame, z0, params.mapping, params.lambda_p * pitch, moves)
+        if kind != kernels.FIELD_ZERO:
+            kernels.fill_field(
+                kind,
+                scale,
+                frame.basis,
+                state.color,
+                _or_dummy(state.depth, 1),
+                _or_dummy(state.normal, 2),
+                _or_dummy(state.direction, 2),
+                float(z0),
+                given,
+                _or_dummy(frame.noise, 2),
+                float(params.noise),
+                v_p,
+            )
+        # ---- lookup: every recorded channel, where the displaced ray crosses the image plane ----
+        now = _time.perf_counter()
+        seconds["camera"] += now - clock
+        clock = now
+        new = PaintState(
+            region,
+            np.empty((region.pixel_count, 3), np.float32),
+            *(
+                None if getattr(plain, name) is None else np.empty_like(getattr(plain, name)[: region.pixel_count])
+                for name in CHANNEL_NAMES[1:]
+            ),
+        )
+        imagespace.look_up(
+            v_p,
+            kind != kernels.FIELD_ZERO,
+            frame.basis,
+            camera.half_height(),
+            region.full_width / region.full_height,
+            region.full_width,
+            region.full_height,
+            region.x0,
+            region.y0,
+            region.width,
+            edge,
+            plain.color,
+            _or_dummy(plain.depth, 1),
+            _or_dummy(plain.normal, 2),
+            _or_dummy(plain.direction, 2),
+            new.color,
+            _or_dummy(new.depth, 1),
+            _or_dummy(new.normal, 2),
+            _or_dummy(new.direction, 2),
+        )
+        # ---- bookkeeping ----
+        now = _time.perf_counter()
+        seconds["shade"] += now - clock
+        clock = now
+        state = new
+        if keep is not None:
+            a = region.y0 * region.width
+            keep[iteration].reshape(-1, 3)[a : a + region.pixel_count] = state.color
+        seconds["bookkeeping"] += _time.perf_counter() - clock
+    return state, seconds
 
 
 def _join(states: list[PaintState], region: Region) -> PaintState:
