@@ -353,3 +353,15 @@ def test_rcp_serve_refuses_a_bad_port_in_one_line(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith("rcp: error:") and err.count("\n") == 1 and "port" in err
+
+
+def test_render_with_the_image_method_and_its_refusal_of_eye_moves(live_server):
+    body = {"scene": "default", "width": 96, "height": 54, "paint": {"method": "image", "edge": "wrap"}}
+    response = post(live_server, body)
+    assert response.status_code == 200
+    scene = live_server.app.state.service.scenes["default"]
+    params = PaintParams.from_dict({**scene.paint, **body["paint"]})
+    expected = paint(scene, scene.camera, 96, 54, params).image
+    np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
+    refused = post(live_server, {**body, "paint": {"method": "image", "lambda_e": 0.1}})
+    assert refused.status_code == 422 and "eye displacement" in refused.json()["detail"]

@@ -168,4 +168,3 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
             "message from rest -> its first frame."
         )
         return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}
-

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 from ..mappings import BUILT_IN
+from ..painting import EDGES, METHODS
 
 Finite = Annotated[float, Field(allow_inf_nan=False)]
 Vec3 = tuple[Finite, Finite, Finite]
@@ -47,8 +48,8 @@ class PaintModel(_Model):
     z_max: Annotated[float, Field(gt=0, le=1e6)] | None = None
     noise: Annotated[float, Field(ge=0, le=16)] | None = None
     seed: Annotated[int, Field(ge=0, le=2**31 - 1)] | None = None
-    method: Literal["raytrace", "image"] | None = None
-    edge: Literal["clamp", "wrap", "mirror"] | None = None
+    method: Literal[METHODS] | None = None  # type: ignore[valid-type]
+    edge: Literal[EDGES] | None = None  # type: ignore[valid-type]
 
     def given(self) -> dict:
         return self.model_dump(exclude_none=True)

@@ -348,4 +348,3 @@ class Session:
                 self.frame = None
                 await self.ws.send_text(text)
                 await self.ws.send_bytes(jpeg)
-
