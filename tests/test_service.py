@@ -365,3 +365,15 @@ def test_render_with_the_image_method_and_its_refusal_of_eye_moves(live_server):
     np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
     refused = post(live_server, {**body, "paint": {"method": "image", "lambda_e": 0.1}})
     assert refused.status_code == 422 and "eye displacement" in refused.json()["detail"]
+
+
+def test_walk_through_paints_with_the_image_method(walk):
+    walk.send(type="hello", scene="default", width=128, height=72)
+    walk.next()
+    walk.until_final()
+    walk.send(type="paint", method="image")
+    walk.send(type="camera", eye=[1.0, 1.7, 37.0], look_at=[0.0, 3.0, 0.0], id=1)
+    frames = walk.until_final()
+    assert frames[-1][0]["camera_id"] == 1 and frames[-1][1].shape == (72, 128, 3)
+    walk.send(type="paint", lambda_e=0.1)
+    assert "eye displacement" in walk.next()["message"]
