@@ -69,12 +69,12 @@ def page(browser, live_server):
 def wait_final(page, after_seq: int = 0, camera_id: int | None = None) -> dict:
     """Wait for a frame at rest (fully refined) newer than ``after_seq`` (showing ``camera_id``); its description."""
     page.wait_for_function(
-        """([seq, id]) => { const f = rcp.state.frame;
+        """([seq, id]) => { const f = rcp.overlay.frame;
             return f && f.final && f.seq > seq && (id === null || f.camera_id === id); }""",
         arg=[after_seq, camera_id],
         timeout=WAIT_MS,
     )
-    return page.evaluate("rcp.state.frame")
+    return page.evaluate("rcp.overlay.frame")
 
 
 def canvas(page) -> np.ndarray:
@@ -125,7 +125,7 @@ def test_holding_w_walks_forward_and_the_view_follows(page):
     page.keyboard.down("w")
     page.wait_for_timeout(300)  # the key is held this long: that is the input
     page.keyboard.up("w")
-    page.wait_for_function("rcp.state.velocity.every((v) => v === 0)", timeout=WAIT_MS)
+    page.wait_for_function("rcp.walk.velocity.every((v) => v === 0)", timeout=WAIT_MS)
     last_id = page.evaluate("rcp.state.cameraId")
     wait_final(page, camera_id=last_id)
 
@@ -159,7 +159,7 @@ def test_holding_w_walks_forward_and_the_view_follows(page):
 
 
 def test_a_slider_repaints_and_its_reset_restores_the_painting(page):
-    before, seq = canvas(page), page.evaluate("rcp.state.frame.seq")
+    before, seq = canvas(page), page.evaluate("rcp.overlay.frame.seq")
     set_slider(page, "lambda_p", 40)
     page.wait_for_function("rcp.sent.some((m) => m.type === 'paint')", timeout=WAIT_MS)
     assert sent(page, "paint") == [{"type": "paint", "lambda_p": 40}]
@@ -206,10 +206,10 @@ def test_a_dropped_connection_comes_back_with_the_same_view(page):
     assert camera_id > 0
     wait_final(page, camera_id=camera_id)
     before, camera = canvas(page), page.evaluate("rcp.state.lastCamera")
-    hellos, frames = len(sent(page)), page.evaluate("rcp.stats.frames")
+    hellos, frames = len(sent(page)), page.evaluate("rcp.overlay.frames")
 
     page.evaluate("rcp.connection.socket.close()")  # the socket drops under the client
-    page.wait_for_function("rcp.connection.opens === 2 && rcp.stats.readies === 2", timeout=WAIT_MS)
+    page.wait_for_function("rcp.connection.opens === 2 && rcp.state.readies === 2", timeout=WAIT_MS)
     assert page.text_content("#o-connection") in ("connected", "connecting…")
     restored = sent(page)[hellos:]
     assert restored[0]["type"] == "hello" and restored[0]["scene"] == "default"
@@ -218,7 +218,7 @@ def test_a_dropped_connection_comes_back_with_the_same_view(page):
     assert {"type": "paint", "lambda_p": 30} in restored
 
     wait_final(page, camera_id=cameras[0]["id"])
-    assert page.evaluate("rcp.stats.frames") > frames
+    assert page.evaluate("rcp.overlay.frames") > frames
     assert np.array_equal(canvas(page), before)  # the same painting as before the drop
 
 
@@ -258,4 +258,4 @@ def test_every_message_the_client_sends_is_in_the_protocol(page):
     assert paints[-1] == {"type": "paint", "mapping": None, "iterations": None}
     assert {"type": "view", "width": SIZE[0] // 2, "height": SIZE[1] // 2, "quality": 60} in messages
     assert {"type": "mode", "animate": True} in messages
-    assert page.evaluate("rcp.stats.errors") == []  # the server accepted every one
+    assert page.evaluate("rcp.state.errors") == []  # the server accepted every one

@@ -1,0 +1,69 @@
+// The overlay of live numbers: frames shown per second, latency (camera message sent -> the first frame
+// showing that camera drawn, median of the last 31), the last frame's size, scale, render time, phase,
+// iteration and samples, and the connection's state.
+
+const LATENCY_SAMPLES = 31;
+const $ = (id) => document.getElementById(id);
+
+function median(values) {
+  if (!values.length) return null;
+  const sorted = [...values].sort((a, b) => a - b);
+  const mid = sorted.length >> 1;
+  return sorted.length % 2 ? sorted[mid] : (sorted[mid - 1] + sorted[mid]) / 2;
+}
+
+export class Overlay {
+  constructor() {
+    this.frames = 0; // frames drawn since the page opened
+    this.shownAt = []; // when each frame of the last second was drawn (ms)
+    this.latencies = []; // ms, the last LATENCY_SAMPLES
+    this.sentAt = new Map(); // camera id -> when it was sent (ms), until a frame shows it or a newer one
+    this.frame = null; // the description of the frame shown
+  }
+
+  cameraSent(id) {
+    this.sentAt.set(id, performance.now());
+  }
+
+  frameShown(meta) {
+    const now = performance.now();
+    this.frames += 1;
+    this.shownAt.push(now);
+    this.frame = meta;
+    const sentAt = this.sentAt.get(meta.camera_id);
+    if (sentAt === undefined) return; // no camera, or one already shown
+    this.latencies.push(now - sentAt);
+    if (this.latencies.length > LATENCY_SAMPLES) this.latencies.shift();
+    for (const id of this.sentAt.keys()) if (id <= meta.camera_id) this.sentAt.delete(id); // never shown: replaced
+  }
+
+  connection(state, detail) {
+    const words = {
+      connecting: "connecting…",
+      open: "connected",
+      waiting: `${detail.why} · retry in ${detail.seconds?.toFixed(1)} s`,
+      stopped: "stopped",
+    };
+    $("o-connection").textContent = words[state] ?? state;
+    $("overlay").dataset.connection = state;
+  }
+
+  /** Refresh the numbers (a few times a second is enough to read them). */
+  update(now) {
+    while (this.shownAt.length && this.shownAt[0] < now - 1000) this.shownAt.shift();
+    const latency = median(this.latencies);
+    $("o-fps").textContent = this.shownAt.length;
+    $("o-latency").textContent = latency === null ? "–" : `${Math.round(latency)} ms`;
+    $("o-frames").textContent = this.frames;
+    const f = this.frame;
+    if (!f) return;
+    $("o-size").textContent = `${f.width}×${f.height}`;
+    $("o-scale").textContent = f.scale === 1 ? "full" : `×${f.scale.toFixed(2)}`;
+    $("o-render").textContent = `${Math.round(f.render_ms)} ms`;
+    $("o-phase").textContent = f.phase === "refine" ? (f.final ? "refined" : "refining") : "walk";
+    $("o-phase").dataset.phase = f.final ? "final" : f.phase;
+    $("o-iteration").textContent = `${f.iteration}${f.temporal ? " (temporal)" : ""}`;
+    $("o-spp").textContent = f.spp;
+    $("o-dropped").textContent = f.dropped;
+  }
+}
