@@ -9,6 +9,7 @@ is checked as pixel equality.
 from __future__ import annotations
 
 import base64
+import contextlib
 import dataclasses
 import io
 import struct
@@ -20,6 +21,7 @@ from PIL import Image
 
 from rcp_server.painting import PaintParams
 from rcp_server.service import protocol
+from rcp_server.service.background import BackgroundServer
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = [
@@ -48,19 +50,26 @@ def browser():
         browser.close()
 
 
-@pytest.fixture
-def page(browser, live_server):
-    """The client on the default scene, with its first refined frame shown; fails on any console error."""
+@contextlib.contextmanager
+def client(browser, url: str, scene: str = "default", wait: bool = True):
+    """The client on ``scene`` (its first refined frame shown unless ``wait`` is false); fails on console errors."""
     context = browser.new_context(viewport={"width": WINDOW[0], "height": WINDOW[1]}, accept_downloads=True)
     page = context.new_page()
     problems = []
     page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: problems.append(str(e)))
-    page.goto(f"{live_server.url}/?scene=default&width={SIZE[0]}&height={SIZE[1]}")
-    wait_final(page)
+    page.goto(f"{url}/?scene={scene}&width={SIZE[0]}&height={SIZE[1]}")
+    if wait:
+        wait_final(page)
     yield page
     context.close()
     assert problems == [], f"console errors: {problems}"
+
+
+@pytest.fixture
+def page(browser, live_server):
+    with client(browser, live_server.url) as page:
+        yield page
 
 
 # ---- helpers ----
@@ -227,13 +236,18 @@ def test_every_message_the_client_sends_is_in_the_protocol(page):
     # the panel has a control for every painting field, and no other
     assert sorted(page.evaluate("rcp.panel.fields")) == sorted(set(schema["paint"]["properties"]) - {"type"})
     # engine defaults the panel shows for fields a scene leaves out are the engine's
-    engine = {f.name: f.default for f in dataclasses.fields(PaintParams)}
-    mirrored = page.evaluate("rcp.ENGINE_DEFAULTS")
-    assert {k: v for k, v in mirrored.items() if k in engine} == {k: engine[k] for k in mirrored if k in engine}
+    engine = {f.name: f.default for f in dataclasses.fields(PaintParams) if f.default is not None}
+    assert page.evaluate("rcp.ENGINE_DEFAULTS") == engine
 
     # use every control that sends something
     page.click('#paint-mapping [data-value="depth"]')
     set_slider(page, "iterations", 3)
+    # a combination the server refuses (the image method cannot move eyes) is undone in the panel
+    set_slider(page, "lambda_e", 0.5)
+    page.click('#paint-method [data-value="image"]')
+    page.wait_for_function("rcp.state.errors.length === 1", timeout=WAIT_MS)
+    assert page.get_attribute('#paint-method [data-value="raytrace"]', "aria-pressed") == "true"
+    assert "method" not in page.evaluate("rcp.state.paint")
     page.click("#reset-paint")
     page.uncheck("#temporal")
     page.locator("#quality").fill("60")
@@ -255,7 +269,22 @@ def test_every_message_the_client_sends_is_in_the_protocol(page):
         protocol.client_message.validate_python(message)  # the server's own models take it
     paints = [m for m in messages if m["type"] == "paint"]
     assert any(m.get("mapping") == "depth" for m in paints) and any(m.get("iterations") == 3 for m in paints)
-    assert paints[-1] == {"type": "paint", "mapping": None, "iterations": None}
+    assert paints[-1] == {"type": "paint", "mapping": None, "iterations": None, "lambda_e": None}
     assert {"type": "view", "width": SIZE[0] // 2, "height": SIZE[1] // 2, "quality": 60} in messages
     assert {"type": "mode", "animate": True} in messages
-    assert page.evaluate("rcp.state.errors") == []  # the server accepted every one
+    (refusal,) = page.evaluate("rcp.state.errors")  # the server accepted every other one
+    assert refusal.startswith("Refused: ") and "lambda_e" in refusal
+
+
+def test_a_busy_server_is_retried_until_a_walk_through_ends(browser):
+    with BackgroundServer(settle_ms=80, max_sessions=1) as server, client(browser, server.url, "sky") as first:
+        with client(browser, server.url, "sky", wait=False) as second:
+            # the server takes the second walk-through, says why it cannot, and closes it (1013)
+            second.wait_for_function("rcp.connection.state === 'waiting'", timeout=WAIT_MS)
+            assert "limit of 1 walk-throughs" in second.evaluate("rcp.state.errors")[0]
+            assert second.text_content("#o-connection").startswith("server busy · retry in")
+            assert second.evaluate("rcp.overlay.frames") == 0
+            first.close()  # the first walk-through ends: the next retry gets in
+            wait_final(second)
+            assert second.text_content("#o-connection") == "connected"
+            assert second.evaluate("rcp.connection.opens") >= 2 and second.evaluate("rcp.state.readies") == 1
