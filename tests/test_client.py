@@ -1,7 +1,7 @@
 """The browser client in a real headless Chromium against a real server on loopback.
 
-Each test opens the client with a small painting (480x270) on the default scene and
-waits on conditions, never on fixed sleeps, except where holding a key *is* the input. Frames painted at
+Each test opens the client with a small painting (480x270), mostly on the default scene, and waits on
+conditions, never on fixed sleeps, except where holding a key *is* the input. Frames painted at
 rest are deterministic (seeded, same camera and settings give the same JPEG), so "the view came back"
 is checked as pixel equality.
 """
@@ -61,8 +61,10 @@ def client(browser, url: str, scene: str = "default", wait: bool = True):
     page.goto(f"{url}/?scene={scene}&width={SIZE[0]}&height={SIZE[1]}")
     if wait:
         wait_final(page)
-    yield page
-    context.close()
+    try:
+        yield page
+    finally:
+        context.close()
     assert problems == [], f"console errors: {problems}"
 
 
