@@ -37,10 +37,7 @@ const sent = []; // the last 500 messages sent, for the tests
 
 const overlay = new Overlay();
 const frames = new FrameView(canvas, {
-  shown(meta) {
-    overlay.frameShown(meta);
-    $("hint").classList.toggle("away", walk.moved);
-  },
+  shown: (meta) => overlay.frameShown(meta),
   failed: (text) => notice(text),
 });
 const walk = new WalkController(canvas, {
@@ -174,6 +171,7 @@ function tick(now) {
   if (now - lastOverlay > 200) {
     lastOverlay = now;
     overlay.update(now);
+    $("hint").classList.toggle("away", walk.moved);
   }
   requestAnimationFrame(tick);
 }
