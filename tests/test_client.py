@@ -51,9 +51,10 @@ def browser():
 
 
 @contextlib.contextmanager
-def client(browser, url: str, scene: str = "default", wait: bool = True):
+def client(browser, url: str, scene: str = "default", wait: bool = True, touch: bool = False):
     """The client on ``scene`` (its first refined frame shown unless ``wait`` is false); fails on console errors."""
-    context = browser.new_context(viewport={"width": WINDOW[0], "height": WINDOW[1]}, accept_downloads=True)
+    viewport = {"width": WINDOW[0], "height": WINDOW[1]}
+    context = browser.new_context(viewport=viewport, accept_downloads=True, has_touch=touch)
     page = context.new_page()
     problems = []
     page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
@@ -167,6 +168,40 @@ def test_holding_w_walks_forward_and_the_view_follows(page):
     right = np.cross(f0, [0, 1, 0])
     assert f1 @ right > 0.05 and abs(f1[1] - f0[1]) < 1e-4
     assert turned["eye"] == cameras[-1]["eye"]
+
+
+def test_one_finger_looks_and_two_fingers_walk(browser, live_server):
+    with client(browser, live_server.url, touch=True) as page:
+        cdp = page.context.new_cdp_session(page)
+
+        def touch(kind: str, *points) -> None:
+            points = [{"x": x, "y": y, "id": k} for k, (x, y) in enumerate(points)]
+            cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
+
+        start = page.evaluate("rcp.state.lastCamera")
+        offset = np.subtract(start["look_at"], start["eye"])
+        f0 = offset / np.linalg.norm(offset)
+        # one finger drags the world to the left: the view turns right
+        touch("touchStart", (300, 300))
+        for x in (280, 260, 240):
+            touch("touchMove", (x, 300))
+        touch("touchEnd")
+        page.wait_for_function("rcp.state.cameraId >= 1", timeout=WAIT_MS)
+        looked = sent(page, "camera")[-1]
+        assert looked["eye"] == start["eye"]
+        assert np.subtract(looked["look_at"], looked["eye"]) @ np.cross(f0, [0, 1, 0]) > 0
+        # two fingers pushed up the screen: the camera walks forward, the view stays
+        count = len(sent(page, "camera"))
+        touch("touchStart", (250, 400), (350, 400))
+        for y in (380, 360, 340, 320):
+            touch("touchMove", (250, y), (350, y))
+        touch("touchEnd")
+        page.wait_for_function(f"rcp.sent.filter((m) => m.type === 'camera').length > {count}", timeout=WAIT_MS)
+        walked = sent(page, "camera")[-1]
+        f1 = np.subtract(looked["look_at"], looked["eye"])
+        step = np.subtract(walked["eye"], looked["eye"])
+        assert step @ f1 > 0.999 * np.linalg.norm(step) * np.linalg.norm(f1) and np.linalg.norm(step) > 0.1
+        assert np.allclose(np.subtract(walked["look_at"], walked["eye"]), f1, atol=1e-3)
 
 
 def test_a_slider_repaints_and_its_reset_restores_the_painting(page):
