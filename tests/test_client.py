@@ -283,6 +283,7 @@ def test_every_message_the_client_sends_is_in_the_protocol(page):
     set_slider(page, "iterations", 3)
     # a combination the server refuses (the image method cannot move eyes) is undone in the panel
     set_slider(page, "lambda_e", 0.5)
+    page.wait_for_function("rcp.sent.some((m) => m.type === 'paint' && m.lambda_e === 0.5)", timeout=WAIT_MS)
     page.click('#paint-method [data-value="image"]')
     page.wait_for_function("rcp.state.errors.length === 1", timeout=WAIT_MS)
     assert page.get_attribute('#paint-method [data-value="raytrace"]', "aria-pressed") == "true"
