@@ -24,8 +24,10 @@ const PAINT_UI = {
   mapping: { label: "Mapping", hint: "what moves each pixel's camera target" },
   method: { label: "Method", hint: "ray-traced, or the image-space shortcut" },
   iterations: { label: "Iterations", slider: [1, 24], step: 1 },
-  lambda_p: { label: "λp smudge", unit: "px", slider: [-64, 64], step: 0.5 },
-  lambda_e: { label: "λe eye move", unit: "units", slider: [-2, 2], step: 0.01 },
+  // `fit`: the slider spans four times the scene's value either way (a depth mapping's lambda_p is per unit
+  // of depth, often below 1; a color mapping's is in pixels, often above 10)
+  lambda_p: { label: "λp smudge", unit: "px", slider: [-64, 64], fit: true },
+  lambda_e: { label: "λe eye move", unit: "units", slider: [-2, 2], fit: true },
   z0: { label: "Focus depth z0", unit: "units", slider: [0.1, 1000], log: true },
   spp: { label: "Samples / pixel", slider: [1, 16], step: 1 },
   eye_mapping: { label: "Eye mapping", more: true },
@@ -82,7 +84,7 @@ function numberControl(name, schema, ui, emit) {
   const low = schema.minimum ?? schema.exclusiveMinimum ?? 0;
   const high = schema.maximum ?? schema.exclusiveMaximum ?? 100;
   const [smin, smax] = ui.slider ?? [low, high];
-  const [sliderMin, sliderMax] = [Math.max(smin, low), Math.min(smax, high)];
+  let [sliderMin, sliderMax] = [Math.max(smin, low), Math.min(smax, high)];
   const step = ui.step ?? (integer ? 1 : "any");
   const box = element("input", { type: "number", class: "num", id: `paint-${name}`, step: String(step) });
   if (schema.minimum !== undefined) box.min = schema.minimum;
@@ -93,7 +95,7 @@ function numberControl(name, schema, ui, emit) {
 
   const toSlider = (v) =>
     ui.log ? (LOG_STEPS * Math.log(v / sliderMin)) / Math.log(sliderMax / sliderMin) : Math.min(sliderMax, Math.max(sliderMin, v));
-  const fromSlider = (p) => (ui.log ? tidy(sliderMin * (sliderMax / sliderMin) ** (p / LOG_STEPS)) : Number(p));
+  const fromSlider = (p) => tidy(ui.log ? sliderMin * (sliderMax / sliderMin) ** (p / LOG_STEPS) : Number(p));
 
   slider.addEventListener("input", () => {
     const value = fromSlider(slider.value);
@@ -114,6 +116,13 @@ function numberControl(name, schema, ui, emit) {
   return {
     input: box,
     slider,
+    /** The scene's value: a `fit` slider spans four times it either way. */
+    fit(value) {
+      if (!ui.fit) return;
+      const span = value ? 4 * Math.abs(value) : smax; // a scene's 0 says nothing about scale
+      [sliderMin, sliderMax] = [Math.max(-span, low), Math.min(span, high)];
+      Object.assign(slider, { min: sliderMin, max: sliderMax });
+    },
     show(value) {
       box.classList.remove("invalid");
       box.value = value ?? "";
@@ -173,6 +182,7 @@ export function paintPanel(container, onChange) {
     setScene(sceneDefaults) {
       defaults = { ...sceneDefaults };
       overrides = {};
+      for (const name of names) controls[name].control.fit?.(defaults[name]);
       names.forEach(render);
     },
     /** Show the user's changes (name -> value). */
