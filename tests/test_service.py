@@ -377,3 +377,15 @@ def test_walk_through_paints_with_the_image_method(walk):
     assert frames[-1][0]["camera_id"] == 1 and frames[-1][1].shape == (72, 128, 3)
     walk.send(type="paint", lambda_e=0.1)
     assert "eye displacement" in walk.next()["message"]
+
+
+def test_after_a_second_hello_every_frame_shows_the_new_scene(walk):
+    walk.send(type="hello", scene="default", width=160, height=90)
+    walk.next()
+    walk.frame()
+    walk.send(type="hello", scene="sky", width=40, height=40)  # square, while the 16:9 village still refines
+    while (message := walk.next())["type"] != "ready":
+        if message["type"] == "frame":
+            walk.ws.recv(30)
+    assert message["scene"]["name"] == "sky"
+    assert all(meta["width"] == meta["height"] for meta, _ in walk.until_final())  # no village frame after ready

@@ -159,6 +159,7 @@ class Session:
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
         self.overrides, self.state, self.iteration = {}, None, 0
         self.epoch += 1
+        self.frame = None  # a frame of the scene being left must not follow the new `ready`
         self.last_move = _time.monotonic()
         self._note(
             protocol.Ready(
