@@ -734,9 +734,9 @@ export const PROTOCOL = {
   },
   "ready": {
    "$defs": {
-    "CameraModel": {
+    "CameraSpec": {
      "additionalProperties": false,
-     "description": "A pinhole camera (MISSION.md conventions): vertical ``fov`` in degrees.",
+     "description": "A pinhole camera (MISSION.md conventions): ``fov`` is the vertical field of view in degrees.",
      "properties": {
       "eye": {
        "maxItems": 3,
@@ -806,7 +806,7 @@ export const PROTOCOL = {
       "eye",
       "look_at"
      ],
-     "title": "CameraModel",
+     "title": "CameraSpec",
      "type": "object"
     },
     "SceneInfo": {
@@ -816,7 +816,7 @@ export const PROTOCOL = {
        "type": "boolean"
       },
       "camera": {
-       "$ref": "#/$defs/CameraModel"
+       "$ref": "#/$defs/CameraSpec"
       },
       "name": {
        "title": "Name",

@@ -15,7 +15,7 @@ from . import images
 from .camera import Camera, CameraError
 from .mappings import MAPPINGS
 from .painting import EDGES, METHODS, PaintParams, PaintState, paint
-from .scenefile import SceneError, load_environment, load_scene, scene_names
+from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 
 log = logging.getLogger("rcp")
 
@@ -255,7 +255,7 @@ def _serve(args: argparse.Namespace) -> None:
     try:
         settings = Settings(**given)
     except ValidationError as exc:
-        raise UsageError(f"bad setting: {exc.errors()[0]['loc'][0]}: {exc.errors()[0]['msg']}") from None
+        raise UsageError(f"bad setting: {one_line(exc)}") from None
     logging.getLogger("rcp").setLevel(logging.INFO)
     for handler in logging.getLogger().handlers:
         handler.setFormatter(logging.Formatter("rcp: %(levelname)s: %(message)s"))

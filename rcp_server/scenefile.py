@@ -51,6 +51,8 @@ class _Model(BaseModel):
 
 
 class CameraSpec(_Model):
+    """A pinhole camera (MISSION.md conventions): ``fov`` is the vertical field of view in degrees."""
+
     eye: Vec3
     look_at: Vec3
     up: Vec3 = (0.0, 1.0, 0.0)
@@ -243,7 +245,8 @@ def _scene_object(spec: ObjectSpec, folder: Path, where: str) -> list[SceneObjec
     return objects
 
 
-def _one_line(exc: ValidationError) -> str:
+def one_line(exc: ValidationError) -> str:
+    """A validation error as one readable line: ``where: problem (and n more)``."""
     problems = []
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"])
@@ -264,7 +267,7 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
     try:
         spec = SceneSpec.model_validate(raw)
     except ValidationError as exc:
-        raise SceneError(f"{path}: {_one_line(exc)}") from None
+        raise SceneError(f"{path}: {one_line(exc)}") from None
     folder = path.parent
     try:
         camera = Camera(**spec.camera.model_dump())

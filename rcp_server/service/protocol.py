@@ -15,24 +15,14 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 from ..mappings import BUILT_IN
 from ..painting import EDGES, METHODS
+from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Vec3 = tuple[Finite, Finite, Finite]
 Size = Annotated[int, Field(ge=1, le=4096)]
 Quality = Annotated[int, Field(ge=1, le=100)]
 
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid")
-
-
-class CameraModel(_Model):
-    """A pinhole camera (MISSION.md conventions): vertical ``fov`` in degrees."""
-
-    eye: Vec3
-    look_at: Vec3
-    up: Vec3 = (0.0, 1.0, 0.0)
-    fov: Annotated[float, Field(gt=0, lt=180)] = 60.0
 
 
 class PaintModel(_Model):

@@ -25,6 +25,7 @@ from .. import images
 from ..camera import Camera, CameraError
 from ..painting import Abandoned, PaintParams, PaintResult, PaintState
 from ..scene import Scene
+from ..scenefile import one_line
 from . import protocol
 
 if TYPE_CHECKING:
@@ -34,16 +35,6 @@ log = logging.getLogger("rcp.session")
 
 SCALES = (1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25)  # walk-frame sizes, as fractions of the canvas
 REFINE_SPP = 4  # once at rest, the second refinement takes at least this many samples per pixel
-
-
-def one_line(exc: ValidationError) -> str:
-    """A validation error as one readable line: ``field: problem``."""
-    problems = []
-    for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"] if not isinstance(p, int) or len(err["loc"]) > 1)
-        problems.append(f"{loc}: {err['msg']}" if loc else err["msg"])
-    more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
-    return problems[0] + more
 
 
 @dataclass
