@@ -263,6 +263,12 @@ def _serve(args: argparse.Namespace) -> None:
     uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
 
 
+def _has(module: str) -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec(module) is not None
+
+
 def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(format="rcp: warning: %(message)s", level=logging.WARNING)
     try:
@@ -283,6 +289,8 @@ def main(argv: list[str] | None = None) -> int:
             from .bench import speed
 
             speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
+        elif args.command == "bench" and args.which in ("accuracy", "stability") and not _has("matplotlib"):
+            raise UsageError(f"rcp bench {args.which} draws its chart with matplotlib: pip install -e '.[bench]'")
         elif args.command == "bench" and args.which == "accuracy":
             from .accuracy import run
 
