@@ -393,11 +393,17 @@ def _or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:
     return array if array is not None else _DUMMY[ndim]
 
 
-def tile_rows(region: Region, threads: int) -> int:
+TILE_WORK = 1 << 18  # most rays x iterations one tile may hold its thread for (about 50 ms on our machine)
+
+
+def tile_rows(region: Region, threads: int, rays_per_pixel: int = 1) -> int:
     """Rows per tile: bands of whole rows keep a tile contiguous in memory, and four tiles a thread balance
     the load (smaller tiles, measured with rcp bench speed at 8k and 4k pixels, lost more to per-call
-    overhead than they gained in cache)."""
-    return max(1, -(-region.height // (threads * 4)))
+    overhead than they gained in cache). ``rays_per_pixel`` (samples x iterations) caps a tile's work at
+    ``TILE_WORK``: a tile keeps its thread through all its iterations, and paintings sharing a pool wait
+    for the tiles in progress, so a large painting must not hold the cores in long tiles."""
+    balanced = -(-region.height // (threads * 4))
+    return max(1, min(balanced, TILE_WORK // (region.width * rays_per_pixel)))
 
 
 def default_threads() -> int:
@@ -438,7 +444,7 @@ def paint(
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
     scene.geometry(time)  # build (or fetch) the BVH once, before the tiles ask for it
-    tiles = region.tiles(tile_rows(region, threads))
+    tiles = region.tiles(tile_rows(region, threads, params.spp * params.iterations))
     keep = [np.empty((height, width, 3), np.float32) for _ in range(params.iterations)] if keep_iterations else None
     if keep is not None and region != Region(width, height):
         raise ValueError("keep_iterations needs the full image")

@@ -800,3 +800,12 @@ def test_non_finite_displacements_move_nothing_in_either_method(busy_scene, meth
     np.testing.assert_array_equal(image[::2], plain[::2])
     np.testing.assert_array_equal(image[1::4], plain[1::4])
     assert not np.array_equal(image[3::4], plain[3::4])
+
+
+def test_tiles_are_balanced_and_no_tile_holds_a_thread_for_long():
+    from rcp_server.painting import TILE_WORK, tile_rows
+
+    assert tile_rows(Region(640, 360), 2, 6) == 45  # four tiles a thread
+    rows = tile_rows(Region(1280, 720), 2, 4 * 6)
+    assert rows * 1280 * 4 * 6 <= TILE_WORK and (rows + 1) * 1280 * 4 * 6 > TILE_WORK
+    assert tile_rows(Region(8000, 4), 2, 64 * 64) == 1  # a row is the least a tile can be

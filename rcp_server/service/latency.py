@@ -10,9 +10,12 @@ this process: one iteration from the last frame (temporal) and all of them from 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import statistics
+import threading
 import time
+import urllib.request
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -120,6 +123,38 @@ def _alone_ms(scene, width: int, height: int, params: PaintParams, temporal: boo
     return statistics.median(times)
 
 
+REST_LOAD = {"width": 1280, "height": 720, "paint": {"spp": 4}}
+
+
+class _Load:
+    done = 0
+
+
+@contextlib.contextmanager
+def _rest_load(url: str, scene_name: str, on: bool):
+    """A REST caller asking for large paintings back to back while the walk runs (when ``on``)."""
+    load, stop = _Load(), threading.Event()
+
+    body = json.dumps({"scene": scene_name, **REST_LOAD}).encode()
+
+    def call():
+        while not stop.is_set():
+            request = urllib.request.Request(f"{url}/api/render", body, {"content-type": "application/json"})
+            with urllib.request.urlopen(request, timeout=300) as response:
+                response.read()
+            load.done += 1
+
+    caller = threading.Thread(target=call, daemon=True)
+    if on:
+        caller.start()
+    try:
+        yield load
+    finally:
+        stop.set()
+        if on:
+            caller.join()
+
+
 def latency(scene_name: str, seconds: float, steps: int) -> dict:
     with BackgroundServer() as server:
         scene = server.app.state.service.scenes[scene_name]
@@ -131,40 +166,45 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
             f"{server.settings.frame_ms:.0f} ms"
         )
         header = (
-            f"{'size':>9} {'mode':>9} | {'alone ms':>8} | {'fps':>5} {'latency p50':>11} {'p95':>6} "
+            f"{'size':>9} {'mode':>14} | {'alone ms':>8} | {'fps':>5} {'latency p50':>11} {'p95':>6} "
             f"{'render p50':>10} {'scale':>5} | {'step p50':>8} {'p95':>6}"
         )
         print(header)
         print("-" * len(header))
         rows = []
-        for width, height in SIZES:
-            for temporal in (True, False):
-                alone = _alone_ms(scene, width, height, params, temporal)
+        cases = [(w, h, temporal, False) for w, h in SIZES for temporal in (True, False)]
+        cases.append((*SIZES[-1], True, True))  # the same walk while REST renders compete for the cores
+        for width, height, temporal, busy in cases:
+            alone = _alone_ms(scene, width, height, params, temporal)
+            with _rest_load(server.url, scene_name, busy) as load:
                 f = asyncio.run(_walk(server.ws_url, info, width, height, temporal, seconds, steps))
-                row = {
-                    "width": width,
-                    "height": height,
-                    "temporal": temporal,
-                    "alone_ms": round(alone, 1),
-                    "fps": round(f.fps, 1),
-                    "latency_p50_ms": round(_percentile(f.latencies_ms, 50), 1),
-                    "latency_p95_ms": round(_percentile(f.latencies_ms, 95), 1),
-                    "render_p50_ms": round(_percentile(f.render_ms, 50), 1),
-                    "scale_mean": round(statistics.fmean(f.scales), 2) if f.scales else None,
-                    "step_p50_ms": round(_percentile(f.step_ms, 50), 1),
-                    "step_p95_ms": round(_percentile(f.step_ms, 95), 1),
-                }
-                rows.append(row)
-                mode = "temporal" if temporal else "per-frame"
-                print(
-                    f"{f'{width}x{height}':>9} {mode:>9} | {alone:8.1f} | {f.fps:5.1f} {row['latency_p50_ms']:11.1f} "
-                    f"{row['latency_p95_ms']:6.1f} {row['render_p50_ms']:10.1f} {row['scale_mean'] or 0:5.2f} | "
-                    f"{row['step_p50_ms']:8.1f} {row['step_p95_ms']:6.1f}"
-                )
+            row = {
+                "width": width,
+                "height": height,
+                "temporal": temporal,
+                "alone_ms": round(alone, 1),
+                "fps": round(f.fps, 1),
+                "latency_p50_ms": round(_percentile(f.latencies_ms, 50), 1),
+                "latency_p95_ms": round(_percentile(f.latencies_ms, 95), 1),
+                "render_p50_ms": round(_percentile(f.render_ms, 50), 1),
+                "scale_mean": round(statistics.fmean(f.scales), 2) if f.scales else None,
+                "step_p50_ms": round(_percentile(f.step_ms, 50), 1),
+                "step_p95_ms": round(_percentile(f.step_ms, 95), 1),
+                "rest_renders": load.done if busy else 0,
+            }
+            rows.append(row)
+            mode = ("temporal" if temporal else "per-frame") + ("+REST" if busy else "")
+            print(
+                f"{f'{width}x{height}':>9} {mode:>14} | {alone:8.1f} | {f.fps:5.1f} {row['latency_p50_ms']:11.1f} "
+                f"{row['latency_p95_ms']:6.1f} {row['render_p50_ms']:10.1f} {row['scale_mean'] or 0:5.2f} | "
+                f"{row['step_p50_ms']:8.1f} {row['step_p95_ms']:6.1f}"
+            )
         print(
             "alone: the painting of one full-size frame in this process (temporal: one iteration from the last "
             "frame; per-frame: all iterations). latency: camera message sent -> its frame received, while walking. "
             "render: the server's painting time per walk frame, at the resolution scale it chose. step: one camera "
-            "message from rest -> its first frame."
+            "message from rest -> its first frame. +REST: meanwhile a REST caller keeps asking for "
+            f"{REST_LOAD['width']}x{REST_LOAD['height']} paintings at {REST_LOAD['paint']['spp']} spp, one after "
+            f"another ({sum(r['rest_renders'] for r in rows)} done)."
         )
         return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}
