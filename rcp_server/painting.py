@@ -173,13 +173,13 @@ class _Frame:
     eta: np.ndarray
     noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
     basis: np.ndarray = field(init=False)  # (3, 3) rows r, u, f
+    plane_args: tuple = field(init=False)  # the image plane and the tile, as the kernels take them
     camera_args: tuple = field(init=False)  # the leading arguments of kernels.cast_rays
 
     def __post_init__(self):
         self.basis = np.stack(self.camera.basis())
         region = self.region
-        self.camera_args = (
-            np.asarray(self.camera.eye, np.float64),
+        self.plane_args = (
             self.basis,
             self.camera.half_height(),
             region.full_width / region.full_height,
@@ -188,9 +188,8 @@ class _Frame:
             region.x0,
             region.y0,
             region.width,
-            self.xi,
-            self.eta,
         )
+        self.camera_args = (np.asarray(self.camera.eye, np.float64), *self.plane_args, self.xi, self.eta)
 
     def plane(self) -> np.ndarray:
         """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
@@ -551,14 +550,7 @@ def _look_up_tile(
         imagespace.look_up(
             v_p,
             kind != kernels.FIELD_ZERO,
-            frame.basis,
-            camera.half_height(),
-            region.full_width / region.full_height,
-            region.full_width,
-            region.full_height,
-            region.x0,
-            region.y0,
-            region.width,
+            *frame.plane_args,
             edge,
             plain.color,
             _or_dummy(plain.depth, 1),
