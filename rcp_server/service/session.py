@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import asyncio
 import collections
-import logging
 import time as _time
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
@@ -30,8 +29,6 @@ from . import protocol
 
 if TYPE_CHECKING:
     from .app import Service
-
-log = logging.getLogger("rcp.session")
 
 SCALES = (1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25)  # walk-frame sizes, as fractions of the canvas
 REFINE_SPP = 4  # once at rest, the second refinement takes at least this many samples per pixel
@@ -200,8 +197,11 @@ class Session:
         """Seconds until the camera counts as resting (then refinement starts), None when nothing is due."""
         if self.scene is None or self.painted_version != self.version:
             return None
-        left = self.last_move + self.settings.settle_ms / 1000 - _time.monotonic()
-        return max(left, 0.005) if self._refinements_left() else None
+        return max(self._rest_in(), 0.005) if self._refinements_left() else None
+
+    def _rest_in(self) -> float:
+        """Seconds until the camera has been still for ``settle_ms`` (0 or less: it rests)."""
+        return self.last_move + self.settings.settle_ms / 1000 - _time.monotonic()
 
     def _refinements_left(self) -> bool:
         return self.refinements < len(self._refine_spp())
@@ -223,8 +223,7 @@ class Session:
         walking = self.painted_version != self.version or (self.animate and self.scene.animated)
         if walking:
             return self._walk_job(params, scene_time)
-        resting = now - self.last_move >= self.settings.settle_ms / 1000
-        if not resting or not self._refinements_left():
+        if self._rest_in() > 0 or not self._refinements_left():
             return None
         spp = self._refine_spp()[self.refinements]
         final = self.refinements == len(self._refine_spp()) - 1
