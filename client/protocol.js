@@ -115,8 +115,10 @@ export const PROTOCOL = {
      "type": "integer"
     },
     "scene": {
-     "maxLength": 64,
-     "minLength": 1,
+     "examples": [
+      "default"
+     ],
+     "pattern": "^[A-Za-z0-9][A-Za-z0-9_-]{0,63}$",
      "title": "Scene",
      "type": "string"
     },

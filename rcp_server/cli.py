@@ -248,7 +248,7 @@ def _serve(args: argparse.Namespace) -> None:
     import uvicorn
     from pydantic import ValidationError
 
-    from .service.app import create_app
+    from .service.app import server_config
     from .service.settings import Settings
 
     given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
@@ -260,7 +260,12 @@ def _serve(args: argparse.Namespace) -> None:
     for handler in logging.getLogger().handlers:
         handler.setFormatter(logging.Formatter("rcp: %(levelname)s: %(message)s"))
     print(f"rcp: serving on http://{settings.host}:{settings.port}/  (walk-through client; API docs at /docs)")
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port, log_level="info")
+    if settings.token is not None:
+        print("rcp: a token is required (RCP_TOKEN): open the client at /#token=<token>")
+    try:
+        uvicorn.Server(server_config(settings, log_level="info")).run()
+    except KeyboardInterrupt:  # uvicorn re-raises the Ctrl-C it has already handled by stopping cleanly
+        pass
 
 
 def _has(module: str) -> bool:

@@ -30,7 +30,7 @@ from .scene import Environment, Light, Scene, SceneObject, Waves
 log = logging.getLogger("rcp")
 
 SCENES_DIR = Path(os.environ.get("RCP_SCENES", Path(__file__).resolve().parent.parent / "scenes"))
-SCENE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_-]{0,63}\Z")  # \Z, not $: "$" lets a newline through
+SCENE_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,63}")  # always with fullmatch: "$" would let a newline in
 
 
 class SceneError(ValueError):

@@ -187,7 +187,7 @@ def test_a_path_is_never_taken_for_a_scene_name(tmp_path, monkeypatch, ref):
     elsewhere.mkdir(parents=True)
     monkeypatch.chdir(elsewhere)
     _write(tmp_path / "outside.toml", VALID)  # the file '../outside' would reach from the scenes folder
-    assert not SCENE_NAME.match(ref)
+    assert not SCENE_NAME.fullmatch(ref)
     with pytest.raises(SceneError) as info:
         load_scene(ref, folder)
     assert "\n" not in str(info.value)
@@ -196,9 +196,9 @@ def test_a_path_is_never_taken_for_a_scene_name(tmp_path, monkeypatch, ref):
 
 def test_scene_name_pattern():
     for good in ("default", "a", "City_2", "sea-waves"):
-        assert SCENE_NAME.match(good)
+        assert SCENE_NAME.fullmatch(good)
     for bad in ("-x", "_x", "a.b", "a/b", "a\\b", "a b", "x" * 65, "ä", "a\n"):
-        assert not SCENE_NAME.match(bad), bad
+        assert not SCENE_NAME.fullmatch(bad), bad
 
 
 def _sun_lit(color, normal, light):

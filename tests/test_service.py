@@ -69,7 +69,7 @@ def test_render_takes_camera_time_and_jpeg(live_server):
     ("body", "status", "says"),
     [
         ({"scene": "atlantis"}, 404, "unknown scene 'atlantis'"),
-        ({"scene": "../scenes/default"}, 404, "unknown scene"),
+        ({"scene": "../scenes/default"}, 422, "pattern"),
         ({}, 422, "scene"),
         ({"scene": "default", "width": 0}, 422, "width"),
         ({"scene": "default", "width": 4096, "height": 4096}, 422, "pixels"),

@@ -6,13 +6,17 @@ import logging
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
+import uvicorn
 from fastapi import FastAPI, WebSocket
+from fastapi.middleware.cors import CORSMiddleware
 from fastapi.staticfiles import StaticFiles
 
 from ..painting import PaintParams, paint
 from ..scene import Scene
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol, rest
+from .access import NEEDS_TOKEN, HideTokens, admits, origin_allowed
+from .faults import InternalErrors
 from .renderer import Renderer
 from .session import Session
 from .settings import Settings
@@ -67,7 +71,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
         log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
-        service = Service(settings, scenes, infos, Renderer(settings.threads, settings.max_renders))
+        renderer = Renderer(settings.threads, settings.max_renders, settings.max_waiting)
+        service = Service(settings, scenes, infos, renderer)
         app.state.service = service
         try:
             yield
@@ -77,18 +82,31 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             service.renderer.close()
 
     app = FastAPI(
-        title="rcp", summary="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.", lifespan=lifespan
+        title="rcp",
+        summary="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.",
+        lifespan=lifespan,
+        max_body_size=settings.max_body_bytes,
     )
+    app.add_middleware(InternalErrors)
+    if settings.cors_origins:  # off unless configured: only the client served here calls the API
+        app.add_middleware(
+            CORSMiddleware,
+            allow_origins=settings.cors_origins,
+            allow_methods=["GET", "POST"],
+            allow_headers=["Authorization", "Content-Type"],
+        )
+    app.include_router(rest.public)
     app.include_router(rest.router)
 
     @app.websocket("/ws")
     async def walk_through(ws: WebSocket):
         service: Service = app.state.service
         await ws.accept()
-        if len(service.sessions) >= settings.max_sessions:
-            message = f"the server is at its limit of {settings.max_sessions} walk-throughs; try again later"
+        refusal = _refusal(ws, service)
+        if refusal is not None:
+            code, message = refusal
             await ws.send_text(protocol.Error(message=message).model_dump_json())
-            await ws.close(code=1013, reason="too many sessions")
+            await ws.close(code=code, reason=message[:120])
             return
         session = Session(ws, service)
         service.sessions.add(session)
@@ -100,3 +118,33 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if settings.client.is_dir():
         app.mount("/", StaticFiles(directory=settings.client, html=True), name="client")
     return app
+
+
+def _refusal(ws: WebSocket, service: Service) -> tuple[int, str] | None:
+    """Why a new walk-through may not start (a close code and a sentence), or None."""
+    settings = service.settings
+    if not origin_allowed(settings, ws.headers):
+        return 1008, f"pages from {ws.headers['origin']} may not open walk-throughs here (see RCP_CORS_ORIGINS)"
+    if not admits(settings, ws.headers, ws.query_params):
+        return 1008, NEEDS_TOKEN
+    if len(service.sessions) >= settings.max_sessions:
+        return 1013, f"the server is at its limit of {settings.max_sessions} walk-throughs; try again later"
+    return None
+
+
+def server_config(settings: Settings, **options) -> uvicorn.Config:
+    """uvicorn for the app, with the transport's own limits: WebSocket messages (past this, the connection
+    closes with 1009; the session's own, smaller limit answers with an error first), connections at once
+    (past this, 503), and how long a stop waits for requests in flight."""
+    config = uvicorn.Config(
+        create_app(settings),
+        host=settings.host,
+        port=settings.port,
+        ws_max_size=64 * settings.max_message_bytes,
+        limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
+        timeout_graceful_shutdown=10,
+        **options,
+    )
+    for name in ("uvicorn.error", "uvicorn.access"):
+        logging.getLogger(name).addFilter(HideTokens())
+    return config

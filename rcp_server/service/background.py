@@ -8,7 +8,7 @@ import time
 
 import uvicorn
 
-from .app import create_app
+from .app import server_config
 from .settings import Settings
 
 
@@ -23,8 +23,8 @@ class BackgroundServer:
 
     def __init__(self, **settings):
         self.settings = Settings(host="127.0.0.1", port=free_port(), **settings)
-        self.app = create_app(self.settings)
-        config = uvicorn.Config(self.app, host="127.0.0.1", port=self.settings.port, log_level="warning")
+        config = server_config(self.settings, log_level="warning")
+        self.app = config.app
         self.server = uvicorn.Server(config)
         self.url = f"http://127.0.0.1:{self.settings.port}"
         self.ws_url = f"ws://127.0.0.1:{self.settings.port}/ws"

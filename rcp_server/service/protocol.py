@@ -15,10 +15,13 @@ from pydantic import BaseModel, ConfigDict, Field, TypeAdapter
 
 from ..mappings import BUILT_IN
 from ..painting import EDGES, METHODS
+from ..scenefile import SCENE_NAME
 from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
 
 Size = Annotated[int, Field(ge=1, le=4096)]
 Quality = Annotated[int, Field(ge=1, le=100)]
+# a name from the scenes folder, never a path (pydantic's regex and JavaScript's anchor "$" at the very end)
+SceneName = Annotated[str, Field(pattern=f"^{SCENE_NAME.pattern}$", examples=["default"])]
 
 
 class _Model(BaseModel):
@@ -48,7 +51,7 @@ class PaintModel(_Model):
 class RenderRequest(_Model):
     """``POST /api/render``: every field but ``scene`` has a default (the scene's camera and painting)."""
 
-    scene: Annotated[str, Field(min_length=1, max_length=64)]
+    scene: SceneName
     width: Size = 640
     height: Size = 360
     camera: CameraModel | None = None
@@ -74,7 +77,7 @@ class Hello(_Model):
     """Open (or switch) a walk-through: the scene and the canvas size; the camera resets to the scene's."""
 
     type: Literal["hello"]
-    scene: Annotated[str, Field(min_length=1, max_length=64)]
+    scene: SceneName
     width: Size = 640
     height: Size = 360
     quality: Quality = 80

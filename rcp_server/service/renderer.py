@@ -9,15 +9,18 @@ every tile of a large render that came first.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import itertools
+import math
 import queue
 import threading
+import time
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from functools import partial
 from typing import TypeVar
 
-from ..painting import PaintParams, PaintResult, paint
+from ..painting import PaintParams, paint
 from ..scene import Scene
 
 T = TypeVar("T")
@@ -74,21 +77,66 @@ class FairPool(Executor):
                 thread.join()
 
 
-class Renderer:
-    """Runs paintings (and whatever goes with them, such as encoding) off the event loop."""
+class Busy(Exception):
+    """Every render slot and waiting place is taken; ``retry_after`` is a fair guess in seconds."""
 
-    def __init__(self, threads: int, max_renders: int):
+    def __init__(self, retry_after: int):
+        super().__init__(f"the server is busy with other renders; try again in {retry_after} s")
+        self.retry_after = retry_after
+
+
+class Renderer:
+    """Runs paintings (and whatever goes with them, such as encoding) off the event loop.
+
+    Walk-throughs are limited by their count (one painting each at a time); REST renders are admitted up
+    to ``max_renders + max_waiting`` at once, and past that refused with :class:`Busy` rather than queued
+    without bound."""
+
+    def __init__(self, threads: int, max_renders: int, max_waiting: int = 0):
         self.threads = threads
         self.tiles = FairPool(threads)
         self._paintings = ThreadPoolExecutor(max_renders, thread_name_prefix="rcp-render")
+        self._places = max_renders + max_waiting
+        self.admitted = 0  # REST renders running or waiting
+        self.painting = 0  # paintings in progress, of any kind
+        self._count = threading.Lock()  # paintings start and end on many threads
+        self._seconds = 1.0  # recent REST render time, for Retry-After
+        self._closing = False
 
-    def paint(self, scene: Scene, camera, width: int, height: int, params: PaintParams, **options) -> PaintResult:
-        """Blocking: paint on the shared tile pool (call it inside :meth:`run`)."""
-        return paint(scene, camera, width, height, params, pool=self.tiles, threads=self.threads, **options)
+    def paint(self, scene: Scene, camera, width: int, height: int, params: PaintParams, should_stop=None, **options):
+        """Blocking: paint on the shared tile pool (call it inside :meth:`run`). Every painting stops at its
+        next tile once the renderer closes."""
+
+        def stop() -> bool:
+            return self._closing or (should_stop is not None and should_stop())
+
+        with self._count:
+            self.painting += 1
+        try:
+            return paint(
+                scene, camera, width, height, params, pool=self.tiles, threads=self.threads, should_stop=stop, **options
+            )
+        finally:
+            with self._count:
+                self.painting -= 1
 
     async def run(self, job: Callable[[], T]) -> T:
         return await asyncio.get_running_loop().run_in_executor(self._paintings, job)
 
+    @contextlib.contextmanager
+    def admission(self) -> Iterator[None]:
+        """A REST render's place: raises :class:`Busy` when there is none, else holds one while it runs."""
+        if self.admitted >= self._places:
+            raise Busy(max(1, math.ceil(self._seconds * self.admitted / self._places)))
+        self.admitted += 1
+        clock = time.monotonic()
+        try:
+            yield
+        finally:
+            self.admitted -= 1
+            self._seconds = 0.7 * self._seconds + 0.3 * (time.monotonic() - clock)
+
     def close(self) -> None:
+        self._closing = True
         self._paintings.shutdown(wait=True, cancel_futures=True)
         self.tiles.shutdown(wait=True)

@@ -2,26 +2,39 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, HTTPException, Request, Response
+import asyncio
+import threading
+import time
+
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from .. import images
 from ..camera import Camera, CameraError
-from ..painting import PaintParams
+from ..painting import Abandoned, PaintParams
 from . import protocol
+from .access import admits, require_token
+from .renderer import Busy
 
-router = APIRouter(prefix="/api")
+public = APIRouter(prefix="/api")
+router = APIRouter(prefix="/api", dependencies=[Depends(require_token)])
 
 MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
+BUSY = {"description": "every render place is taken, or the render ran out of time; see Retry-After"}
 
 
-@router.get("/health")
+@public.get("/health")
 def health(request: Request) -> dict:
+    """Open to all (for container health checks); the figures only for callers with the token."""
     service = request.app.state.service
+    if not admits(service.settings, request.headers, request.query_params):
+        return {"status": "ok"}
     return {
         "status": "ok",
         "scenes": len(service.scenes),
         "sessions": len(service.sessions),
         "threads": service.renderer.threads,
+        "renders": service.renderer.admitted,
+        "painting": service.renderer.painting,
     }
 
 
@@ -35,28 +48,63 @@ def scenes(request: Request) -> list[protocol.SceneInfo]:
     response_class=Response,
     responses={
         200: {"content": {"image/png": {}, "image/jpeg": {}}, "description": "the painting"},
+        401: {"description": "the server has a token and the request did not bring it"},
         404: {"description": "no such scene"},
-        422: {"description": "a request the painting cannot take"},
+        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        422: {"description": "a request the painting cannot take, or one over a limit"},
+        503: BUSY,
     },
 )
 async def render(body: protocol.RenderRequest, request: Request) -> Response:
     service = request.app.state.service
+    settings = service.settings
     scene = service.scenes.get(body.scene)
     if scene is None:
         raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
-    limit = service.settings.max_pixels
-    if body.width * body.height > limit:
-        raise HTTPException(422, f"{body.width}x{body.height} is more than the {limit} pixels an image may have")
     try:
         camera = scene.camera if body.camera is None else Camera(**body.camera.model_dump())
         params = PaintParams.from_dict({**scene.paint, **body.paint.given()})
+        settings.check_painting(body.width, body.height, params)
     except (CameraError, ValueError) as exc:
         raise HTTPException(422, str(exc)) from None
     fmt, media_type = MEDIA_TYPES[body.format]
     renderer = service.renderer
+    deadline = time.monotonic() + settings.render_timeout_s  # waiting for a turn counts too
+    gone = threading.Event()  # the caller hung up: paint no further
 
     def job() -> bytes:
-        result = renderer.paint(scene, camera, body.width, body.height, params, time=body.time)
+        result = renderer.paint(
+            scene,
+            camera,
+            body.width,
+            body.height,
+            params,
+            time=body.time,
+            should_stop=lambda: gone.is_set() or time.monotonic() > deadline,
+        )
         return images.encode(result.image, fmt, body.quality)
 
-    return Response(await renderer.run(job), media_type=media_type)
+    try:
+        with renderer.admission():
+            watcher = asyncio.create_task(_hang_up(request, gone))
+            try:
+                return Response(await renderer.run(job), media_type=media_type)
+            finally:
+                watcher.cancel()
+    except Busy as busy:
+        raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
+    except Abandoned:
+        if gone.is_set():
+            return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
+        if time.monotonic() > deadline:
+            message = f"the render ran past the server's {settings.render_timeout_s:g} s limit; ask for less, or later"
+        else:
+            message = "the server is stopping"
+        raise HTTPException(503, message, headers={"Retry-After": "10"}) from None
+
+
+async def _hang_up(request: Request, gone: threading.Event) -> None:
+    """Set ``gone`` when the caller disconnects (the body is read; the next message is the disconnect)."""
+    while (await request.receive())["type"] != "http.disconnect":
+        await asyncio.sleep(0.05)
+    gone.set()

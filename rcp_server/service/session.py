@@ -26,6 +26,7 @@ from ..painting import Abandoned, PaintParams, PaintResult, PaintState
 from ..scene import Scene
 from ..scenefile import one_line
 from . import protocol
+from .faults import fault_message, report_fault
 
 if TYPE_CHECKING:
     from .app import Service
@@ -104,15 +105,23 @@ class Session:
             if message["type"] == "websocket.disconnect":
                 raise WebSocketDisconnect(message.get("code", 1000))
             text = message.get("text")
+            limit = self.settings.max_message_bytes
             if text is None:
                 self._note(protocol.Error(message="send JSON text messages; binary messages mean nothing here"))
-                continue
-            try:
-                self._apply(protocol.client_message.validate_json(text))
-            except ValidationError as exc:
-                self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
-            except (CameraError, ValueError) as exc:
-                self._note(protocol.Error(message=str(exc)))
+            elif len(text) > limit:
+                self._note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
+            else:
+                self._take(text)
+
+    def _take(self, text: str) -> None:
+        try:
+            self._apply(protocol.client_message.validate_json(text))
+        except ValidationError as exc:
+            self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
+        except (CameraError, ValueError) as exc:
+            self._note(protocol.Error(message=str(exc)))
+        except Exception:  # a fault of ours: this message is lost, the session is not
+            self._note(protocol.Error(message=fault_message(report_fault(f"session message {text[:200]!r}"))))
 
     def _apply(self, msg) -> None:
         if isinstance(msg, protocol.Hello):
@@ -126,14 +135,14 @@ class Session:
         elif isinstance(msg, protocol.PaintMessage):
             overrides = {**self.overrides, **msg.changes()}
             overrides = {k: v for k, v in overrides.items() if v is not None}
-            PaintParams.from_dict({**self.scene.paint, **overrides})  # refuse now, keep the old settings
+            self._check(self.scene, self.width, self.height, overrides)  # refuse now, keep the old settings
             self.overrides = overrides
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
-            self._check_size(width, height)
+            self._check(self.scene, width, height, self.overrides)
             self.width, self.height, self.quality = width, height, msg.quality or self.quality
         self._changed()
 
@@ -141,7 +150,7 @@ class Session:
         scenes = self.service.scenes
         if msg.scene not in scenes:
             raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(scenes))}")
-        self._check_size(msg.width, msg.height)
+        self._check(scenes[msg.scene], msg.width, msg.height, {})
         self.scene = scenes[msg.scene]
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
@@ -160,9 +169,9 @@ class Session:
             )
         )
 
-    def _check_size(self, width: int, height: int) -> None:
-        if width * height > self.settings.max_pixels:
-            raise ValueError(f"{width}x{height} is more than the {self.settings.max_pixels} pixels a frame may have")
+    def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> None:
+        """Refuses a view whose paintings could not be made: a bad setting, or more work than one may take."""
+        self.settings.check_painting(width, height, PaintParams.from_dict({**scene.paint, **overrides}))
 
     def _changed(self) -> None:
         self.version += 1
@@ -185,9 +194,12 @@ class Session:
                 result, seconds = await self.renderer.run(lambda job=job: self._render(job))
             except Abandoned:
                 continue
-            except (CameraError, ValueError) as exc:  # e.g. a painting setting the scene cannot take
+            except Exception as exc:  # this view cannot be painted: say why, and wait for the next change
                 self.painted_version, self.refinements = job.version, len(self._refine_spp())
-                self._note(protocol.Error(message=str(exc)))
+                if isinstance(exc, (CameraError, ValueError)):  # e.g. a painting setting the scene cannot take
+                    self._note(protocol.Error(message=str(exc)))
+                else:
+                    self._note(protocol.Error(message=fault_message(report_fault(f"painting {job.phase} frame"))))
                 continue
             if job.epoch != self.epoch:
                 continue  # painted for a scene the client has left
@@ -207,9 +219,10 @@ class Session:
         return self.refinements < len(self._refine_spp())
 
     def _refine_spp(self) -> list[int]:
-        spp = self._params().spp
-        more = min(64, max(REFINE_SPP, 2 * spp))
-        return [spp] if more == spp else [spp, more]
+        params = self._params()
+        affordable = self.settings.max_work // (self.width * self.height * params.iterations)
+        more = max(params.spp, min(64, max(REFINE_SPP, 2 * params.spp), affordable))
+        return [params.spp] if more == params.spp else [params.spp, more]
 
     def _params(self) -> PaintParams:
         return PaintParams.from_dict({**self.scene.paint, **self.overrides})
@@ -333,9 +346,17 @@ class Session:
             await self.outbox.wait()
             self.outbox.clear()
             while self.notes:
-                await self.ws.send_text(self.notes.popleft())
+                await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
             if self.frame is not None:
                 text, jpeg = self.frame
                 self.frame = None
-                await self.ws.send_text(text)
-                await self.ws.send_bytes(jpeg)
+                await self._deliver({"type": "websocket.send", "text": text})
+                await self._deliver({"type": "websocket.send", "bytes": jpeg})
+
+    async def _deliver(self, message: dict) -> None:
+        """A send waits while the client's buffers are full (newer frames replace the unsent one meanwhile);
+        a client that takes nothing for ``send_timeout_s`` has gone and is let go."""
+        try:
+            await asyncio.wait_for(self.ws.send(message), self.settings.send_timeout_s)
+        except TimeoutError:
+            raise WebSocketDisconnect(1001, "the client took no data") from None

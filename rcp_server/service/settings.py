@@ -1,13 +1,17 @@
-"""Service settings, in one place, read from ``RCP_*`` environment variables (``RCP_PORT=9000``)."""
+"""Service settings, in one place, read from ``RCP_*`` environment variables (``RCP_PORT=9000``).
+
+Every limit a caller can run into is here, with a default that keeps one 2-core machine serving everyone.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Annotated
 
-from pydantic import Field
-from pydantic_settings import BaseSettings, SettingsConfigDict
+from pydantic import Field, SecretStr, field_validator
+from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from ..painting import default_threads
+from ..painting import PaintParams, default_threads
 from ..scenefile import SCENES_DIR
 
 CLIENT_DIR = Path(__file__).resolve().parent.parent.parent / "client"
@@ -16,13 +20,41 @@ CLIENT_DIR = Path(__file__).resolve().parent.parent.parent / "client"
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="RCP_")
 
-    host: str = "127.0.0.1"
+    host: str = "127.0.0.1"  # loopback only unless asked: the container sets 0.0.0.0
     port: int = Field(8000, ge=0, le=65535)
     scenes: Path = SCENES_DIR  # the folder scene names resolve in
     client: Path = CLIENT_DIR  # the browser client's static files
+    # ---- access ----
+    token: SecretStr | None = None  # when set, REST and WebSocket callers must present it
+    cors_origins: Annotated[list[str], NoDecode] = []  # origins other pages may call from (comma-separated)
+    # ---- capacity ----
     threads: int = Field(default_factory=default_threads, ge=1, le=256)  # tile workers shared by all renders
     max_renders: int = Field(4, ge=1)  # paintings in progress at once; more wait their turn
+    max_waiting: int = Field(16, ge=0)  # REST renders that may wait for a turn; more get 503 and Retry-After
     max_sessions: int = Field(8, ge=1)  # WebSocket walk-throughs at once
+    # ---- one request ----
     max_pixels: int = Field(4096 * 2160, ge=1)  # width x height of one image
+    max_work: int = Field(1 << 28, ge=1)  # pixels x samples x iterations of one painting (about 30 s here)
+    render_timeout_s: float = Field(60.0, gt=0)  # a REST render not done by then (waiting included) gets 503
+    max_body_bytes: int = Field(64 * 1024, ge=1024)  # an HTTP request body
+    max_message_bytes: int = Field(16 * 1024, ge=256)  # a WebSocket text message; longer ones get an error
+    send_timeout_s: float = Field(30.0, gt=0)  # a client that takes no data for this long is disconnected
+    # ---- walking ----
     frame_ms: float = Field(60.0, gt=0)  # while walking, aim for frames at least this fast
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message
+
+    @field_validator("cors_origins", mode="before")
+    @classmethod
+    def _comma_separated(cls, value):
+        return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
+
+    def check_painting(self, width: int, height: int, params: PaintParams) -> None:
+        """Refuses (``ValueError``, said to the caller) a painting larger than one request may ask for."""
+        if width * height > self.max_pixels:
+            raise ValueError(f"{width}x{height} is more than the {self.max_pixels} pixels an image may have")
+        work = width * height * params.spp * params.iterations
+        if work > self.max_work:
+            raise ValueError(
+                f"{width}x{height} pixels x {params.spp} spp x {params.iterations} iterations is {work:,} rays, more "
+                f"than the {self.max_work:,} one painting may take: ask for fewer pixels, samples or iterations"
+            )
