@@ -14,7 +14,7 @@ export class Connection {
     this.url = url;
     this.handlers = handlers;
     this.socket = null;
-    this.state = "idle"; // connecting | open | waiting (to reconnect) | stopped
+    this.state = "idle"; // connecting | open | waiting (to reconnect) | refused | stopped
     this.backoff = BACKOFF_MS[0];
     this.opens = 0; // connections opened so far (the tests watch reconnection through it)
     this.meta = null; // the frame description waiting for its JPEG
@@ -59,7 +59,8 @@ export class Connection {
     socket.onmessage = (event) => this.receive(event.data);
     socket.onclose = (event) => {
       if (socket !== this.socket || this.stopped) return;
-      this.retry(event);
+      if (event.code === 1008) this.refused(event.reason); // no token, or a foreign page: retrying cannot help
+      else this.retry(event);
     };
   }
 
@@ -79,6 +80,11 @@ export class Connection {
     }
     if (msg.type === "frame") this.meta = msg;
     else this.handlers.onMessage(msg);
+  }
+
+  refused(reason) {
+    this.stopped = true;
+    this.setState("refused", { why: reason });
   }
 
   retry(event) {

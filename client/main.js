@@ -1,6 +1,7 @@
 // The rcp walk-through: wires the connection, the frames, the walk controls, the panel and the overlay.
 // Query parameters: ?scene=NAME, ?width=W&height=H (a fixed painting size instead of the window's; the
-// Resolution setting scales either), ?quality=Q (JPEG quality).
+// Resolution setting scales either), ?quality=Q (JPEG quality). A server with a token (RCP_TOKEN) is
+// opened as /#token=TOKEN: the fragment never reaches a server log or a Referer header.
 //
 // `window.rcp` exposes the state, the messages sent and the overlay's numbers, for the tests.
 
@@ -15,6 +16,8 @@ import { WalkController } from "./walk.js";
 
 const $ = (id) => document.getElementById(id);
 const query = new URLSearchParams(location.search);
+const token = new URLSearchParams(location.hash.slice(1)).get("token");
+const authorization = token ? { authorization: `Bearer ${token}` } : {};
 const canvas = $("view");
 
 const state = {
@@ -47,6 +50,7 @@ const walk = new WalkController(canvas, {
 });
 const wsUrl = new URL("ws", location.href); // beside the page: works behind a proxy's path prefix too
 wsUrl.protocol = wsUrl.protocol === "https:" ? "wss:" : "ws:";
+if (token) wsUrl.searchParams.set("token", token); // a browser's WebSocket cannot send headers
 const connection = new Connection(wsUrl.href, {
   onOpen: sendHello,
   onMessage: receive,
@@ -266,7 +270,7 @@ async function save() {
   try {
     const response = await fetch("api/render", {
       method: "POST",
-      headers: { "content-type": "application/json" },
+      headers: { "content-type": "application/json", ...authorization },
       body: JSON.stringify(body),
     });
     if (!response.ok) {
@@ -308,8 +312,13 @@ function notice(text, kind = "error") {
 async function loadScenes() {
   for (let wait = 500; ; wait = Math.min(wait * 2, 8000)) {
     try {
-      const response = await fetch("api/scenes");
+      const response = await fetch("api/scenes", { headers: authorization });
       if (response.ok) return await response.json();
+      if (response.status === 401) {
+        $("o-connection").textContent = "this server needs a token: open the page as /#token=…";
+        notice((await response.json()).detail);
+        return null;
+      }
     } catch {
       // the server is not up yet: try again
     }
@@ -325,6 +334,7 @@ async function start() {
   $("quality-value").textContent = state.quality;
   applySize();
   state.scenes = await loadScenes();
+  if (state.scenes === null) return; // refused: retrying cannot help
   const names = state.scenes.map((s) => s.name);
   for (const scene of state.scenes) $("scene").append(new Option(`${scene.title} (${scene.name})`, scene.name));
   if (!names.includes(state.sceneName)) {

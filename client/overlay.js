@@ -42,6 +42,7 @@ export class Overlay {
       connecting: "connecting…",
       open: "connected",
       waiting: `${detail.why} · retry in ${detail.seconds?.toFixed(1)} s`,
+      refused: `refused: ${detail.why}`,
       stopped: "stopped",
     };
     $("o-connection").textContent = words[state] ?? state;

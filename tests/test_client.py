@@ -51,7 +51,7 @@ def browser():
 
 
 @contextlib.contextmanager
-def client(browser, url: str, scene: str = "default", wait: bool = True, touch: bool = False):
+def client(browser, url: str, scene: str = "default", wait: bool = True, touch: bool = False, fragment: str = ""):
     """The client on ``scene`` (its first refined frame shown unless ``wait`` is false); fails on console errors."""
     viewport = {"width": WINDOW[0], "height": WINDOW[1]}
     context = browser.new_context(viewport=viewport, accept_downloads=True, has_touch=touch)
@@ -59,7 +59,7 @@ def client(browser, url: str, scene: str = "default", wait: bool = True, touch: 
     problems = []
     page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
     page.on("pageerror", lambda e: problems.append(str(e)))
-    page.goto(f"{url}/?scene={scene}&width={SIZE[0]}&height={SIZE[1]}")
+    page.goto(f"{url}/?scene={scene}&width={SIZE[0]}&height={SIZE[1]}{fragment}")
     if wait:
         wait_final(page)
     try:
@@ -328,3 +328,21 @@ def test_a_busy_server_is_retried_until_a_walk_through_ends(browser):
             wait_final(second)
             assert second.text_content("#o-connection") == "connected"
             assert second.evaluate("rcp.connection.opens") >= 2 and second.evaluate("rcp.state.readies") == 1
+
+
+def test_a_server_with_a_token_walks_and_saves_for_the_page_that_has_it(browser):
+    with BackgroundServer(settle_ms=80, token="sesame") as server:
+        with client(browser, server.url, "sky", fragment="#token=sesame") as page:
+            with page.expect_request("**/api/render") as request, page.expect_download(timeout=WAIT_MS) as download:
+                page.click("#save")
+            assert request.value.headers["authorization"] == "Bearer sesame"
+            assert Path(download.value.path()).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        # without it the page says what is missing and stops asking
+        context = browser.new_context()
+        page = context.new_page()
+        page.goto(f"{server.url}/?scene=sky")
+        page.wait_for_function("rcp.state.errors.length > 0", timeout=WAIT_MS)
+        assert "needs a token" in page.evaluate("rcp.state.errors")[0]
+        assert page.text_content("#o-connection").startswith("this server needs a token")
+        assert page.evaluate("rcp.overlay.frames") == 0
+        context.close()
