@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import math
+import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -262,10 +263,15 @@ def _serve(args: argparse.Namespace) -> None:
     print(f"rcp: serving on http://{settings.host}:{settings.port}/  (walk-through client; API docs at /docs)")
     if settings.token is not None:
         print("rcp: a token is required (RCP_TOKEN): open the client at /#token=<token>")
-    try:
-        uvicorn.Server(server_config(settings, log_level="info")).run()
-    except KeyboardInterrupt:  # uvicorn re-raises the Ctrl-C it has already handled by stopping cleanly
-        pass
+    # uvicorn stops gracefully on SIGINT or SIGTERM, then raises the signal again for the handler it found:
+    # a stop asked for and carried out is exit status 0
+    signal.signal(signal.SIGTERM, _stopped)
+    signal.signal(signal.SIGINT, _stopped)
+    uvicorn.Server(server_config(settings, log_level="info")).run()
+
+
+def _stopped(signum, frame) -> None:
+    raise SystemExit(0)
 
 
 def _has(module: str) -> bool:

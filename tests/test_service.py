@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import threading
 import time
@@ -13,8 +11,7 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
-from PIL import Image
-from websockets.sync.client import connect
+from conftest import decode
 
 from rcp_server import images
 from rcp_server.camera import Camera
@@ -28,10 +25,6 @@ ROOT = Path(__file__).resolve().parent.parent
 
 def post(server, body: dict) -> httpx.Response:
     return httpx.post(f"{server.url}/api/render", json=body, timeout=120)
-
-
-def decode(data: bytes) -> np.ndarray:
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
 # ---- REST ----
@@ -147,43 +140,6 @@ def test_fair_pool_passes_errors_and_drops_the_rest_of_a_failed_batch():
 # ---- the WebSocket walk-through ----
 
 
-class Walk:
-    """A WebSocket client that reads frames as (meta, image)."""
-
-    def __init__(self, server):
-        self._stack = contextlib.ExitStack()
-        self.ws = self._stack.enter_context(connect(server.ws_url, max_size=None, open_timeout=30))
-
-    def send(self, **message) -> None:
-        self.ws.send(json.dumps(message))
-
-    def next(self, timeout: float = 30.0) -> dict:
-        return json.loads(self.ws.recv(timeout))
-
-    def frame(self, timeout: float = 30.0) -> tuple[dict, np.ndarray]:
-        while (meta := self.next(timeout))["type"] != "frame":
-            assert meta["type"] != "error", meta
-        image = self.ws.recv(timeout)
-        assert isinstance(image, bytes)
-        return meta, decode(image)
-
-    def until_final(self, timeout: float = 60.0) -> list[tuple[dict, np.ndarray]]:
-        frames = []
-        while not frames or not frames[-1][0]["final"]:
-            frames.append(self.frame(timeout))
-        return frames
-
-    def close(self) -> None:
-        self._stack.close()
-
-
-@pytest.fixture
-def walk(live_server):
-    client = Walk(live_server)
-    yield client
-    client.close()
-
-
 def test_hello_gives_ready_then_walk_and_refined_frames(walk):
     walk.send(type="hello", scene="default", width=160, height=90)
     ready = walk.next()
@@ -282,12 +238,12 @@ def test_messages_before_hello_and_binary_messages_are_refused(walk):
     assert walk.next()["type"] == "ready"
 
 
-def test_sessions_are_limited_and_freed_on_disconnect():
+def test_sessions_are_limited_and_freed_on_disconnect(walk_to):
     with BackgroundServer(max_sessions=1, settle_ms=50) as server:
-        first = Walk(server)
+        first = walk_to(server)
         first.send(type="hello", scene="sky", width=32, height=18)
         first.next()
-        second = Walk(server)
+        second = walk_to(server)
         assert "limit" in second.next()["message"]
         with pytest.raises(Exception):  # noqa: B017 - the server closes the socket (code 1013)
             second.next(5)
@@ -295,7 +251,7 @@ def test_sessions_are_limited_and_freed_on_disconnect():
         deadline = time.monotonic() + 10
         while httpx.get(f"{server.url}/api/health").json()["sessions"] and time.monotonic() < deadline:
             time.sleep(0.05)
-        third = Walk(server)
+        third = walk_to(server)
         third.send(type="hello", scene="sky", width=32, height=18)
         assert third.next()["type"] == "ready"
         third.close()

@@ -3,13 +3,17 @@
 from __future__ import annotations
 
 import logging
+import socket
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 
 import uvicorn
-from fastapi import FastAPI, WebSocket
+from fastapi import FastAPI, Request, WebSocket
+from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from ..painting import PaintParams, paint
 from ..scene import Scene
@@ -58,6 +62,8 @@ def load_scenes(settings: Settings) -> dict[str, Scene]:
             scenes[name] = scene
         except SceneError as exc:
             log.error("scene %s skipped: %s", name, exc)
+        except Exception:  # a fault the scene file's checks did not foresee: still only this scene's
+            log.exception("scene %s skipped: it failed to build", name)
     return scenes
 
 
@@ -95,6 +101,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST"],
             allow_headers=["Authorization", "Content-Type"],
         )
+    app.add_exception_handler(RequestValidationError, _invalid)
     app.include_router(rest.public)
     app.include_router(rest.router)
 
@@ -120,6 +127,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     return app
 
 
+async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+    """FastAPI's 422, without echoing the input: a NaN or an infinity in it could not be written as JSON."""
+    errors = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
+    return JSONResponse({"detail": errors}, 422)
+
+
 def _refusal(ws: WebSocket, service: Service) -> tuple[int, str] | None:
     """Why a new walk-through may not start (a close code and a sentence), or None."""
     settings = service.settings
@@ -132,6 +145,20 @@ def _refusal(ws: WebSocket, service: Service) -> tuple[int, str] | None:
     return None
 
 
+class _WebSockets(WebSocketsSansIOProtocol):
+    """uvicorn's WebSocket protocol with the kernel's send buffer capped: the kernel would otherwise grow it to
+    megabytes for a client that stops reading, holding seconds of stale frames before a send ever waits. With
+    the cap, sends wait after ``SEND_BUFFER`` bytes and newer frames replace the unsent one (session.py)."""
+
+    SEND_BUFFER = 256 * 1024
+
+    def connection_made(self, transport) -> None:
+        super().connection_made(transport)
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.SEND_BUFFER)
+
+
 def server_config(settings: Settings, **options) -> uvicorn.Config:
     """uvicorn for the app, with the transport's own limits: WebSocket messages (past this, the connection
     closes with 1009; the session's own, smaller limit answers with an error first), connections at once
@@ -140,6 +167,7 @@ def server_config(settings: Settings, **options) -> uvicorn.Config:
         create_app(settings),
         host=settings.host,
         port=settings.port,
+        ws=_WebSockets,
         ws_max_size=64 * settings.max_message_bytes,
         limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
         timeout_graceful_shutdown=10,
