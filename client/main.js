@@ -315,7 +315,7 @@ async function loadScenes() {
       const response = await fetch("api/scenes", { headers: authorization });
       if (response.ok) return await response.json();
       if (response.status === 401) {
-        $("o-connection").textContent = "this server needs a token: open the page as /#token=…";
+        $("o-connection").textContent = "needs a token: open /#token=…";
         notice((await response.json()).detail);
         return null;
       }

@@ -343,6 +343,6 @@ def test_a_server_with_a_token_walks_and_saves_for_the_page_that_has_it(browser)
         page.goto(f"{server.url}/?scene=sky")
         page.wait_for_function("rcp.state.errors.length > 0", timeout=WAIT_MS)
         assert "needs a token" in page.evaluate("rcp.state.errors")[0]
-        assert page.text_content("#o-connection").startswith("this server needs a token")
+        assert page.text_content("#o-connection").startswith("needs a token")
         assert page.evaluate("rcp.overlay.frames") == 0
         context.close()
