@@ -29,6 +29,9 @@ RAY_DTYPE = np.float32
 """The ray engine's dtype (Embree takes float32); geometry math is float64 until rays are built."""
 
 
+COORDINATE_LIMIT = 1e9
+
+
 class CameraError(ValueError):
     """A camera that cannot form a basis (eye on target, up parallel to the view, non-finite values)."""
 
@@ -39,6 +42,8 @@ def _vec3(name: str, value) -> tuple[float, float, float]:
         raise CameraError(f"{name} must be three numbers, got {value!r}")
     if not np.all(np.isfinite(arr)):
         raise CameraError(f"{name} must be finite, got {value!r}")
+    if not np.all(np.abs(arr) <= COORDINATE_LIMIT):  # past this, float32 rays and the basis's norms break down
+        raise CameraError(f"{name} must lie within +-{COORDINATE_LIMIT:g} scene units, got {value!r}")
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 

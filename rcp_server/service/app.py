@@ -13,6 +13,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.routing import Match, Mount
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
 from ..painting import PaintParams, paint
@@ -123,8 +124,18 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             service.sessions.discard(session)
 
     if settings.client.is_dir():
-        app.mount("/", StaticFiles(directory=settings.client, html=True), name="client")
+        app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app
+
+
+class _ClientFiles(Mount):
+    """The client's static files at ``/``, except under ``/api/``: there a path the API lacks is a 404 and a
+    method it lacks a 405 with ``Allow``, not a lookup among the client's files."""
+
+    def matches(self, scope):
+        if scope["type"] == "http" and scope["path"].startswith("/api/"):
+            return Match.NONE, {}
+        return super().matches(scope)
 
 
 async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:

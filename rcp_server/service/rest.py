@@ -48,6 +48,7 @@ def scenes(request: Request) -> list[protocol.SceneInfo]:
     response_class=Response,
     responses={
         200: {"content": {"image/png": {}, "image/jpeg": {}}, "description": "the painting"},
+        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
         401: {"description": "the server has a token and the request did not bring it"},
         404: {"description": "no such scene"},
         413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
