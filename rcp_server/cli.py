@@ -133,9 +133,10 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="benchmarks that print figures (accuracy and stability also chart them)")
     b.add_argument(
         "which",
-        choices=["speed", "latency", "accuracy", "stability"],
+        choices=["speed", "latency", "accuracy", "stability", "soak"],
         help="speed: the engine against Embree; latency: the service; accuracy: time against error of both "
-        "methods; stability: where each method breaks",
+        "methods; stability: where each method breaks; soak: rcp serve under WebSocket and REST load, its memory "
+        "and threads before and after",
     )
     b.add_argument("--out", type=Path, default=Path("bench-out"), help="accuracy, stability: folder for JSON and PNG")
     b.add_argument("--quick", action="store_true", help="accuracy, stability: a smaller run (minutes)")
@@ -145,8 +146,17 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--iterations", type=_positive_int, default=6)
     b.add_argument("--repeats", type=_positive_int, default=5)
     b.add_argument("--threads", type=_positive_int)
-    b.add_argument("--seconds", type=_finite, default=4.0, help="latency: seconds of walking per size and mode")
+    b.add_argument(
+        "--seconds", type=_finite, help="latency: seconds of walking per size and mode (default 4); soak: of load (60)"
+    )
     b.add_argument("--steps", type=_positive_int, default=10, help="latency: single camera steps from rest")
+    b.add_argument(
+        "--clients",
+        type=_positive_int,
+        default=6,
+        help="soak: WebSocket walk-throughs at once (the server takes RCP_MAX_SESSIONS, 8)",
+    )
+    b.add_argument("--rest", type=int, default=2, choices=range(0, 65), metavar="0..64", help="soak: REST callers")
     return parser
 
 
@@ -295,7 +305,11 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "bench" and args.which == "latency":
             from .service.latency import latency
 
-            latency(args.scene, args.seconds, args.steps)
+            latency(args.scene, 4.0 if args.seconds is None else args.seconds, args.steps)
+        elif args.command == "bench" and args.which == "soak":
+            from .service.soak import bench_soak
+
+            bench_soak(60.0 if args.seconds is None else args.seconds, args.clients, args.rest)
         elif args.command == "bench" and args.which == "speed":
             from .bench import speed
 
