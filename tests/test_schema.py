@@ -7,9 +7,6 @@ Two things the schema cannot say are told to the generator: scene names are data
 bodies' ``scene`` from the server's own scenes), and ``width * height`` must stay under ``max_pixels``, so
 small sizes are drawn often and a schema-valid body may still get the documented 422. The server's limit is
 64x64 pixels, so every painting that passes is cheap. The seed is fixed: a failure reproduces.
-
-Known deviations, each dropped from the fuzzing by one precise filter and pinned by a strict xfail test below
-that fails (XPASS) once the server is fixed, so the filter and the xfail can go together.
 """
 
 from __future__ import annotations
@@ -21,6 +18,8 @@ import schemathesis
 from rcp_server.service.background import BackgroundServer
 
 MAX_PIXELS = 64 * 64
+TOKEN = "schema-token"  # schemathesis brings it, and checks that requests without it or with another get 401
+AUTH = {"authorization": f"Bearer {TOKEN}"}
 TIMEOUT = 30  # seconds; the largest painting the limit allows (64x64, 64 iterations, 64 spp) takes about 4
 SIZES = [1, 7, 16, 64]  # widths and heights whose products stay within MAX_PIXELS
 PARSE_ERROR = {"detail": "There was an error parsing the body"}
@@ -28,18 +27,8 @@ PARSE_ERROR = {"detail": "There was an error parsing the body"}
 
 @pytest.fixture(scope="module")
 def server():
-    with BackgroundServer(max_pixels=MAX_PIXELS) as server:
+    with BackgroundServer(max_pixels=MAX_PIXELS, token=TOKEN) as server:
         yield server
-
-
-def _known_deviation(failure, case, response) -> bool:
-    """Failures the xfail tests below pin: FastAPI's undocumented 400 for a body that is not UTF-8, and the
-    client's static files at ``/`` answering methods ``/api/render`` does not take."""
-    if type(failure).__name__ == "UndefinedStatusCode":
-        return response.status_code == 400 and response.json() == PARSE_ERROR
-    if type(failure).__name__ in ("UnsupportedMethodResponse", "AllowHeaderMismatch"):
-        return case.path == "/api/render" and case.method != "POST"
-    return False
 
 
 @pytest.fixture(scope="module")
@@ -49,6 +38,7 @@ def api(server):
             "seed": 20260101,
             "generation": {"max-examples": 150, "database": "none"},  # no example database left in the tree
             "request-timeout": TIMEOUT,
+            "auth": {"openapi": {"HTTPBearer": {"bearer": TOKEN}, "APIKeyQuery": {"api_key": TOKEN}}},
             "dictionaries": {
                 "scenes": {"values": sorted(server.app.state.service.scenes)},
                 "sizes": {"values": SIZES},
@@ -68,10 +58,6 @@ def api(server):
     )
     schema = schemathesis.openapi.from_url(f"{server.url}/openapi.json", config=config, timeout=TIMEOUT)
 
-    @schema.hook
-    def filter_failure(context, failure, case, response) -> bool:
-        return not _known_deviation(failure, case, response)
-
     return schema
 
 
@@ -86,33 +72,36 @@ def test_every_answer_is_declared_by_the_schema_and_none_is_a_server_error(case)
 def test_the_generated_requests_reach_the_painting(server):
     """The dictionaries do their job: a body the fuzzing sends (scene from the server, small size) paints."""
     body = {"scene": sorted(server.app.state.service.scenes)[0], "width": SIZES[1], "height": SIZES[2]}
-    response = httpx.post(f"{server.url}/api/render", json=body, timeout=TIMEOUT)
+    response = httpx.post(f"{server.url}/api/render", json=body, headers=AUTH, timeout=TIMEOUT)
     assert response.status_code == 200 and response.headers["content-type"] == "image/png"
-    too_big = httpx.post(f"{server.url}/api/render", json={**body, "width": 65, "height": 64}, timeout=TIMEOUT)
+    too_big = {**body, "width": 65, "height": 64}
+    too_big = httpx.post(f"{server.url}/api/render", json=too_big, headers=AUTH, timeout=TIMEOUT)
     assert too_big.status_code == 422 and "pixels" in too_big.json()["detail"]
 
 
-@pytest.mark.xfail(strict=True, reason="FastAPI answers a body that is not UTF-8 with 400, which the schema omits")
-def test_a_body_that_is_not_utf8_gets_a_documented_status(server):
+def test_a_body_that_is_not_json_text_gets_the_documented_400(server):
     response = httpx.post(
-        f"{server.url}/api/render", content=b"\xc3\x12", headers={"content-type": "application/json"}, timeout=TIMEOUT
+        f"{server.url}/api/render",
+        content=b"\xc3\x12",
+        headers={"content-type": "application/json", **AUTH},
+        timeout=TIMEOUT,
     )
-    assert response.json() == PARSE_ERROR  # the deviation the fuzzing filter drops, exactly
-    assert response.status_code in (404, 422)
+    assert response.status_code == 400 and response.json() == PARSE_ERROR
+    assert "400" in httpx.get(f"{server.url}/openapi.json").json()["paths"]["/api/render"]["post"]["responses"]
 
 
-@pytest.mark.xfail(strict=True, reason="the client's static files at / answer GET and OPTIONS on /api/render")
 def test_a_method_render_does_not_take_gets_405_with_post_allowed(server):
     get = httpx.get(f"{server.url}/api/render", timeout=TIMEOUT)
     options = httpx.options(f"{server.url}/api/render", timeout=TIMEOUT)
     assert (get.status_code, options.status_code) == (405, 405)
     assert get.headers["allow"] == options.headers["allow"] == "POST"
+    assert httpx.get(f"{server.url}/api/nothing", timeout=TIMEOUT).status_code == 404  # not a client file lookup
 
 
-@pytest.mark.xfail(strict=True, reason="eye - look_at overflows float64: the painting is all black, answered 200")
-def test_a_camera_whose_view_direction_overflows_is_refused(server):
-    """Coordinates are unbounded in the schema; past about 1e154 the camera's norms overflow to inf and NaN."""
-    camera = {"eye": [1e308, 0, 0], "look_at": [-1e308, 0, 0]}
-    body = {"scene": sorted(server.app.state.service.scenes)[0], "width": 16, "height": 16, "camera": camera}
-    response = httpx.post(f"{server.url}/api/render", json=body, timeout=TIMEOUT)
-    assert response.status_code == 422
+def test_a_camera_whose_view_direction_would_overflow_is_refused(server):
+    """Past about 1e154 the camera's norms would overflow to inf: coordinates are bounded at 1e9."""
+    scene = sorted(server.app.state.service.scenes)[0]
+    for camera in ({"eye": [1e308, 0, 0], "look_at": [-1e308, 0, 0]}, {"eye": [1e200, 0, 0], "look_at": [0, 0, 1]}):
+        body = {"scene": scene, "width": 16, "height": 16, "camera": camera}
+        response = httpx.post(f"{server.url}/api/render", json=body, headers=AUTH, timeout=TIMEOUT)
+        assert response.status_code == 422 and "1e+09" in response.json()["detail"]

@@ -16,7 +16,8 @@ from .access import admits, require_token
 from .renderer import Busy
 
 public = APIRouter(prefix="/api")
-router = APIRouter(prefix="/api", dependencies=[Depends(require_token)])
+NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
+router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
 
 MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
 BUSY = {"description": "every render place is taken, or the render ran out of time; see Retry-After"}
@@ -49,7 +50,6 @@ def scenes(request: Request) -> list[protocol.SceneInfo]:
     responses={
         200: {"content": {"image/png": {}, "image/jpeg": {}}, "description": "the painting"},
         400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
-        401: {"description": "the server has a token and the request did not bring it"},
         404: {"description": "no such scene"},
         413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
         422: {"description": "a request the painting cannot take, or one over a limit"},
