@@ -41,12 +41,13 @@ def admits(settings: Settings, headers: Headers, query: QueryParams) -> bool:
     return _matches(presented(headers, query), settings)
 
 
-def require_token(
+async def require_token(
     request: Request,
     bearer: Annotated[HTTPAuthorizationCredentials | None, Security(BEARER)],
     token: Annotated[str | None, Security(QUERY)],
 ) -> None:
-    """The REST routes' dependency: 401 unless the token (if the server has one) came with the request."""
+    """The REST routes' dependency: 401 unless the token (if the server has one) came with the request. Async,
+    like the light routes, so that none of them takes a worker thread."""
     settings: Settings = request.app.state.service.settings
     given = bearer.credentials if bearer is not None else token
     if not _matches(given, settings):

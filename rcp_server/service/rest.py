@@ -24,7 +24,7 @@ BUSY = {"description": "every render place is taken, or the render ran out of ti
 
 
 @public.get("/health")
-def health(request: Request) -> dict:
+async def health(request: Request) -> dict:
     """Open to all (for container health checks); the figures only for callers with the token."""
     service = request.app.state.service
     if not admits(service.settings, request.headers, request.query_params):
@@ -40,7 +40,7 @@ def health(request: Request) -> dict:
 
 
 @router.get("/scenes")
-def scenes(request: Request) -> list[protocol.SceneInfo]:
+async def scenes(request: Request) -> list[protocol.SceneInfo]:
     return list(request.app.state.service.infos.values())
 
 
