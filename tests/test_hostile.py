@@ -5,21 +5,18 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import signal
 import socket
-import subprocess
-import sys
 import threading
 import time
-from types import SimpleNamespace
 
 import httpx
 import pytest
 from conftest import Walk, decode
 from websockets.exceptions import ConnectionClosed
 
-from rcp_server.service.background import BackgroundServer, free_port
+from rcp_server.service.background import BackgroundServer
+from rcp_server.service.soak import rcp_serve
 
 BIG = {"scene": "default", "width": 1280, "height": 720, "paint": {"spp": 8}}  # seconds of work on 2 cores
 
@@ -354,41 +351,24 @@ def test_broken_scenes_are_skipped_and_the_others_serve(tmp_path):
         assert image.shape == (16, 16, 3)
 
 
-def test_a_stop_signal_ends_walks_and_renders_and_exits_cleanly_without_logging_the_token():
-    port = free_port()
-    env = {**os.environ, "RCP_PORT": str(port), "RCP_TOKEN": "hush-hush"}
-    server = subprocess.Popen(
-        [sys.executable, "-m", "rcp_server.cli", "serve"], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT
-    )
-    url = f"http://127.0.0.1:{port}"
+def test_a_stop_signal_ends_walks_and_renders_and_exits_cleanly_without_logging_the_token(tmp_path):
     auth = {"authorization": "Bearer hush-hush"}
-    try:
-        until(lambda: _answers(f"{url}/api/health"), 120, "rcp serve to come up")
-
-        walk = Walk(SimpleNamespace(ws_url=f"ws://127.0.0.1:{port}/ws"), "?token=hush-hush")
+    with rcp_serve(tmp_path, token="hush-hush") as served:
+        walk = Walk(served, "?token=hush-hush")
         walk.send(type="hello", scene="default", width=640, height=360)
         walk.next()
-        render = threading.Thread(target=lambda: httpx.post(f"{url}/api/render", json=BIG, headers=auth, timeout=60))
+        post = lambda: httpx.post(f"{served.url}/api/render", json=BIG, headers=auth, timeout=60)  # noqa: E731
+        render = threading.Thread(target=post)
         render.start()
-        until(lambda: httpx.get(f"{url}/api/health", headers=auth).json()["renders"] == 1, what="the render")
+        until(lambda: httpx.get(f"{served.url}/api/health", headers=auth).json()["renders"] == 1, what="the render")
         clock = time.monotonic()
-        server.send_signal(signal.SIGTERM)
-        assert server.wait(30) == 0
+        served.process.send_signal(signal.SIGTERM)
+        assert served.process.wait(30) == 0
         assert time.monotonic() - clock < 15  # the graceful wait is 10 s, then paintings stop at their next tile
         with pytest.raises(ConnectionClosed) as closed:
             while True:
                 walk.ws.recv(10)
         assert closed.value.rcvd is None or closed.value.rcvd.code in (1001, 1012)
         render.join(30)
-    finally:
-        if server.poll() is None:
-            server.kill()
-    output = server.stdout.read().decode()
+    output = served.log.read_text()
     assert "token=***" in output and "hush-hush" not in output
-
-
-def _answers(url: str) -> bool:
-    try:
-        return httpx.get(url, timeout=1).status_code == 200
-    except httpx.TransportError:
-        return False

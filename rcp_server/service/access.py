@@ -26,31 +26,27 @@ QUERY = APIKeyQuery(name="token", auto_error=False, description="the same token,
 NEEDS_TOKEN = "this server needs a token: send 'Authorization: Bearer <token>' or add ?token=<token> to the address"
 
 
-def _matches(given: str | None, settings: Settings) -> bool:
-    if settings.token is None:
-        return True
-    return given is not None and secrets.compare_digest(given.encode(), settings.token.get_secret_value().encode())
-
-
 def presented(headers: Headers, query: QueryParams) -> str | None:
     scheme, _, credentials = headers.get("authorization", "").partition(" ")
     return credentials.strip() if scheme.lower() == "bearer" else query.get("token")
 
 
 def admits(settings: Settings, headers: Headers, query: QueryParams) -> bool:
-    return _matches(presented(headers, query), settings)
+    """The one check of REST and WebSocket callers alike: no token set, or the token presented."""
+    if settings.token is None:
+        return True
+    given = presented(headers, query)
+    return given is not None and secrets.compare_digest(given.encode(), settings.token.get_secret_value().encode())
 
 
 async def require_token(
     request: Request,
-    bearer: Annotated[HTTPAuthorizationCredentials | None, Security(BEARER)],
-    token: Annotated[str | None, Security(QUERY)],
+    _bearer: Annotated[HTTPAuthorizationCredentials | None, Security(BEARER)],  # for the OpenAPI schema
+    _token: Annotated[str | None, Security(QUERY)],
 ) -> None:
     """The REST routes' dependency: 401 unless the token (if the server has one) came with the request. Async,
     like the light routes, so that none of them takes a worker thread."""
-    settings: Settings = request.app.state.service.settings
-    given = bearer.credentials if bearer is not None else token
-    if not _matches(given, settings):
+    if not admits(request.app.state.service.settings, request.headers, request.query_params):
         raise HTTPException(401, NEEDS_TOKEN, headers={"WWW-Authenticate": "Bearer"})
 
 

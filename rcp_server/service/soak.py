@@ -110,9 +110,9 @@ class Served:
 
 
 @contextlib.contextmanager
-def rcp_serve(log_dir: Path):
-    """``rcp serve`` in a subprocess on 127.0.0.1 and a free port, up once ``/api/health`` answers; stopped (or
-    killed) on the way out."""
+def rcp_serve(log_dir: Path, **settings: str):
+    """``rcp serve`` in a subprocess on 127.0.0.1 and a free port (``settings`` as ``RCP_*`` variables: ``token=``
+    is ``RCP_TOKEN``), up once ``/api/health`` answers; stopped (or killed) on the way out."""
     port = free_port()
     log = log_dir / "rcp-serve.log"
     command = [sys.executable, "-m", "rcp_server.cli", "serve", "--host", "127.0.0.1", "--port", str(port)]
@@ -120,6 +120,7 @@ def rcp_serve(log_dir: Path):
         # the server runs the code this module was imported from, whatever the working directory
         path = os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")]))
         env = {**os.environ, "PYTHONPATH": path, "PYTHONUNBUFFERED": "1"}
+        env.update({f"RCP_{name.upper()}": value for name, value in settings.items()})
         process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
     served = Served(process, port, log)
     try:
