@@ -320,9 +320,13 @@ def test_a_busy_server_is_retried_until_a_walk_through_ends(browser):
     with BackgroundServer(settle_ms=80, max_sessions=1) as server, client(browser, server.url, "sky") as first:
         with client(browser, server.url, "sky", wait=False) as second:
             # the server takes the second walk-through, says why it cannot, and closes it (1013)
-            second.wait_for_function("rcp.connection.state === 'waiting'", timeout=WAIT_MS)
+            # it retries every quarter second or so, so the state and its words are read in one look
+            second.wait_for_function(
+                "rcp.connection.state === 'waiting'"
+                " && document.querySelector('#o-connection').textContent.startsWith('server busy · retry in')",
+                timeout=WAIT_MS,
+            )
             assert "limit of 1 walk-throughs" in second.evaluate("rcp.state.errors")[0]
-            assert second.text_content("#o-connection").startswith("server busy · retry in")
             assert second.evaluate("rcp.overlay.frames") == 0
             first.close()  # the first walk-through ends: the next retry gets in
             wait_final(second)
