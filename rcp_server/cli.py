@@ -256,10 +256,9 @@ def _scenes() -> None:
 
 
 def _serve(args: argparse.Namespace) -> None:
-    import uvicorn
     from pydantic import ValidationError
 
-    from .service.app import server_config
+    from .service.app import Server
     from .service.settings import Settings
 
     given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
@@ -277,7 +276,7 @@ def _serve(args: argparse.Namespace) -> None:
     # a stop asked for and carried out is exit status 0
     signal.signal(signal.SIGTERM, _stopped)
     signal.signal(signal.SIGINT, _stopped)
-    uvicorn.Server(server_config(settings, log_level="info")).run()
+    Server(settings, log_level="info").run()
 
 
 def _stopped(signum, frame) -> None:

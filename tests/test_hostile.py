@@ -9,12 +9,14 @@ import signal
 import socket
 import threading
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 import pytest
 from conftest import Walk, decode
 from websockets.exceptions import ConnectionClosed
 
+from rcp_server.service.app import Server
 from rcp_server.service.background import BackgroundServer
 from rcp_server.service.soak import rcp_serve
 
@@ -351,24 +353,47 @@ def test_broken_scenes_are_skipped_and_the_others_serve(tmp_path):
         assert image.shape == (16, 16, 3)
 
 
+LONG = {"scene": "default", "width": 1920, "height": 1080, "paint": {"spp": 20}}  # far past the stop's grace
+
+
 def test_a_stop_signal_ends_walks_and_renders_and_exits_cleanly_without_logging_the_token(tmp_path):
     auth = {"authorization": "Bearer hush-hush"}
     with rcp_serve(tmp_path, token="hush-hush") as served:
         walk = Walk(served, "?token=hush-hush")
         walk.send(type="hello", scene="default", width=640, height=360)
         walk.next()
-        post = lambda: httpx.post(f"{served.url}/api/render", json=BIG, headers=auth, timeout=60)  # noqa: E731
-        render = threading.Thread(target=post)
-        render.start()
-        until(lambda: httpx.get(f"{served.url}/api/health", headers=auth).json()["renders"] == 1, what="the render")
-        clock = time.monotonic()
-        served.process.send_signal(signal.SIGTERM)
-        assert served.process.wait(30) == 0
-        assert time.monotonic() - clock < 15  # the graceful wait is 10 s, then paintings stop at their next tile
+        with ThreadPoolExecutor(1) as caller:
+            render = caller.submit(lambda: httpx.post(f"{served.url}/api/render", json=LONG, headers=auth, timeout=60))
+            until(lambda: health(served, **auth)["painting"] >= 1, what="the render")
+            clock = time.monotonic()
+            served.process.send_signal(signal.SIGTERM)
+            assert served.process.wait(30) == 0
+            # the render had the paintings' grace (8 s) to finish, then was told why it could not
+            assert Server.PAINTING_GRACE_S <= time.monotonic() - clock < Server.GRACE_S
+            response = render.result(30)
         with pytest.raises(ConnectionClosed) as closed:
             while True:
                 walk.ws.recv(10)
         assert closed.value.rcvd is None or closed.value.rcvd.code in (1001, 1012)
-        render.join(30)
+    assert response.status_code == 503 and response.json()["detail"] == "the server is stopping"
+    assert response.headers["retry-after"]
     output = served.log.read_text()
+    assert "stopping the paintings in progress" in output
     assert "token=***" in output and "hush-hush" not in output
+    assert "Traceback" not in output and "cancelled" not in output.lower(), output
+
+
+def test_a_second_ctrl_c_stops_the_paintings_at_once_and_still_answers(tmp_path):
+    auth = {"authorization": "Bearer sesame"}
+    with rcp_serve(tmp_path, token="sesame") as served, ThreadPoolExecutor(1) as caller:
+        render = caller.submit(lambda: post(served, LONG, headers=auth))
+        until(lambda: health(served, **auth)["painting"] >= 1, what="the render")
+        served.process.send_signal(signal.SIGINT)
+        time.sleep(0.5)
+        clock = time.monotonic()
+        served.process.send_signal(signal.SIGINT)
+        assert served.process.wait(30) == 0
+        assert time.monotonic() - clock < 5
+        response = render.result(30)
+    assert response.status_code == 503 and response.json()["detail"] == "the server is stopping"
+    assert "Traceback" not in served.log.read_text()

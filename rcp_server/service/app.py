@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import socket
 from contextlib import asynccontextmanager
@@ -170,20 +171,54 @@ class _WebSockets(WebSocketsSansIOProtocol):
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.SEND_BUFFER)
 
 
-def server_config(settings: Settings, **options) -> uvicorn.Config:
-    """uvicorn for the app, with the transport's own limits: WebSocket messages (past this, the connection
+class Server(uvicorn.Server):
+    """uvicorn serving the app, with the transport's own limits: WebSocket messages (past this, the connection
     closes with 1009; the session's own, smaller limit answers with an error first), connections at once
-    (past this, 503), and how long a stop waits for requests in flight."""
-    config = uvicorn.Config(
-        create_app(settings),
-        host=settings.host,
-        port=settings.port,
-        ws=_WebSockets,
-        ws_max_size=64 * settings.max_message_bytes,
-        limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
-        timeout_graceful_shutdown=10,
-        **options,
-    )
-    for name in ("uvicorn.error", "uvicorn.access"):
-        logging.getLogger(name).addFilter(HideTokens())
-    return config
+    (past this, 503), and a stop that loses no answer.
+
+    On SIGINT or SIGTERM, requests and walk-throughs in flight get ``PAINTING_GRACE_S`` to finish; then their
+    paintings are stopped, so each caller is told "the server is stopping" (503) before uvicorn's own grace
+    runs out and cancels whatever is left (a 500 and a traceback). A second signal stops the paintings at
+    once; a third Ctrl-C is uvicorn's forced exit."""
+
+    PAINTING_GRACE_S = 8
+    GRACE_S = PAINTING_GRACE_S + 4  # uvicorn's: time for the stopped paintings to answer
+
+    def __init__(self, settings: Settings, **options):
+        config = uvicorn.Config(
+            create_app(settings),
+            host=settings.host,
+            port=settings.port,
+            ws=_WebSockets,
+            ws_max_size=64 * settings.max_message_bytes,
+            limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
+            timeout_graceful_shutdown=self.GRACE_S,
+            **options,
+        )
+        for name in ("uvicorn.error", "uvicorn.access"):
+            logging.getLogger(name).addFilter(HideTokens())
+        super().__init__(config)
+
+    def handle_exit(self, sig, frame) -> None:
+        renderer = self._renderer()
+        if self.should_exit and renderer is not None and not renderer.stopping:
+            self._stop_paintings()
+        else:
+            super().handle_exit(sig, frame)
+
+    async def shutdown(self, sockets=None) -> None:
+        grace = asyncio.get_running_loop().call_later(self.PAINTING_GRACE_S, self._stop_paintings)
+        try:
+            await super().shutdown(sockets)
+        finally:
+            grace.cancel()
+
+    def _stop_paintings(self) -> None:
+        renderer = self._renderer()
+        if renderer is not None and not renderer.stopping:
+            log.info("stopping the paintings in progress (%d)", renderer.painting)
+            renderer.stop()
+
+    def _renderer(self) -> Renderer | None:
+        service = getattr(self.config.app.state, "service", None)  # none before the app has started
+        return None if service is None else service.renderer

@@ -6,9 +6,7 @@ import socket
 import threading
 import time
 
-import uvicorn
-
-from .app import server_config
+from .app import Server
 from .settings import Settings
 
 
@@ -23,9 +21,8 @@ class BackgroundServer:
 
     def __init__(self, **settings):
         self.settings = Settings(host="127.0.0.1", port=free_port(), **settings)
-        config = server_config(self.settings, log_level="warning")
-        self.app = config.app
-        self.server = uvicorn.Server(config)
+        self.server = Server(self.settings, log_level="warning")
+        self.app = self.server.config.app
         self.url = f"http://127.0.0.1:{self.settings.port}"
         self.ws_url = f"ws://127.0.0.1:{self.settings.port}/ws"
         self._thread = threading.Thread(target=self.server.run, name="rcp-server", daemon=True)

@@ -101,14 +101,14 @@ class Renderer:
         self.painting = 0  # paintings in progress, of any kind
         self._count = threading.Lock()  # paintings start and end on many threads
         self._seconds = 1.0  # recent REST render time, for Retry-After
-        self._closing = False
+        self.stopping = False  # see stop()
 
     def paint(self, scene: Scene, camera, width: int, height: int, params: PaintParams, should_stop=None, **options):
         """Blocking: paint on the shared tile pool (call it inside :meth:`run`). Every painting stops at its
-        next tile once the renderer closes."""
+        next tile once the renderer stops."""
 
         def stop() -> bool:
-            return self._closing or (should_stop is not None and should_stop())
+            return self.stopping or (should_stop is not None and should_stop())
 
         with self._count:
             self.painting += 1
@@ -136,7 +136,12 @@ class Renderer:
             self.admitted -= 1
             self._seconds = 0.7 * self._seconds + 0.3 * (time.monotonic() - clock)
 
+    def stop(self) -> None:
+        """Stop every painting at its next tile (each raises :class:`~rcp_server.painting.Abandoned`), and any
+        that starts from now on at once: the server is stopping."""
+        self.stopping = True
+
     def close(self) -> None:
-        self._closing = True
+        self.stop()
         self._paintings.shutdown(wait=True, cancel_futures=True)
         self.tiles.shutdown(wait=True)

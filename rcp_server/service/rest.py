@@ -97,10 +97,10 @@ async def render(body: protocol.RenderRequest, request: Request) -> Response:
     except Abandoned:
         if gone.is_set():
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
-        if time.monotonic() > deadline:
-            message = f"the render ran past the server's {settings.render_timeout_s:g} s limit; ask for less, or later"
-        else:
+        if renderer.stopping:
             message = "the server is stopping"
+        else:
+            message = f"the render ran past the server's {settings.render_timeout_s:g} s limit; ask for less, or later"
         raise HTTPException(503, message, headers={"Retry-After": "10"}) from None
 
 

@@ -193,6 +193,8 @@ class Session:
             try:
                 result, seconds = await self.renderer.run(lambda job=job: self._render(job))
             except Abandoned:
+                if self.renderer.stopping:
+                    return  # the server is stopping: nothing will paint again
                 continue
             except Exception as exc:  # this view cannot be painted: say why, and wait for the next change
                 self.painted_version, self.refinements = job.version, len(self._refine_spp())
