@@ -202,7 +202,7 @@ class Server(uvicorn.Server):
     def handle_exit(self, sig, frame) -> None:
         renderer = self._renderer()
         if self.should_exit and renderer is not None and not renderer.stopping:
-            self._stop_paintings()
+            self._stop_paintings()  # asked twice: no more waiting, but every caller still gets its answer
         else:
             super().handle_exit(sig, frame)
 
