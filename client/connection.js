@@ -4,6 +4,7 @@
 // The owner restores the walk-through (scene, camera, settings) in `onOpen`, as after any fresh start.
 
 const BACKOFF_MS = [250, 8000]; // first retry, longest wait
+const CLOSED_BECAUSE = { 1001: "server going away", 1006: "connection lost", 1012: "server restarting", 1013: "server busy" };
 
 export class Connection {
   /**
@@ -90,7 +91,7 @@ export class Connection {
   retry(event) {
     const wait = this.backoff * (0.8 + 0.4 * Math.random()); // jitter: many clients do not return at once
     this.backoff = Math.min(this.backoff * 2, BACKOFF_MS[1]);
-    const why = event.code === 1013 ? "server busy" : event.code === 1006 ? "connection lost" : `closed (${event.code})`;
+    const why = CLOSED_BECAUSE[event.code] ?? `closed (${event.code})`;
     this.setState("waiting", { why, seconds: wait / 1000 });
     this.timer = setTimeout(() => this.connect(), wait);
   }
