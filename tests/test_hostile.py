@@ -363,8 +363,8 @@ def test_a_stop_signal_ends_walks_and_renders_and_exits_cleanly_without_logging_
         walk.send(type="hello", scene="default", width=640, height=360)
         walk.next()
         with ThreadPoolExecutor(1) as caller:
-            render = caller.submit(lambda: httpx.post(f"{served.url}/api/render", json=LONG, headers=auth, timeout=60))
-            until(lambda: health(served, **auth)["painting"] >= 1, what="the render")
+            render = caller.submit(lambda: post(served, LONG, headers=auth))
+            until(lambda: health(served, **auth)["renders"] == 1, what="the render")  # the walk paints too
             clock = time.monotonic()
             served.process.send_signal(signal.SIGTERM)
             assert served.process.wait(30) == 0
@@ -387,7 +387,7 @@ def test_a_second_ctrl_c_stops_the_paintings_at_once_and_still_answers(tmp_path)
     auth = {"authorization": "Bearer sesame"}
     with rcp_serve(tmp_path, token="sesame") as served, ThreadPoolExecutor(1) as caller:
         render = caller.submit(lambda: post(served, LONG, headers=auth))
-        until(lambda: health(served, **auth)["painting"] >= 1, what="the render")
+        until(lambda: health(served, **auth)["renders"] == 1, what="the render")
         served.process.send_signal(signal.SIGINT)
         time.sleep(0.5)
         clock = time.monotonic()

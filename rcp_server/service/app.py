@@ -200,11 +200,9 @@ class Server(uvicorn.Server):
         super().__init__(config)
 
     def handle_exit(self, sig, frame) -> None:
-        renderer = self._renderer()
-        if self.should_exit and renderer is not None and not renderer.stopping:
-            self._stop_paintings()  # asked twice: no more waiting, but every caller still gets its answer
-        else:
-            super().handle_exit(sig, frame)
+        if self.should_exit and self._stop_paintings():
+            return  # asked twice: no more waiting, but every caller still gets its answer
+        super().handle_exit(sig, frame)
 
     async def shutdown(self, sockets=None) -> None:
         grace = asyncio.get_running_loop().call_later(self.PAINTING_GRACE_S, self._stop_paintings)
@@ -213,12 +211,11 @@ class Server(uvicorn.Server):
         finally:
             grace.cancel()
 
-    def _stop_paintings(self) -> None:
-        renderer = self._renderer()
-        if renderer is not None and not renderer.stopping:
-            log.info("stopping the paintings in progress (%d)", renderer.painting)
-            renderer.stop()
-
-    def _renderer(self) -> Renderer | None:
-        service = getattr(self.config.app.state, "service", None)  # none before the app has started
-        return None if service is None else service.renderer
+    def _stop_paintings(self) -> bool:
+        """Stop the paintings, unless they are stopped already or the app has not started: True if it did."""
+        service = getattr(self.config.app.state, "service", None)
+        if service is None or service.renderer.stopping:
+            return False
+        log.info("stopping the paintings in progress (%d)", service.renderer.painting)
+        service.renderer.stop()
+        return True
