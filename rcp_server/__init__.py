@@ -11,7 +11,8 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 from .camera import Camera, Region
 from .mappings import MappingInput, register_mapping
-from .painting import PaintParams, PaintResult, PaintState, paint
+from .painting import PaintResult, PaintState, paint
+from .params import PaintParams
 from .scenefile import SceneError, load_scene
 
 __all__ = [

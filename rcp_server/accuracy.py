@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from .metrics import edge_band, psnr, ssim, upscale
-from .painting import METHODS, PaintParams, default_threads, paint
+from .painting import default_threads, paint
+from .params import METHODS, PaintParams
 from .scenefile import load_scene
 
 SCENES = ("default", "sea", "sky")

@@ -12,7 +12,8 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 from .camera import Region
-from .painting import STAGES, PaintParams, _cast, _frame, _Rays, default_threads, paint, tile_rows
+from .painting import STAGES, _cast, _frame, _Rays, default_threads, paint, tile_rows
+from .params import PaintParams
 from .scenefile import load_scene
 
 

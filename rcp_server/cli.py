@@ -15,7 +15,8 @@ import numpy as np
 from . import images
 from .camera import Camera, CameraError
 from .mappings import MAPPINGS
-from .painting import EDGES, METHODS, PaintParams, PaintState, paint
+from .painting import PaintState, paint
+from .params import EDGES, METHODS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 
 log = logging.getLogger("rcp")

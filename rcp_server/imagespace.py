@@ -27,8 +27,7 @@ import numba
 import numpy as np
 
 from .camera import Camera, Region
-
-EDGES = ("clamp", "wrap", "mirror")
+from .params import EDGES
 
 
 def lookup_coords(v_p: np.ndarray, camera: Camera, region: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

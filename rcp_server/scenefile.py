@@ -286,7 +286,7 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
         objects = []
         for index, obj in enumerate(spec.objects):
             objects.extend(_scene_object(obj, folder, f"objects.{index}" + (f" ({obj.name})" if obj.name else "")))
-        from .painting import PaintParams
+        from .params import PaintParams
 
         PaintParams.from_dict(spec.paint)  # refuse bad painting defaults now, not at the first render
     except (SceneError, MeshError, CameraError, ValueError) as exc:

@@ -24,11 +24,12 @@ import numpy as np
 from scipy.ndimage import binary_dilation
 
 from .camera import Camera, CameraError, Region
-from .imagespace import EDGES, bilinear, lookup_coords
+from .imagespace import bilinear, lookup_coords
 from .mappings import register_mapping
 from .meshes import Part, primitive
 from .metrics import edge_band, psnr
-from .painting import PaintParams, _cast, _frame, _Rays, displacements, paint
+from .painting import _cast, _frame, _Rays, displacements, paint
+from .params import EDGES, PaintParams
 from .scene import Environment, Scene, SceneObject
 from .scenefile import load_scene
 

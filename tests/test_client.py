@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rcp_server.painting import PaintParams
+from rcp_server.params import PaintParams
 from rcp_server.service import protocol
 from rcp_server.service.background import BackgroundServer
 

@@ -6,7 +6,8 @@ from conftest import CAMERA
 
 from rcp_server import imagespace
 from rcp_server.camera import Camera, Region
-from rcp_server.imagespace import EDGES, bilinear, edge_index, lookup_coords
+from rcp_server.imagespace import bilinear, edge_index, lookup_coords
+from rcp_server.params import EDGES
 
 
 def test_edge_index_maps_off_screen_indices_as_documented():

@@ -11,7 +11,8 @@ import pytest
 
 from rcp_server import kernels
 from rcp_server.camera import Camera, Region, plane_points
-from rcp_server.painting import PaintParams, PaintState, _frame, displacements
+from rcp_server.painting import PaintState, _frame, displacements
+from rcp_server.params import PaintParams
 
 KINDS = {
     "zero": kernels.FIELD_ZERO,

@@ -11,7 +11,8 @@ from conftest import CAMERA, facing_plane, gradient, make_scene, sphere, transla
 from rcp_server.camera import Camera, Region
 from rcp_server.mappings import MAPPINGS, register_mapping
 from rcp_server.meshes import Part
-from rcp_server.painting import Abandoned, PaintParams, PaintState, _frame, displacements, paint
+from rcp_server.painting import Abandoned, PaintState, _frame, displacements, paint
+from rcp_server.params import PaintParams
 from rcp_server.scene import Environment, Light, SceneObject
 
 W, H = 48, 32

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from rcp_server.cli import main
-from rcp_server.painting import PaintParams, paint
+from rcp_server.painting import paint
+from rcp_server.params import PaintParams
 from rcp_server.radiance import RadianceError, read_radiance, tonemap
 from rcp_server.scenefile import load_scene_file
 

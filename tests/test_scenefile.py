@@ -9,7 +9,8 @@ import trimesh
 from PIL import Image
 
 from rcp_server.camera import Camera
-from rcp_server.painting import PaintParams, paint
+from rcp_server.painting import paint
+from rcp_server.params import PaintParams
 from rcp_server.scenefile import SCENE_NAME, SceneError, load_scene, load_scene_file, scene_names
 
 VALID = """\

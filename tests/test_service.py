@@ -15,7 +15,8 @@ from conftest import decode
 
 from rcp_server import images
 from rcp_server.camera import Camera
-from rcp_server.painting import PaintParams, paint
+from rcp_server.painting import paint
+from rcp_server.params import PaintParams
 from rcp_server.service import protocol
 from rcp_server.service.background import BackgroundServer
 from rcp_server.service.renderer import FairPool

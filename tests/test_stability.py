@@ -8,8 +8,9 @@ import pytest
 from conftest import CAMERA, make_scene
 
 from rcp_server.camera import Camera, CameraError, Region
-from rcp_server.imagespace import EDGES, bilinear, lookup_coords
-from rcp_server.painting import PaintParams, _frame, displacements, paint
+from rcp_server.imagespace import bilinear, lookup_coords
+from rcp_server.painting import _frame, displacements, paint
+from rcp_server.params import EDGES, PaintParams
 from rcp_server.stability import (
     eye_section,
     flicker,

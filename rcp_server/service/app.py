@@ -17,7 +17,8 @@ from fastapi.staticfiles import StaticFiles
 from starlette.routing import Match, Mount
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
 
-from ..painting import PaintParams, paint
+from ..painting import paint
+from ..params import PaintParams
 from ..scene import Scene
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol, rest

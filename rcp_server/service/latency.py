@@ -21,7 +21,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import websockets
 
-from ..painting import PaintParams, paint
+from ..painting import paint
+from ..params import PaintParams
 from .background import BackgroundServer
 
 SIZES = ((320, 180), (640, 360))

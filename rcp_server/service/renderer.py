@@ -20,7 +20,8 @@ from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from functools import partial
 from typing import TypeVar
 
-from ..painting import PaintParams, paint
+from ..painting import paint
+from ..params import PaintParams
 from ..scene import Scene
 
 T = TypeVar("T")

@@ -10,7 +10,8 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from .. import images
 from ..camera import Camera, CameraError
-from ..painting import Abandoned, PaintParams
+from ..painting import Abandoned
+from ..params import PaintParams
 from . import protocol
 from .access import admits, require_token
 from .renderer import Busy

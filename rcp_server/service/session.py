@@ -22,7 +22,8 @@ from pydantic import ValidationError
 
 from .. import images
 from ..camera import Camera, CameraError
-from ..painting import Abandoned, PaintParams, PaintResult, PaintState
+from ..painting import Abandoned, PaintResult, PaintState
+from ..params import PaintParams
 from ..scene import Scene
 from ..scenefile import one_line
 from . import protocol

@@ -11,7 +11,8 @@ from typing import Annotated
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from ..painting import PaintParams, default_threads
+from ..painting import default_threads
+from ..params import PaintParams
 from ..scenefile import SCENES_DIR
 
 CLIENT_DIR = Path(__file__).resolve().parent.parent.parent / "client"
