@@ -21,13 +21,14 @@ log = logging.getLogger("rcp")
 
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
 # two faces around a vertex shade as one surface when their normals lie within this angle, and as a crease
-# otherwise. 48 degrees: above the 45 between an octagonal trunk's sides and the 42 of the coarsest
-# shipped sphere (icosphere 1), so both stay round; below the 52 of a four-sided pyramid roof and the 90
-# of a box, so those stay flat
+# otherwise. 48 degrees: above the 45 between the sides of an octagonal trunk and the at most 42 between
+# two faces around a vertex of the coarsest shipped sphere (icosphere 1), so both stay round; below the 52
+# between the sides of a four-sided pyramid roof and the 90 of a box, so those stay flat
 CREASE_DEGREES = 48.0
 CREASE_COS = math.cos(math.radians(CREASE_DEGREES))
-# a vertex whose faces all lie within half the crease angle of its mean normal has no crease pair (the
-# angles add up along the sphere), so its corners take that mean without the pairwise test
+# a vertex whose faces all lie within half the crease angle of their mean has no crease pair (the angle
+# between two faces is at most the sum of their angles to the mean), so its corners take that mean
+# without the pairwise test: all of the sea, every frame
 _HALF_CREASE_COS = math.cos(math.radians(CREASE_DEGREES / 2))
 
 
