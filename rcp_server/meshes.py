@@ -20,9 +20,16 @@ import trimesh
 log = logging.getLogger("rcp")
 
 DEFAULT_ALBEDO = (0.8, 0.8, 0.8)
-# corners whose averaged normal bends further than this from the face keep the face normal: boxes stay
-# crisp while spheres and scanned meshes shade smooth
-CREASE_COS = math.cos(math.radians(35.0))
+# two faces around a vertex shade as one surface when their normals lie within this angle, and as a crease
+# otherwise. 48 degrees: above the 45 between the sides of an octagonal trunk and the at most 42 between
+# two faces around a vertex of the coarsest shipped sphere (icosphere 1), so both stay round; below the 52
+# between the sides of a four-sided pyramid roof and the 90 of a box, so those stay flat
+CREASE_DEGREES = 48.0
+CREASE_COS = math.cos(math.radians(CREASE_DEGREES))
+# a vertex whose faces all lie within half the crease angle of their mean has no crease pair (the angle
+# between two faces is at most the sum of their angles to the mean), so its corners take that mean
+# without the pairwise test: all of the sea, every frame
+_HALF_CREASE_COS = math.cos(math.radians(CREASE_DEGREES / 2))
 
 
 class MeshError(ValueError):
@@ -55,23 +62,66 @@ def _grey(face_count: int) -> np.ndarray:
     return np.broadcast_to(np.float32(DEFAULT_ALBEDO), (face_count, 3, 3)).copy()
 
 
-def corner_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Shading normals at each face corner: (F, 3, 3) float64 unit vectors, smooth below the crease angle.
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise dot product of (..., 3) arrays: (...)."""
+    return np.einsum("...k,...k->...", a, b)
 
-    Vertex normals are area-weighted means of the faces around a vertex (a bincount per axis, which is
-    what lets a wave-deformed sea be re-shaded every frame).
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """Rows scaled to unit length: (..., 3); a zero row stays zero."""
+    length = np.sqrt(_dot(v, v))[..., None]
+    return v / np.where(length > 0, length, 1.0)
+
+
+def corner_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Shading normals at each face corner: (F, 3, 3) float64 unit vectors, creased per pair of faces.
+
+    vertices : (V, 3) float64;  faces : (F, 3) int64
+    A corner's normal is the mean of the normals of the faces around its vertex that lie within the
+    crease angle of its own face, each weighted by its angle at that vertex. Where no pair of faces
+    around a vertex creases this is trimesh's ``vertex_normals``; each face of a box keeps its own normal.
+    Vectorised (bincounts, and the pairwise test only at vertices that need it), which is what lets a
+    wave-deformed sea be re-shaded every frame.
     """
-    tri = vertices[faces]
-    cross = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # length = twice the area
-    face_n = cross / np.maximum(np.linalg.norm(cross, axis=1, keepdims=True), 1e-30)
+    p0, p1, p2 = (vertices[corner] for corner in faces.T)  # three contiguous gathers: twice as fast as (F, 3, 3)
+    edge_01, edge_02 = p1 - p0, p2 - p0
+    face_n = _unit(np.cross(edge_01, edge_02))  # (F, 3); zero on a degenerate face, which then weighs nothing
+    # corner angles as trimesh weighs them (Thuerrner and Wuethrich 1998): two arccos, the third is the rest
+    edge_12 = p2 - p1
+    length_01, length_02, length_12 = (np.sqrt(_dot(e, e)) for e in (edge_01, edge_02, edge_12))
+    with np.errstate(invalid="ignore", divide="ignore"):  # an edge of length 0: NaN angles, set to 0 below
+        cos_0 = _dot(edge_01, edge_02) / (length_01 * length_02)
+        cos_1 = -_dot(edge_01, edge_12) / (length_01 * length_12)
+    angle = np.empty(faces.shape)
+    angle[:, 0] = np.arccos(np.clip(cos_0, -1.0, 1.0))
+    angle[:, 1] = np.arccos(np.clip(cos_1, -1.0, 1.0))
+    angle[:, 2] = np.pi - angle[:, 0] - angle[:, 1]
+    np.nan_to_num(angle, copy=False, nan=0.0)
+
+    # ---- all faces around a vertex: kept at every vertex where no pair of its faces creases ----
     index = faces.ravel()
-    vertex_n = np.stack(
-        [np.bincount(index, np.repeat(cross[:, k], 3), minlength=len(vertices)) for k in range(3)], axis=1
+    vertex_n = _unit(
+        np.stack([np.bincount(index, (angle * face_n[:, k, None]).ravel(), len(vertices)) for k in range(3)], 1)
     )
-    vertex_n /= np.maximum(np.linalg.norm(vertex_n, axis=1, keepdims=True), 1e-30)
     corner_n = vertex_n[faces]
-    crease = np.einsum("fck,fk->fc", corner_n, face_n) < CREASE_COS
-    corner_n[crease] = np.broadcast_to(face_n[:, None, :], corner_n.shape)[crease]
+    far = np.einsum("fck,fk->fc", corner_n, face_n) < _HALF_CREASE_COS
+    creased = (np.bincount(index[far.ravel()], minlength=len(vertices)) > 0)[index]
+
+    # ---- at the others, each corner against every corner of its vertex ----
+    if creased.any():
+        corners = np.flatnonzero(creased)  # flat corner index: 3 * face + k
+        by_vertex = np.argsort(index, kind="stable")
+        valence = np.bincount(index, minlength=len(vertices))
+        first = np.cumsum(valence) - valence  # where each vertex's corners start in by_vertex
+        size = valence[index[corners]]
+        pair = np.repeat(np.arange(len(corners)), size)  # the corner of ``corners`` each pair belongs to
+        rank = np.arange(len(pair)) - np.repeat(np.cumsum(size) - size, size)
+        other = by_vertex[np.repeat(first[index[corners]], size) + rank]  # flat corner index
+        own_n, other_n = face_n[corners // 3], face_n[other // 3]
+        smooth_weight = angle.ravel()[other] * (_dot(own_n[pair], other_n) >= CREASE_COS)
+        summed = np.stack([np.bincount(pair, smooth_weight * other_n[:, k], len(corners)) for k in range(3)], 1)
+        # a degenerate face finds no face within the crease, itself included: it keeps its zero normal
+        corner_n.reshape(-1, 3)[corners] = _unit(summed)
     return corner_n
 
 
