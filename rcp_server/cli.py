@@ -15,7 +15,7 @@ import numpy as np
 from . import images
 from .camera import Camera, CameraError
 from .painting import PaintState, paint
-from .params import SETTINGS, PaintParams
+from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 
 log = logging.getLogger("rcp")
@@ -48,7 +48,7 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
     """One option per painting setting (``--lambda-p`` for ``lambda_p``), from its declaration; the bounds
     are checked once, by :class:`PaintParams`."""
     g = p.add_argument_group("painting (defaults: the scene's [paint] table, then the engine's)")
-    for name, declared in SETTINGS.items():
+    for name, declared in PAINT_SETTINGS.items():
         open_names = declared.lookup is not None  # more can be registered: the engine says which it knows
         help = declared.help + (f": {', '.join(declared.choices)}" if open_names else "")
         help += "" if declared.default is None else f" (default {declared.default})"
@@ -154,7 +154,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def paint_params(scene_defaults: PaintParams, args: argparse.Namespace) -> PaintParams:
     """The scene's painting settings, with whatever the command line gives in their place."""
-    given = {name: value for name in SETTINGS if (value := getattr(args, name, None)) is not None}
+    given = {name: value for name in PAINT_SETTINGS if (value := getattr(args, name, None)) is not None}
     return replace(scene_defaults, **given)
 
 

@@ -1,7 +1,7 @@
 """How to paint: the painting settings, declared once and validated at construction.
 
 Each field of :class:`PaintParams` declares its default, a line of help and its bounds (:func:`setting`).
-Everything else that names a painting setting is derived from :data:`SETTINGS`: the wire model
+Everything else that names a painting setting is derived from :data:`PAINT_SETTINGS`: the wire model
 (``service/protocol.py``), the options of ``rcp render`` (``cli.py``) and the client's defaults (the
 generated ``client/protocol.js``). A new setting is one new field; ``tests/test_params.py`` fails until
 it reaches every caller.
@@ -29,7 +29,7 @@ EDGES = ("clamp", "wrap", "mirror")
 
 def setting(default, help: str, **bounds) -> Any:
     """A field of :class:`PaintParams`: the engine's default, one line of help (for ``rcp render --help``,
-    the wire schema and the client) and the bounds, keyword arguments of :class:`Setting`."""
+    the wire schema and the client) and the bounds, keyword arguments of :class:`PaintSetting`."""
     return field(default=default, metadata={"help": help, **bounds})
 
 
@@ -67,7 +67,7 @@ class PaintParams:
     edge: str = setting("mirror", "how the image method reads off screen", choices=EDGES)
 
     def __post_init__(self):
-        for declared in SETTINGS.values():
+        for declared in PAINT_SETTINGS.values():
             declared.check(getattr(self, declared.name))
         if self.method == "image" and self.lambda_e != 0.0:
             raise ValueError(
@@ -78,14 +78,14 @@ class PaintParams:
     @classmethod
     def from_dict(cls, values: dict) -> PaintParams:
         """Settings by name (a scene file's ``[paint]`` table); an unknown name is refused with the known ones."""
-        unknown = set(values) - set(SETTINGS)
+        unknown = set(values) - set(PAINT_SETTINGS)
         if unknown:
-            raise ValueError(f"unknown paint settings {sorted(unknown)}; known: {sorted(SETTINGS)}")
+            raise ValueError(f"unknown paint settings {sorted(unknown)}; known: {sorted(PAINT_SETTINGS)}")
         return cls(**values)
 
     def non_defaults(self) -> dict:
         """The settings that differ from the engine's defaults, name -> value (what a scene changes)."""
-        return {name: value for name, s in SETTINGS.items() if (value := getattr(self, name)) != s.default}
+        return {name: value for name, s in PAINT_SETTINGS.items() if (value := getattr(self, name)) != s.default}
 
     def focus(self, camera: Camera) -> float:
         """``z0``: the focus depth given, or the view depth of the camera's look-at point."""
@@ -100,7 +100,7 @@ class PaintParams:
 
 
 @dataclass(frozen=True)
-class Setting:
+class PaintSetting:
     """One painting setting as declared: ``kind`` is int, float or str; ``optional``: None is a value (it
     means "derive it", as the help says). Numbers are finite and within ``ge``/``gt``/``le``; a name is
     one of ``choices``, or, with ``lookup``, whatever the registry knows (mappings are registered at run
@@ -147,15 +147,15 @@ class Setting:
             raise ValueError(f"{self.name} must be at most {self.le}, got {value}")
 
 
-def _declared() -> dict[str, Setting]:
+def _declared() -> dict[str, PaintSetting]:
     hints = get_type_hints(PaintParams)
     declared = {}
     for f in fields(PaintParams):
         kinds = get_args(hints[f.name]) or (hints[f.name],)
         kind = next(k for k in kinds if k is not type(None))
-        declared[f.name] = Setting(f.name, kind, type(None) in kinds, f.default, **f.metadata)
+        declared[f.name] = PaintSetting(f.name, kind, type(None) in kinds, f.default, **f.metadata)
     return declared
 
 
-SETTINGS: dict[str, Setting] = _declared()
+PAINT_SETTINGS: dict[str, PaintSetting] = _declared()
 """Every painting setting, in the order of :class:`PaintParams`' fields: name -> its declaration."""

@@ -22,7 +22,7 @@ from PIL import Image
 from rcp_server import images
 from rcp_server.cli import main
 from rcp_server.painting import paint
-from rcp_server.params import SETTINGS, PaintParams
+from rcp_server.params import PAINT_SETTINGS, PaintParams
 from rcp_server.service import protocol
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -116,7 +116,7 @@ def test_a_setting_reaches_the_command_line(tmp_path, scene, name):
 
 @pytest.mark.parametrize("name", FIELDS)
 def test_a_setting_reaches_the_client(name):
-    declared = SETTINGS[name]
+    declared = PAINT_SETTINGS[name]
     _, given = _settings(name)
     # the client's defaults, for a setting a scene leaves out, are the engine's
     assert _exported("ENGINE_DEFAULTS")[name] == getattr(PaintParams(), name) == declared.default

@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
-from ..params import SETTINGS, PaintParams, Setting
+from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
 from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
 
@@ -34,7 +34,7 @@ class _Paint(_Model):
         return self.model_dump(exclude_none=True)
 
 
-def _wire(declared: Setting):
+def _wire(declared: PaintSetting):
     """A painting setting on the wire, from its declaration: optional, ``null`` meaning the scene's value."""
     if declared.kind is str:
         kind = Literal[declared.choices]  # mappings: the built-in ones (others are registered in Python only)
@@ -48,7 +48,7 @@ PaintModel = create_model(
     "PaintModel",
     __base__=_Paint,
     __doc__="Painting settings; a field left out takes the scene's value, then the engine's.",
-    **{name: _wire(declared) for name, declared in SETTINGS.items()},
+    **{name: _wire(declared) for name, declared in PAINT_SETTINGS.items()},
 )
 
 
