@@ -5,13 +5,13 @@
 //
 // `window.rcp` exposes the state, the messages sent and the overlay's numbers, for the tests.
 
-import { PROTOCOL } from "./protocol.js";
+import { ENGINE_DEFAULTS, PROTOCOL } from "./protocol.js";
 import { MESSAGES } from "./messages.js";
 import * as walkCamera from "./camera.js";
 import { Connection } from "./connection.js";
 import { FrameView } from "./frames.js";
 import { Overlay } from "./overlay.js";
-import { ENGINE_DEFAULTS, paintPanel } from "./panel.js";
+import { paintPanel } from "./panel.js";
 import { WalkController } from "./walk.js";
 
 const $ = (id) => document.getElementById(id);

@@ -5,20 +5,6 @@
 import { PROTOCOL } from "./protocol.js";
 import { checkValue, valueSchema } from "./messages.js";
 
-/** The engine's defaults (rcp_server/painting.py PaintParams) for fields a scene leaves out; a test compares. */
-export const ENGINE_DEFAULTS = {
-  mapping: "color",
-  eye_mapping: "color",
-  iterations: 6,
-  spp: 1,
-  lambda_p: 8.0,
-  lambda_e: 0.0,
-  noise: 0.0,
-  seed: 0,
-  method: "raytrace",
-  edge: "mirror",
-};
-
 // label, unit, the slider's range (the number box takes the server's whole range), step, log slider
 const PAINT_UI = {
   mapping: { label: "Mapping", hint: "what moves each pixel's camera target" },
@@ -161,7 +147,8 @@ export function paintPanel(container, onChange) {
     });
     const label = element("label", { for: `paint-${name}`, text: ui.label ?? title(name) });
     if (ui.unit) label.append(element("span", { class: "unit", text: ` ${ui.unit}` }));
-    if (ui.hint) label.title = ui.hint;
+    const hint = ui.hint ?? properties[name].description; // the server's help text, unless we say it better
+    if (hint) label.title = hint;
     const row = element("div", { class: "row", "data-field": name }, label, control.input, reset);
     if (control.slider) row.append(control.slider);
     (ui.more ? more : container).append(row);

@@ -201,6 +201,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "how the image method reads off screen",
      "title": "Edge"
     },
     "eye_mapping": {
@@ -218,6 +219,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "eye displacement mapping",
      "title": "Eye Mapping"
     },
     "iterations": {
@@ -232,6 +234,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "recursion depth N",
      "title": "Iterations"
     },
     "lambda_e": {
@@ -246,13 +249,14 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "largest eye displacement, in scene units",
      "title": "Lambda E"
     },
     "lambda_p": {
      "anyOf": [
       {
-       "maximum": 256,
-       "minimum": -256,
+       "maximum": 1000000.0,
+       "minimum": -1000000.0,
        "type": "number"
       },
       {
@@ -260,6 +264,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "largest target displacement, in pixels",
      "title": "Lambda P"
     },
     "mapping": {
@@ -277,6 +282,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "target displacement mapping",
      "title": "Mapping"
     },
     "method": {
@@ -293,6 +299,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "raytrace (right everywhere) or image (look up the plain render: fast, needs lambda_e 0)",
      "title": "Method"
     },
     "noise": {
@@ -307,6 +314,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "strength of a seeded random vector added per pixel",
      "title": "Noise"
     },
     "seed": {
@@ -321,6 +329,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "seed of the jitter and the noise",
      "title": "Seed"
     },
     "spp": {
@@ -335,6 +344,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "samples per pixel, stratified and seeded",
      "title": "Spp"
     },
     "type": {
@@ -354,6 +364,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "focus depth of the depth mapping (default: the distance to look-at)",
      "title": "Z0"
     },
     "z_max": {
@@ -368,6 +379,7 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
+     "description": "depth recorded for a miss (default: beyond the scene)",
      "title": "Z Max"
     }
    },
@@ -438,7 +450,7 @@ export const PROTOCOL = {
  },
  "paint": {
   "additionalProperties": false,
-  "description": "Painting settings; a field left out takes the scene's default, then the engine's.",
+  "description": "Painting settings; a field left out takes the scene's value, then the engine's.",
   "properties": {
    "edge": {
     "anyOf": [
@@ -455,6 +467,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "how the image method reads off screen",
     "title": "Edge"
    },
    "eye_mapping": {
@@ -472,6 +485,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "eye displacement mapping",
     "title": "Eye Mapping"
    },
    "iterations": {
@@ -486,6 +500,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "recursion depth N",
     "title": "Iterations"
    },
    "lambda_e": {
@@ -500,13 +515,14 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "largest eye displacement, in scene units",
     "title": "Lambda E"
    },
    "lambda_p": {
     "anyOf": [
      {
-      "maximum": 256,
-      "minimum": -256,
+      "maximum": 1000000.0,
+      "minimum": -1000000.0,
       "type": "number"
      },
      {
@@ -514,6 +530,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "largest target displacement, in pixels",
     "title": "Lambda P"
    },
    "mapping": {
@@ -531,6 +548,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "target displacement mapping",
     "title": "Mapping"
    },
    "method": {
@@ -547,6 +565,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "raytrace (right everywhere) or image (look up the plain render: fast, needs lambda_e 0)",
     "title": "Method"
    },
    "noise": {
@@ -561,6 +580,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "strength of a seeded random vector added per pixel",
     "title": "Noise"
    },
    "seed": {
@@ -575,6 +595,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "seed of the jitter and the noise",
     "title": "Seed"
    },
    "spp": {
@@ -589,6 +610,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "samples per pixel, stratified and seeded",
     "title": "Spp"
    },
    "z0": {
@@ -603,6 +625,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "focus depth of the depth mapping (default: the distance to look-at)",
     "title": "Z0"
    },
    "z_max": {
@@ -617,6 +640,7 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
+    "description": "depth recorded for a miss (default: beyond the scene)",
     "title": "Z Max"
    }
   },
@@ -893,4 +917,19 @@ export const PROTOCOL = {
    "type": "object"
   }
  }
+};
+// The engine's painting settings (rcp_server/params.py), for those a scene leaves out.
+export const ENGINE_DEFAULTS = {
+ "mapping": "color",
+ "eye_mapping": "color",
+ "iterations": 6,
+ "spp": 1,
+ "lambda_p": 8.0,
+ "lambda_e": 0.0,
+ "z0": null,
+ "noise": 0.0,
+ "seed": 0,
+ "z_max": null,
+ "method": "raytrace",
+ "edge": "mirror"
 };

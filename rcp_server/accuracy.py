@@ -22,7 +22,7 @@ import numpy as np
 
 from .metrics import edge_band, psnr, ssim, upscale
 from .painting import default_threads, paint
-from .params import METHODS, PaintParams
+from .params import METHODS
 from .scenefile import load_scene
 
 SCENES = ("default", "sea", "sky")
@@ -46,7 +46,7 @@ def measure(scene_name: str, sweep: Sweep, threads: int) -> tuple[list[dict], di
     """Every (method, spp, scale) point of one scene, and what its reference is."""
     scene = load_scene(scene_name)
     camera = scene.camera
-    base = replace(PaintParams.from_dict(scene.paint), lambda_e=0.0, method="raytrace", spp=1)
+    base = replace(scene.paint, lambda_e=0.0, method="raytrace", spp=1)
     w, h = sweep.width, sweep.height
     clock = time.perf_counter()
     reference = paint(scene, camera, w, h, replace(base, spp=sweep.reference_spp), threads=threads).image

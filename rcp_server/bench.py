@@ -35,7 +35,7 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     scene = load_scene(scene_name)
     threads = threads or default_threads()
     params = PaintParams(
-        mapping="color", iterations=iterations, spp=1, lambda_p=float(scene.paint.get("lambda_p", 8.0))
+        mapping="color", iterations=iterations, spp=1, lambda_p=float(scene.paint.lambda_p)
     )
     camera = scene.camera
     geometry, tracer = scene.geometry(0.0)

@@ -14,9 +14,8 @@ import numpy as np
 
 from . import images
 from .camera import Camera, CameraError
-from .mappings import MAPPINGS
 from .painting import PaintState, paint
-from .params import EDGES, METHODS, PaintParams
+from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 
 log = logging.getLogger("rcp")
@@ -46,23 +45,15 @@ def _finite(text: str) -> float:
 
 
 def _add_paint_options(p: argparse.ArgumentParser) -> None:
+    """One option per painting setting (``--lambda-p`` for ``lambda_p``), from its declaration; the bounds
+    are checked once, by :class:`PaintParams`."""
     g = p.add_argument_group("painting (defaults: the scene's [paint] table, then the engine's)")
-    g.add_argument("--iterations", type=_positive_int, help="recursion depth N (default 6)")
-    g.add_argument("--spp", type=_positive_int, help="samples per pixel, stratified and seeded (default 1)")
-    g.add_argument("--mapping", help=f"target displacement mapping: {', '.join(sorted(MAPPINGS))}")
-    g.add_argument("--eye-mapping", help="eye displacement mapping (default color)")
-    g.add_argument("--lambda-p", type=_finite, help="largest target displacement, in pixels")
-    g.add_argument("--lambda-e", type=_finite, help="largest eye displacement, in scene units (default 0)")
-    g.add_argument("--z0", type=_finite, help="focus depth of the depth mapping (default: distance to look-at)")
-    g.add_argument("--z-max", type=_finite, help="depth recorded for a miss (default: beyond the scene)")
-    g.add_argument("--noise", type=_finite, help="strength of a seeded random vector added per pixel")
-    g.add_argument("--seed", type=int, help="seed of the jitter and the noise")
-    g.add_argument(
-        "--method",
-        choices=METHODS,
-        help="raytrace (default: right everywhere) or image (look up the plain render: fast, needs lambda_e 0)",
-    )
-    g.add_argument("--edge", choices=EDGES, help="how the image method reads off screen (default mirror)")
+    for name, declared in PAINT_SETTINGS.items():
+        open_names = declared.lookup is not None  # more can be registered: the engine says which it knows
+        help = declared.help + (f": {', '.join(declared.choices)}" if open_names else "")
+        help += "" if declared.default is None else f" (default {declared.default})"
+        choices = None if open_names or not declared.choices else declared.choices
+        g.add_argument(f"--{name.replace('_', '-')}", type=declared.kind, choices=choices, help=help)
 
 
 def _add_camera_options(p: argparse.ArgumentParser) -> None:
@@ -161,14 +152,10 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def paint_params(scene_defaults: dict, args: argparse.Namespace) -> PaintParams:
-    """The scene's painting defaults, overridden by whatever the command line gives."""
-    values = dict(scene_defaults)
-    names = ("iterations", "spp", "mapping", "eye_mapping", "lambda_p", "lambda_e", "z0", "z_max", "noise", "seed")
-    for name in (*names, "method", "edge"):
-        if getattr(args, name, None) is not None:
-            values[name] = getattr(args, name)
-    return PaintParams.from_dict(values)
+def paint_params(scene_defaults: PaintParams, args: argparse.Namespace) -> PaintParams:
+    """The scene's painting settings, with whatever the command line gives in their place."""
+    given = {name: value for name in PAINT_SETTINGS if (value := getattr(args, name, None)) is not None}
+    return replace(scene_defaults, **given)
 
 
 def _camera(default: Camera, args: argparse.Namespace) -> Camera:

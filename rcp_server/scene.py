@@ -15,6 +15,7 @@ import numpy as np
 
 from .camera import Camera
 from .meshes import Part, corner_normals
+from .params import PaintParams
 from .tracer import Tracer
 
 
@@ -182,7 +183,7 @@ class Scene:
     environment: Environment
     light: Light | None = None
     objects: list[SceneObject] = field(default_factory=list)
-    paint: dict = field(default_factory=dict)  # default painting parameters of this scene
+    paint: PaintParams = field(default_factory=PaintParams)  # how this scene is painted unless told otherwise
     z_max: float | None = None  # depth a miss records; derived from the scene's size when None
     _cache: dict = field(default_factory=dict, repr=False)
     _static: dict = field(default_factory=dict, repr=False)  # placed instances of objects that never move

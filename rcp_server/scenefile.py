@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from .camera import Camera, CameraError
 from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
+from .params import PaintParams
 from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
 
@@ -286,15 +287,11 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
         objects = []
         for index, obj in enumerate(spec.objects):
             objects.extend(_scene_object(obj, folder, f"objects.{index}" + (f" ({obj.name})" if obj.name else "")))
-        from .params import PaintParams
-
-        PaintParams.from_dict(spec.paint)  # refuse bad painting defaults now, not at the first render
+        paint = PaintParams.from_dict(spec.paint)  # refuse bad painting settings now, not at the first render
     except (SceneError, MeshError, CameraError, ValueError) as exc:
         message = str(exc)
         raise SceneError(message if message.startswith(str(path)) else f"{path}: {message}") from None
-    return Scene(
-        name or path.stem, spec.title or path.stem, camera, environment, light, objects, dict(spec.paint), spec.z_max
-    )
+    return Scene(name or path.stem, spec.title or path.stem, camera, environment, light, objects, paint, spec.z_max)
 
 
 def load_environment(path: Path, exposure: float = 0.0) -> Environment:

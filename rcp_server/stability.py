@@ -429,7 +429,7 @@ def run(out: Path, quick: bool = False) -> dict:
     started = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     scene = load_scene("default")
-    base = replace(PaintParams.from_dict(scene.paint), lambda_e=0.0, spp=1)
+    base = replace(scene.paint, lambda_e=0.0, spp=1)
     base = replace(base, lambda_p=base.lambda_p * height / 360)  # the same painting at any resolution
     edges, crops = edges_section(scene, width, height, base)
     report = {

@@ -61,7 +61,7 @@ def test_valid_scene_file_loads_and_renders(tmp_path):
     assert scene.name == "ball" and scene.title == "A red ball"
     assert scene.camera == Camera((0, 0, 5), (0, 0, 0), fov=40)
     assert scene.light is None and scene.z_max == 50.0 and scene.depth_of_miss(scene.camera.eye) == 50.0
-    assert scene.paint == {"mapping": "depth", "iterations": 3, "lambda_p": 4.0}
+    assert scene.paint == PaintParams(mapping="depth", iterations=3, lambda_p=4.0)
     np.testing.assert_array_equal(scene.environment.image, np.float32([[[0.2, 0.3, 0.4]]]))
     assert [len(o.instances) for o in scene.objects] == [1, 2]
     geometry, tracer = scene.geometry()

@@ -6,6 +6,7 @@ import json
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import replace
 from pathlib import Path
 
 import httpx
@@ -16,7 +17,6 @@ from conftest import decode
 from rcp_server import images
 from rcp_server.camera import Camera
 from rcp_server.painting import paint
-from rcp_server.params import PaintParams
 from rcp_server.service import protocol
 from rcp_server.service.background import BackgroundServer
 from rcp_server.service.renderer import FairPool
@@ -45,7 +45,7 @@ def test_render_is_exactly_the_engines_painting(live_server):
     response = post(live_server, body)
     assert response.status_code == 200 and response.headers["content-type"] == "image/png"
     scene = live_server.app.state.service.scenes["default"]
-    expected = paint(scene, scene.camera, 96, 54, PaintParams.from_dict({**scene.paint, **body["paint"]})).image
+    expected = paint(scene, scene.camera, 96, 54, replace(scene.paint, **body["paint"])).image
     np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
 
 
@@ -317,7 +317,7 @@ def test_render_with_the_image_method_and_its_refusal_of_eye_moves(live_server):
     response = post(live_server, body)
     assert response.status_code == 200
     scene = live_server.app.state.service.scenes["default"]
-    params = PaintParams.from_dict({**scene.paint, **body["paint"]})
+    params = replace(scene.paint, **body["paint"])
     expected = paint(scene, scene.camera, 96, 54, params).image
     np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
     refused = post(live_server, {**body, "paint": {"method": "image", "lambda_e": 0.1}})

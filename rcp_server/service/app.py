@@ -49,7 +49,7 @@ def scene_info(scene: Scene) -> protocol.SceneInfo:
         name=scene.name,
         title=scene.title,
         camera=protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov),
-        paint=scene.paint,
+        paint=scene.paint.non_defaults(),
         animated=scene.animated,
         triangles=scene.geometry(0.0)[0].face_count,
     )

@@ -160,7 +160,7 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
     with BackgroundServer() as server:
         scene = server.app.state.service.scenes[scene_name]
         info = server.app.state.service.infos[scene_name].model_dump()
-        params = PaintParams.from_dict(scene.paint)
+        params = scene.paint
         print(
             f"rcp bench latency: scene {scene_name}, {server.settings.threads} threads, camera messages at "
             f"{RATE:.0f} Hz for {seconds:.0f} s, then {steps} single steps from rest; frame budget "

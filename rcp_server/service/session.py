@@ -172,7 +172,7 @@ class Session:
 
     def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> None:
         """Refuses a view whose paintings could not be made: a bad setting, or more work than one may take."""
-        self.settings.check_painting(width, height, PaintParams.from_dict({**scene.paint, **overrides}))
+        self.settings.check_painting(width, height, replace(scene.paint, **overrides))
 
     def _changed(self) -> None:
         self.version += 1
@@ -228,7 +228,7 @@ class Session:
         return [params.spp] if more == params.spp else [params.spp, more]
 
     def _params(self) -> PaintParams:
-        return PaintParams.from_dict({**self.scene.paint, **self.overrides})
+        return replace(self.scene.paint, **self.overrides)
 
     def _next_job(self) -> _Job | None:
         if self.scene is None:
