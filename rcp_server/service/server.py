@@ -60,7 +60,7 @@ class Server(uvicorn.Server):
             logging.getLogger(name).addFilter(HideTokens())
         super().__init__(config)
 
-    def handle_exit(self, sig, stack) -> None:  # stack: the Python frame the signal interrupted
+    def handle_exit(self, sig, stack) -> None:  # stack: where the signal interrupted the program
         if self.should_exit and self._stop_paintings():
             return  # asked twice: no more waiting, but every caller still gets its answer
         super().handle_exit(sig, stack)
