@@ -90,8 +90,9 @@ def service_of(app: Starlette) -> Service | None:
     return getattr(app.state, "service", None)
 
 
-def get_service(connection: HTTPConnection) -> Service:
-    """The dependency of HTTP and WebSocket routes alike (both are an ``HTTPConnection``)."""
+async def get_service(connection: HTTPConnection) -> Service:
+    """The dependency of HTTP and WebSocket routes alike (both are an ``HTTPConnection``). Async, so that
+    FastAPI calls it on the event loop: a plain function would take a worker thread for every request."""
     service = service_of(connection.app)
     assert service is not None, "a route ran before the app's lifespan opened the service"
     return service
