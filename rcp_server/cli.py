@@ -246,7 +246,7 @@ def _scenes() -> None:
 def _serve(args: argparse.Namespace) -> None:
     from pydantic import ValidationError
 
-    from .service.app import Server
+    from .service.server import Server
     from .service.settings import Settings
 
     given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}

@@ -6,20 +6,13 @@ point's view depth is ``-z``. A "facing plane" is a grid turned to face the came
 
 from __future__ import annotations
 
-import contextlib
-import io
-import json
-
 import numpy as np
 import pytest
-from PIL import Image
-from websockets.sync.client import connect
 
 from rcp_server.camera import Camera
 from rcp_server.mappings import register_mapping
 from rcp_server.meshes import Part, primitive
 from rcp_server.scene import Environment, Light, Scene, SceneObject
-from rcp_server.service.background import BackgroundServer
 
 CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0)
 SKY = (0.2, 0.35, 0.6)
@@ -106,68 +99,3 @@ def busy_scene() -> Scene:
     ]
     light = Light(tuple(np.array([-0.3, -1.0, -0.4]) / np.linalg.norm([-0.3, -1.0, -0.4])), 0.3)
     return make_scene(objects, light=light, environment=Environment(sky))
-
-
-# ---- a real server ----
-
-
-@pytest.fixture(scope="session")
-def live_server():
-    """One real server per test process (settles fast, so refinement starts soon after the camera rests)."""
-    with BackgroundServer(settle_ms=80) as server:
-        yield server
-
-
-def decode(data: bytes) -> np.ndarray:
-    """A PNG or JPEG from the server, as (height, width, 3) uint8."""
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
-
-
-class Walk:
-    """A WebSocket client of a real server that reads frames as (meta, image)."""
-
-    def __init__(self, server, path: str = "", **options):
-        self._stack = contextlib.ExitStack()
-        options = {"max_size": None, "open_timeout": 30, **options}
-        self.ws = self._stack.enter_context(connect(server.ws_url + path, **options))
-
-    def send(self, **message) -> None:
-        self.ws.send(json.dumps(message))
-
-    def next(self, timeout: float = 30.0) -> dict:
-        return json.loads(self.ws.recv(timeout))
-
-    def frame(self, timeout: float = 30.0) -> tuple[dict, np.ndarray]:
-        while (meta := self.next(timeout))["type"] != "frame":
-            assert meta["type"] != "error", meta
-        image = self.ws.recv(timeout)
-        assert isinstance(image, bytes)
-        return meta, decode(image)
-
-    def until_final(self, timeout: float = 60.0) -> list[tuple[dict, np.ndarray]]:
-        frames = []
-        while not frames or not frames[-1][0]["final"]:
-            frames.append(self.frame(timeout))
-        return frames
-
-    def close(self) -> None:
-        self._stack.close()
-
-
-@pytest.fixture
-def walk_to():
-    """Opens walk-throughs (``walk_to(server)``); all are closed after the test."""
-    opened: list[Walk] = []
-
-    def open_walk(server, path: str = "", **options) -> Walk:
-        opened.append(Walk(server, path, **options))
-        return opened[-1]
-
-    yield open_walk
-    for client in opened:
-        client.close()
-
-
-@pytest.fixture
-def walk(live_server, walk_to):
-    return walk_to(live_server)

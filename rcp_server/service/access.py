@@ -18,6 +18,7 @@ from fastapi.security import APIKeyQuery, HTTPAuthorizationCredentials, HTTPBear
 from starlette.datastructures import Headers, QueryParams
 
 from .settings import Settings
+from .state import ServiceDep
 
 # documented in the OpenAPI schema as the two ways to present the token
 BEARER = HTTPBearer(auto_error=False, description="the token of RCP_TOKEN, when the server has one")
@@ -41,12 +42,13 @@ def admits(settings: Settings, headers: Headers, query: QueryParams) -> bool:
 
 async def require_token(
     request: Request,
+    service: ServiceDep,
     _bearer: Annotated[HTTPAuthorizationCredentials | None, Security(BEARER)],  # for the OpenAPI schema
     _token: Annotated[str | None, Security(QUERY)],
 ) -> None:
     """The REST routes' dependency: 401 unless the token (if the server has one) came with the request. Async,
     like the light routes, so that none of them takes a worker thread."""
-    if not admits(request.app.state.service.settings, request.headers, request.query_params):
+    if not admits(service.settings, request.headers, request.query_params):
         raise HTTPException(401, NEEDS_TOKEN, headers={"WWW-Authenticate": "Bearer"})
 
 

@@ -6,7 +6,7 @@ import socket
 import threading
 import time
 
-from .app import Server
+from .server import Server
 from .settings import Settings
 
 

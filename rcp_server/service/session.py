@@ -1,12 +1,11 @@
 """One WebSocket walk-through: camera in, painted frames out, the newest camera always wins.
 
-Three tasks share a session. The receiver validates messages and updates the view; every change bumps
-``version``, which abandons a painting in flight between iterations. The painter renders the newest view:
-while the camera moves, *walk* frames (temporal mode: one iteration continuing from the last frame, the
-paper's ``I_n = F(I_{n-1}, S(n))``; resolution chosen from the measured speed to hold the frame rate);
-once it rests, *refine* frames at full resolution with all iterations and then more samples. The sender
-keeps one slot for frames: a frame not yet sent is replaced by a newer one, so a slow client never
-gets a queue of stale frames.
+Three tasks share a session. The receiver validates messages and updates the view; every change bumps the
+planner's ``version``, which abandons a refinement in flight between iterations. The painter asks the
+:class:`~rcp_server.service.planner.Planner` what to paint next (walk frames while the camera moves,
+refinements once it rests), paints it on the workshop and tells the planner how long it took. The sender
+keeps one slot for frames: a frame not yet sent is replaced by a newer one, so a slow client never gets a
+queue of stale frames.
 """
 
 from __future__ import annotations
@@ -15,7 +14,6 @@ import asyncio
 import collections
 import time as _time
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
@@ -28,37 +26,26 @@ from ..scene import Scene
 from ..scenefile import one_line
 from . import protocol
 from .faults import fault_message, report_fault
-
-if TYPE_CHECKING:
-    from .app import Service
-
-SCALES = (1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25)  # walk-frame sizes, as fractions of the canvas
-REFINE_SPP = 4  # once at rest, the second refinement takes at least this many samples per pixel
+from .planner import Plan, Planner, View
+from .state import Service
 
 
 @dataclass
 class _Job:
-    """One frame to paint: a snapshot of the view it shows, and how to paint it."""
+    """One frame to paint: the planner's plan, and a snapshot of the view it shows."""
 
-    version: int
+    plan: Plan
     epoch: int
     scene: Scene
     camera: Camera
     camera_id: int | None
-    phase: str
-    width: int
-    height: int
-    params: PaintParams
-    previous: PaintState | None
-    time: float
-    iteration: int
-    final: bool
+    previous: PaintState | None  # the last frame's state at the plan's size, when the plan continues it
     quality: int
 
 
 class Session:
     def __init__(self, ws: WebSocket, service: Service):
-        self.ws, self.service, self.renderer, self.settings = ws, service, service.renderer, service.settings
+        self.ws, self.service, self.workshop, self.settings = ws, service, service.workshop, service.settings
         # ---- the view (set by the receiver) ----
         self.scene: Scene | None = None
         self.camera: Camera | None = None
@@ -68,17 +55,12 @@ class Session:
         self.overrides: dict = {}  # painting settings the client changed from the scene's
         self.temporal = True
         self.animate = False
-        self.version = 0  # bumped by every change; a painting of an older version is stale
         self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
-        self.last_move = 0.0  # when the camera last moved (monotonic seconds)
         self.changed = asyncio.Event()
         # ---- the painting (kept by the painter) ----
+        settings = self.settings
+        self.planner = Planner(settings.frame_ms, settings.settle_ms, settings.max_work, _time.monotonic())
         self.state: PaintState | None = None  # the last frame's per-pixel data, for temporal mode
-        self.iteration = 0
-        self.painted_version = -1
-        self.refinements = 0  # refinement frames sent for the painted version
-        self.seconds_per_ray: float | None = None  # measured cost of one ray-iteration, for walk frames
-        self.clock0 = _time.monotonic()
         self.closed = False
         # ---- the outbox (drained by the sender) ----
         self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
@@ -98,7 +80,11 @@ class Session:
         except* WebSocketDisconnect:
             pass
         finally:
-            self.closed = True  # a painting still in flight stops at its next iteration
+            self.close()
+
+    def close(self) -> None:
+        """End the walk-through's painting: one still in flight stops at its next iteration."""
+        self.closed = True
 
     async def _receive(self) -> None:
         while True:
@@ -132,7 +118,7 @@ class Session:
         elif isinstance(msg, protocol.CameraMessage):
             self.camera = Camera(msg.eye, msg.look_at, msg.up, msg.fov)
             self.camera_id = msg.id
-            self.last_move = _time.monotonic()
+            self.planner.camera_moved(_time.monotonic())
         elif isinstance(msg, protocol.PaintMessage):
             overrides = {**self.overrides, **msg.changes()}
             overrides = {k: v for k, v in overrides.items() if v is not None}
@@ -155,10 +141,10 @@ class Session:
         self.scene = scenes[msg.scene]
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
-        self.overrides, self.state, self.iteration = {}, None, 0
+        self.overrides, self.state = {}, None
+        self.planner.scene_started(_time.monotonic())
         self.epoch += 1
         self.frame = None  # a frame of the scene being left must not follow the new `ready`
-        self.last_move = _time.monotonic()
         self._note(
             protocol.Ready(
                 scene=self.service.infos[msg.scene],
@@ -175,7 +161,7 @@ class Session:
         self.settings.check_painting(width, height, replace(scene.paint, **overrides))
 
     def _changed(self) -> None:
-        self.version += 1
+        self.planner.view_changed()
         self.changed.set()
 
     # ---- painting ----
@@ -192,115 +178,60 @@ class Session:
                     pass
                 continue
             try:
-                result, seconds = await self.renderer.run(lambda job=job: self._render(job))
+                result, seconds = await self.workshop.run(lambda job=job: self._paint_and_encode(job))
             except Abandoned:
-                if self.renderer.stopping:
+                if self.workshop.stopping:
                     return  # the server is stopping: nothing will paint again
                 continue
             except Exception as exc:  # this view cannot be painted: say why, and wait for the next change
-                self.painted_version, self.refinements = job.version, len(self._refine_spp())
+                self.planner.frame_failed(job.plan, self._view())
                 if isinstance(exc, (CameraError, ValueError)):  # e.g. a painting setting the scene cannot take
                     self._note(protocol.Error(message=str(exc)))
                 else:
-                    self._note(protocol.Error(message=fault_message(report_fault(f"painting {job.phase} frame"))))
+                    self._note(protocol.Error(message=fault_message(report_fault(f"painting {job.plan.phase} frame"))))
                 continue
             if job.epoch != self.epoch:
                 continue  # painted for a scene the client has left
             self._finished(job, result, seconds)
 
-    def _until_rest(self) -> float | None:
-        """Seconds until the camera counts as resting (then refinement starts), None when nothing is due."""
-        if self.scene is None or self.painted_version != self.version:
-            return None
-        return max(self._rest_in(), 0.005) if self._refinements_left() else None
-
-    def _rest_in(self) -> float:
-        """Seconds until the camera has been still for ``settle_ms`` (0 or less: it rests)."""
-        return self.last_move + self.settings.settle_ms / 1000 - _time.monotonic()
-
-    def _refinements_left(self) -> bool:
-        return self.refinements < len(self._refine_spp())
-
-    def _refine_spp(self) -> list[int]:
-        params = self._params()
-        affordable = self.settings.max_work // (self.width * self.height * params.iterations)
-        more = max(params.spp, min(64, max(REFINE_SPP, 2 * params.spp), affordable))
-        return [params.spp] if more == params.spp else [params.spp, more]
-
     def _params(self) -> PaintParams:
         return replace(self.scene.paint, **self.overrides)
+
+    def _view(self) -> View:
+        moving = self.animate and self.scene.animated
+        return View(self.width, self.height, self._params(), self.temporal, moving)
+
+    def _until_rest(self) -> float | None:
+        """Seconds until refinement starts, None when nothing is due (the planner's, once there is a scene)."""
+        return None if self.scene is None else self.planner.until_rest(_time.monotonic(), self._view())
 
     def _next_job(self) -> _Job | None:
         if self.scene is None:
             return None
-        params = self._params()
-        now = _time.monotonic()
-        scene_time = now - self.clock0 if self.animate and self.scene.animated else 0.0
-        walking = self.painted_version != self.version or (self.animate and self.scene.animated)
-        if walking:
-            return self._walk_job(params, scene_time)
-        if self._rest_in() > 0 or not self._refinements_left():
+        plan = self.planner.next_frame(_time.monotonic(), self._view())
+        if plan is None:
             return None
-        spp = self._refine_spp()[self.refinements]
-        final = self.refinements == len(self._refine_spp()) - 1
-        return self._job("refine", self.width, self.height, replace(params, spp=spp), None, scene_time, final)
+        previous = self.state.resized(plan.width, plan.height) if plan.continues else None
+        return _Job(plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality)
 
-    def _walk_job(self, params: PaintParams, scene_time: float) -> _Job:
-        scale = self._walk_scale(params)
-        width, height = max(1, round(self.width * scale)), max(1, round(self.height * scale))
-        previous = None
-        if self.temporal and self.state is not None:
-            previous = self.state.resized(width, height)
-            params = replace(params, iterations=1, spp=1)
-        else:
-            params = replace(params, spp=1)
-        return self._job("walk", width, height, params, previous, scene_time, False)
-
-    def _job(self, phase, width, height, params, previous, scene_time, final) -> _Job:
-        iteration = self.iteration + params.iterations if previous is not None else params.iterations
-        return _Job(
-            self.version,
-            self.epoch,
-            self.scene,
-            self.camera,
-            self.camera_id,
-            phase,
-            width,
-            height,
-            params,
-            previous,
-            scene_time,
-            iteration,
-            final,
-            self.quality,
-        )
-
-    def _walk_scale(self, params: PaintParams) -> float:
-        """The largest walk-frame size whose painting fits the frame budget at the measured speed."""
-        if self.seconds_per_ray is None:
-            return 0.5
-        iterations = 1 if self.temporal and self.state is not None else params.iterations
-        budget = 0.8 * self.settings.frame_ms / 1000
-        affordable = budget / (self.seconds_per_ray * iterations * self.width * self.height)
-        return next((s for s in SCALES if s * s <= affordable), SCALES[-1])
-
-    def _render(self, job: _Job) -> tuple[tuple[PaintResult, bytes], float]:
-        """Blocking, on a render thread: paint the job and encode it. Refinements are abandoned as soon as
+    def _paint_and_encode(self, job: _Job) -> tuple[tuple[PaintResult, bytes], float]:
+        """Blocking, on a painter's thread: paint the job and encode it. Refinements are abandoned as soon as
         anything changes; walk frames are short by design and always finish, or a camera that never rests
         would never see a frame."""
+        plan = job.plan
 
         def should_stop() -> bool:
-            stale = self.version != job.version if job.phase == "refine" else self.epoch != job.epoch
+            stale = self.planner.version != plan.version if plan.phase == "refine" else self.epoch != job.epoch
             return self.closed or stale
 
         clock = _time.perf_counter()
-        result = self.renderer.paint(
+        result = self.workshop.paint(
             job.scene,
             job.camera,
-            job.width,
-            job.height,
-            job.params,
-            time=job.time,
+            plan.width,
+            plan.height,
+            plan.params,
+            time=plan.time,
             previous=job.previous,
             should_stop=should_stop,
         )
@@ -309,24 +240,22 @@ class Session:
 
     def _finished(self, job: _Job, painted: tuple[PaintResult, bytes], seconds: float) -> None:
         result, jpeg = painted
-        measured = seconds / (job.width * job.height * job.params.spp * job.params.iterations)
-        self.seconds_per_ray = measured if self.seconds_per_ray is None else 0.7 * self.seconds_per_ray + 0.3 * measured
-        self.state, self.iteration = result.state, job.iteration
-        self.refinements = self.refinements + 1 if job.phase == "refine" and job.version == self.version else 0
-        self.painted_version = job.version
+        plan = job.plan
+        self.planner.frame_painted(plan, seconds)
+        self.state = result.state
         meta = protocol.Frame(
             seq=0,
-            width=job.width,
-            height=job.height,
+            width=plan.width,
+            height=plan.height,
             render_ms=round(seconds * 1000, 2),
-            iteration=job.iteration,
-            spp=job.params.spp,
-            scale=round(job.width / self.width, 4),
-            phase=job.phase,
-            final=job.final,
-            temporal=job.previous is not None,
+            iteration=plan.iteration,
+            spp=plan.params.spp,
+            scale=round(plan.width / self.width, 4),
+            phase=plan.phase,
+            final=plan.final,
+            temporal=plan.continues,
             camera_id=job.camera_id,
-            time=job.time,
+            time=plan.time,
             dropped=0,
         )
         self._post_frame(meta, jpeg)

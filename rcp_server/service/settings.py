@@ -13,9 +13,10 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from ..painting import default_threads
 from ..params import PaintParams
-from ..scenefile import SCENES_DIR
 
-CLIENT_DIR = Path(__file__).resolve().parent.parent.parent / "client"
+REPOSITORY = Path(__file__).resolve().parent.parent.parent
+CLIENT_DIR = REPOSITORY / "client"
+BUNDLED_SCENES = REPOSITORY / "scenes"  # RCP_SCENES names another folder: the service reads it once, below
 
 
 class Settings(BaseSettings):
@@ -23,7 +24,7 @@ class Settings(BaseSettings):
 
     host: str = "127.0.0.1"  # loopback only unless asked: the container sets 0.0.0.0
     port: int = Field(8000, ge=0, le=65535)
-    scenes: Path = SCENES_DIR  # the folder scene names resolve in
+    scenes: Path = BUNDLED_SCENES  # the folder scene names resolve in (RCP_SCENES)
     client: Path = CLIENT_DIR  # the browser client's static files
     # ---- access ----
     token: SecretStr | None = None  # when set, REST and WebSocket callers must present it

@@ -1,9 +1,10 @@
-"""Rendering off the event loop: one pool of tile workers shared by every painting, taken in turns.
+"""Where paintings are made off the event loop: the workers, the places, and the door.
 
-A painting blocks while its tiles run, so each one waits on a thread of its own (at most ``max_renders``
-at once); its tiles go to the shared :class:`FairPool`. The pool serves tiles by their position in their
-painting, so paintings in progress take turns tile by tile: a small walk-through frame is not stuck behind
-every tile of a large render that came first.
+The engine paints; this module only queues and admits its work. A painting blocks while its tiles run, so
+each one waits on a thread of its own (at most ``max_renders`` at once); its tiles go to the shared
+:class:`FairPool`. The pool serves tiles by their position in their painting, so paintings in progress take
+turns tile by tile: a small walk-through frame is not stuck behind every tile of a large render that came
+first. REST renders are admitted at the door (:meth:`Workshop.admission`) or turned away (:class:`Busy`).
 """
 
 from __future__ import annotations
@@ -86,8 +87,8 @@ class Busy(Exception):
         self.retry_after = retry_after
 
 
-class Renderer:
-    """Runs paintings (and whatever goes with them, such as encoding) off the event loop.
+class Workshop:
+    """Runs paintings (and whatever goes with them, such as encoding) off the event loop, on shared workers.
 
     Walk-throughs are limited by their count (one painting each at a time); REST renders are admitted up
     to ``max_renders + max_waiting`` at once, and past that refused with :class:`Busy` rather than queued
@@ -96,33 +97,34 @@ class Renderer:
     def __init__(self, threads: int, max_renders: int, max_waiting: int = 0):
         self.threads = threads
         self.tiles = FairPool(threads)
-        self._paintings = ThreadPoolExecutor(max_renders, thread_name_prefix="rcp-render")
+        self._painters = ThreadPoolExecutor(max_renders, thread_name_prefix="rcp-render")  # one painting each
         self._places = max_renders + max_waiting
         self.admitted = 0  # REST renders running or waiting
-        self.painting = 0  # paintings in progress, of any kind
-        self._count = threading.Lock()  # paintings start and end on many threads
+        self.in_progress = 0  # paintings in progress, of any kind
+        self._counting = threading.Lock()  # paintings start and end on many threads
         self._seconds = 1.0  # recent REST render time, for Retry-After
         self.stopping = False  # see stop()
 
     def paint(self, scene: Scene, camera, width: int, height: int, params: PaintParams, should_stop=None, **options):
         """Blocking: paint on the shared tile pool (call it inside :meth:`run`). Every painting stops at its
-        next tile once the renderer stops."""
+        next tile once the workshop stops."""
 
         def stop() -> bool:
             return self.stopping or (should_stop is not None and should_stop())
 
-        with self._count:
-            self.painting += 1
+        with self._counting:
+            self.in_progress += 1
         try:
             return paint(
                 scene, camera, width, height, params, pool=self.tiles, threads=self.threads, should_stop=stop, **options
             )
         finally:
-            with self._count:
-                self.painting -= 1
+            with self._counting:
+                self.in_progress -= 1
 
     async def run(self, job: Callable[[], T]) -> T:
-        return await asyncio.get_running_loop().run_in_executor(self._paintings, job)
+        """``job()`` on a painter's thread, awaited from the event loop."""
+        return await asyncio.get_running_loop().run_in_executor(self._painters, job)
 
     @contextlib.contextmanager
     def admission(self) -> Iterator[None]:
@@ -144,5 +146,5 @@ class Renderer:
 
     def close(self) -> None:
         self.stop()
-        self._paintings.shutdown(wait=True, cancel_futures=True)
+        self._painters.shutdown(wait=True, cancel_futures=True)
         self.tiles.shutdown(wait=True)

@@ -9,12 +9,13 @@ from dataclasses import replace
 
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
-from .. import images
-from ..camera import Camera, CameraError
-from ..painting import Abandoned
-from . import protocol
-from .access import admits, require_token
-from .renderer import Busy
+from ... import images
+from ...camera import Camera, CameraError
+from ...painting import Abandoned
+from .. import protocol
+from ..access import admits, require_token
+from ..state import ServiceDep
+from ..workshop import Busy
 
 public = APIRouter(prefix="/api")
 NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
@@ -25,24 +26,23 @@ BUSY = {"description": "every render place is taken, or the render ran out of ti
 
 
 @public.get("/health")
-async def health(request: Request) -> dict:
+async def health(request: Request, service: ServiceDep) -> dict:
     """Open to all (for container health checks); the figures only for callers with the token."""
-    service = request.app.state.service
     if not admits(service.settings, request.headers, request.query_params):
         return {"status": "ok"}
     return {
         "status": "ok",
         "scenes": len(service.scenes),
         "sessions": len(service.sessions),
-        "threads": service.renderer.threads,
-        "renders": service.renderer.admitted,
-        "painting": service.renderer.painting,
+        "threads": service.workshop.threads,
+        "renders": service.workshop.admitted,
+        "painting": service.workshop.in_progress,
     }
 
 
 @router.get("/scenes")
-async def scenes(request: Request) -> list[protocol.SceneInfo]:
-    return list(request.app.state.service.infos.values())
+async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
+    return list(service.infos.values())
 
 
 @router.post(
@@ -57,8 +57,7 @@ async def scenes(request: Request) -> list[protocol.SceneInfo]:
         503: BUSY,
     },
 )
-async def render(body: protocol.RenderRequest, request: Request) -> Response:
-    service = request.app.state.service
+async def render(body: protocol.RenderRequest, request: Request, service: ServiceDep) -> Response:
     settings = service.settings
     scene = service.scenes.get(body.scene)
     if scene is None:
@@ -70,12 +69,12 @@ async def render(body: protocol.RenderRequest, request: Request) -> Response:
     except (CameraError, ValueError) as exc:
         raise HTTPException(422, str(exc)) from None
     fmt, media_type = MEDIA_TYPES[body.format]
-    renderer = service.renderer
+    workshop = service.workshop
     deadline = time.monotonic() + settings.render_timeout_s  # waiting for a turn counts too
     gone = threading.Event()  # the caller hung up: paint no further
 
     def job() -> bytes:
-        result = renderer.paint(
+        result = workshop.paint(
             scene,
             camera,
             body.width,
@@ -87,10 +86,10 @@ async def render(body: protocol.RenderRequest, request: Request) -> Response:
         return images.encode(result.image, fmt, body.quality)
 
     try:
-        with renderer.admission():
+        with workshop.admission():
             watcher = asyncio.create_task(_hang_up(request, gone))
             try:
-                return Response(await renderer.run(job), media_type=media_type)
+                return Response(await workshop.run(job), media_type=media_type)
             finally:
                 watcher.cancel()
     except Busy as busy:
@@ -98,7 +97,7 @@ async def render(body: protocol.RenderRequest, request: Request) -> Response:
     except Abandoned:
         if gone.is_set():
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
-        if renderer.stopping:
+        if workshop.stopping:
             message = "the server is stopping"
         else:
             message = f"the render ran past the server's {settings.render_timeout_s:g} s limit; ask for less, or later"

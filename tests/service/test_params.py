@@ -16,7 +16,6 @@ import httpx
 import jsonschema
 import numpy as np
 import pytest
-from conftest import decode
 from PIL import Image
 
 from rcp_server import images
@@ -25,7 +24,9 @@ from rcp_server.painting import paint
 from rcp_server.params import PAINT_SETTINGS, PaintParams
 from rcp_server.service import protocol
 
-ROOT = Path(__file__).resolve().parent.parent
+from .conftest import decode
+
+ROOT = Path(__file__).resolve().parents[2]
 FIELDS = [f.name for f in dataclasses.fields(PaintParams)]
 SCENE = "sky"  # quick to load, and every setting below changes its painting at this size
 W, H = 48, 27

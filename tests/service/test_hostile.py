@@ -13,12 +13,13 @@ from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 import pytest
-from conftest import Walk, decode
 from websockets.exceptions import ConnectionClosed
 
-from rcp_server.service.app import Server
 from rcp_server.service.background import BackgroundServer
+from rcp_server.service.server import Server
 from rcp_server.service.soak import rcp_serve
+
+from .conftest import Walk, decode
 
 BIG = {"scene": "default", "width": 1280, "height": 720, "paint": {"spp": 8}}  # seconds of work on 2 cores
 
@@ -312,7 +313,7 @@ def test_cors_is_off_unless_configured_and_foreign_pages_cannot_walk(tight, walk
 
 
 def test_a_render_that_raises_answers_500_with_an_id_and_the_server_goes_on(tight, walk_to, caplog, monkeypatch):
-    renderer = tight.app.state.service.renderer
+    workshop = tight.app.state.service.workshop
 
     def broken(*args, **kwargs):
         raise RuntimeError("secret internals")
@@ -322,7 +323,7 @@ def test_a_render_that_raises_answers_500_with_an_id_and_the_server_goes_on(tigh
     walk.next()
     walk.until_final()
     with caplog.at_level(logging.ERROR, logger="rcp.service"), monkeypatch.context() as patch:
-        patch.setattr(renderer, "paint", broken)
+        patch.setattr(workshop, "paint", broken)
         response = post(tight, {"scene": "sky", "width": 16, "height": 16})
         walk.send(type="camera", eye=[0, 0, 0], look_at=[0, 0.1, -1])
         session_error = walk.next()

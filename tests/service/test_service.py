@@ -12,16 +12,17 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
-from conftest import decode
 
 from rcp_server import images
 from rcp_server.camera import Camera
 from rcp_server.painting import paint
 from rcp_server.service import protocol
 from rcp_server.service.background import BackgroundServer
-from rcp_server.service.renderer import FairPool
+from rcp_server.service.workshop import FairPool
 
-ROOT = Path(__file__).resolve().parent.parent
+from .conftest import decode
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def post(server, body: dict) -> httpx.Response:

@@ -1,0 +1,1 @@
+"""One router per surface: ``rest`` (``/api``) and ``walk`` (the ``/ws`` walk-through)."""

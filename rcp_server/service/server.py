@@ -1,0 +1,82 @@
+"""uvicorn serving the app (``rcp serve``): the transport's limits, a capped send buffer, a stop that loses
+no answer."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import socket
+
+import uvicorn
+from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
+
+from .access import HideTokens
+from .app import create_app
+from .settings import Settings
+from .state import service_of
+
+log = logging.getLogger("rcp.service")
+
+
+class CappedWebSockets(WebSocketsSansIOProtocol):
+    """uvicorn's WebSocket protocol with the kernel's send buffer capped: the kernel would otherwise grow it to
+    megabytes for a client that stops reading, holding seconds of stale frames before a send ever waits. With
+    the cap, sends wait after ``SEND_BUFFER`` bytes and newer frames replace the unsent one (session.py)."""
+
+    SEND_BUFFER = 256 * 1024
+
+    def connection_made(self, transport) -> None:
+        super().connection_made(transport)
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, self.SEND_BUFFER)
+
+
+class Server(uvicorn.Server):
+    """uvicorn serving the app, with the transport's own limits: WebSocket messages (past this, the connection
+    closes with 1009; the session's own, smaller limit answers with an error first), connections at once
+    (past this, 503), and a stop that loses no answer.
+
+    On SIGINT or SIGTERM, requests and walk-throughs in flight get ``PAINTING_GRACE_S`` to finish; then their
+    paintings are stopped, so each caller is told "the server is stopping" (503) before uvicorn's own grace
+    runs out and cancels whatever is left (a 500 and a traceback). A second signal stops the paintings at
+    once; a third Ctrl-C is uvicorn's forced exit."""
+
+    PAINTING_GRACE_S = 8
+    GRACE_S = PAINTING_GRACE_S + 4  # uvicorn's: time for the stopped paintings to answer
+
+    def __init__(self, settings: Settings, **options):
+        config = uvicorn.Config(
+            create_app(settings),
+            host=settings.host,
+            port=settings.port,
+            ws=CappedWebSockets,
+            ws_max_size=64 * settings.max_message_bytes,
+            limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
+            timeout_graceful_shutdown=self.GRACE_S,
+            **options,
+        )
+        for name in ("uvicorn.error", "uvicorn.access"):
+            logging.getLogger(name).addFilter(HideTokens())
+        super().__init__(config)
+
+    def handle_exit(self, sig, stack) -> None:  # stack: where the signal interrupted the program
+        if self.should_exit and self._stop_paintings():
+            return  # asked twice: no more waiting, but every caller still gets its answer
+        super().handle_exit(sig, stack)
+
+    async def shutdown(self, sockets=None) -> None:
+        grace = asyncio.get_running_loop().call_later(self.PAINTING_GRACE_S, self._stop_paintings)
+        try:
+            await super().shutdown(sockets)
+        finally:
+            grace.cancel()
+
+    def _stop_paintings(self) -> bool:
+        """Stop the paintings, unless they are stopped already or the app has not started: True if it did."""
+        service = service_of(self.config.app)
+        if service is None or service.workshop.stopping:
+            return False
+        log.info("stopping the paintings in progress (%d)", service.workshop.in_progress)
+        service.workshop.stop()
+        return True

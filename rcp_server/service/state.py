@@ -1,0 +1,101 @@
+"""What the service shares: its settings, the scenes (loaded once, at startup), the workshop and the open
+walk-throughs; and the dependency that hands it to a route, typed (``service: ServiceDep``)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Protocol
+
+from fastapi import Depends
+from starlette.applications import Starlette
+from starlette.requests import HTTPConnection
+
+from ..painting import paint
+from ..params import PaintParams
+from ..scene import Scene
+from ..scenefile import SceneError, load_scene, scene_names
+from . import protocol
+from .settings import Settings
+from .workshop import Workshop
+
+log = logging.getLogger("rcp.service")
+
+
+class Walkthrough(Protocol):
+    """An open walk-through, as the service sees it (``session.Session``): one it can close."""
+
+    def close(self) -> None: ...
+
+
+@dataclass
+class Service:
+    """What every request and session shares: settings, the scenes (and their descriptions, made once so a
+    listing never builds geometry on the event loop), the workshop, the open walk-throughs."""
+
+    settings: Settings
+    scenes: dict[str, Scene]
+    infos: dict[str, protocol.SceneInfo]
+    workshop: Workshop
+    sessions: set[Walkthrough] = field(default_factory=set)
+
+    @classmethod
+    def open(cls, settings: Settings) -> Service:
+        """Blocking: load the scenes of ``settings.scenes``, compile the kernels, open the workshop."""
+        scenes = load_scenes(settings.scenes)
+        for scene in list(scenes.values())[:1]:  # load the compiled kernels before a visitor waits for them
+            paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
+        log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
+        infos = {name: scene_info(scene) for name, scene in scenes.items()}
+        workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
+        return cls(settings, scenes, infos, workshop)
+
+    def close(self) -> None:
+        """Close every walk-through (their paintings stop at the next iteration), then the workshop."""
+        for session in list(self.sessions):
+            session.close()
+        self.workshop.close()
+
+
+def scene_info(scene: Scene) -> protocol.SceneInfo:
+    camera = scene.camera
+    return protocol.SceneInfo(
+        name=scene.name,
+        title=scene.title,
+        camera=protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov),
+        paint=scene.paint.non_defaults(),
+        animated=scene.animated,
+        triangles=scene.geometry(0.0)[0].face_count,
+    )
+
+
+def load_scenes(folder: Path) -> dict[str, Scene]:
+    """Every scene of ``folder``, ready to trace; a broken one is reported and skipped."""
+    scenes = {}
+    for name in scene_names(folder):
+        try:
+            scene = load_scene(name, folder)
+            scene.geometry(0.0)  # build its BVH now, not on the first request
+            scenes[name] = scene
+        except SceneError as exc:
+            log.error("scene %s skipped: %s", name, exc)
+        except Exception:  # a fault the scene file's checks did not foresee: still only this scene's
+            log.exception("scene %s skipped: it failed to build", name)
+    return scenes
+
+
+def service_of(app: Starlette) -> Service | None:
+    """The service an app serves, None before its lifespan has opened it."""
+    return getattr(app.state, "service", None)
+
+
+async def get_service(connection: HTTPConnection) -> Service:
+    """The dependency of HTTP and WebSocket routes alike (both are an ``HTTPConnection``). Async, so that
+    FastAPI calls it on the event loop: a plain function would take a worker thread for every request."""
+    service = service_of(connection.app)
+    assert service is not None, "a route ran before the app's lifespan opened the service"
+    return service
+
+
+ServiceDep = Annotated[Service, Depends(get_service)]
