@@ -15,11 +15,11 @@ import pytest
 from PIL import Image
 from websockets.sync.client import connect
 
+from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camera import Camera
 from rcp_server.mappings import register_mapping
 from rcp_server.meshes import Part, primitive
 from rcp_server.scene import Environment, Light, Scene, SceneObject
-from rcp_server.service.background import BackgroundServer
 
 CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0)
 SKY = (0.2, 0.35, 0.6)
