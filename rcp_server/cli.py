@@ -13,6 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from . import images
+from .argtypes import finite as _finite
+from .argtypes import positive_int as _positive_int
+from .bench.cli import MissingExtra, add_bench_commands
 from .camera import Camera, CameraError
 from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
@@ -28,20 +31,6 @@ class UsageError(Exception):
 class _Parser(argparse.ArgumentParser):
     def error(self, message):  # argparse prints usage and a message over two lines; we want one
         raise UsageError(message)
-
-
-def _positive_int(text: str) -> int:
-    value = int(text)
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be a positive integer, got {text}")
-    return value
-
-
-def _finite(text: str) -> float:
-    value = float(text)
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"must be a finite number, got {text}")
-    return value
 
 
 def _add_paint_options(p: argparse.ArgumentParser) -> None:
@@ -122,33 +111,7 @@ def _parser() -> argparse.ArgumentParser:
     v.add_argument("--host", help="address to listen on (default 127.0.0.1, or RCP_HOST)")
     v.add_argument("--port", type=int, help="port (default 8000, or RCP_PORT)")
 
-    b = sub.add_parser("bench", help="benchmarks that print figures (accuracy and stability also chart them)")
-    b.add_argument(
-        "which",
-        choices=["speed", "latency", "accuracy", "stability", "soak"],
-        help="speed: the engine against Embree; latency: the service; accuracy: time against error of both "
-        "methods; stability: where each method breaks; soak: rcp serve under WebSocket and REST load, its memory "
-        "and threads before and after",
-    )
-    b.add_argument("--out", type=Path, default=Path("bench-out"), help="accuracy, stability: folder for JSON and PNG")
-    b.add_argument("--quick", action="store_true", help="accuracy, stability: a smaller run (minutes)")
-    b.add_argument("--scene", default="default")
-    b.add_argument("--width", type=_positive_int, default=640)
-    b.add_argument("--height", type=_positive_int, default=360)
-    b.add_argument("--iterations", type=_positive_int, default=6)
-    b.add_argument("--repeats", type=_positive_int, default=5)
-    b.add_argument("--threads", type=_positive_int)
-    b.add_argument(
-        "--seconds", type=_finite, help="latency: seconds of walking per size and mode (default 4); soak: of load (60)"
-    )
-    b.add_argument("--steps", type=_positive_int, default=10, help="latency: single camera steps from rest")
-    b.add_argument(
-        "--clients",
-        type=_positive_int,
-        default=6,
-        help="soak: WebSocket walk-throughs at once (the server takes RCP_MAX_SESSIONS, 8)",
-    )
-    b.add_argument("--rest", type=int, default=2, choices=range(0, 65), metavar="0..64", help="soak: REST callers")
+    add_bench_commands(sub)
     return parser
 
 
@@ -271,12 +234,6 @@ def _stopped(signum, frame) -> None:
     raise SystemExit(0)
 
 
-def _has(module: str) -> bool:
-    import importlib.util
-
-    return importlib.util.find_spec(module) is not None
-
-
 def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(format="rcp: warning: %(message)s", level=logging.WARNING)
     try:
@@ -289,29 +246,9 @@ def main(argv: list[str] | None = None) -> int:
             _scenes()
         elif args.command == "serve":
             _serve(args)
-        elif args.command == "bench" and args.which == "latency":
-            from .service.latency import latency
-
-            latency(args.scene, 4.0 if args.seconds is None else args.seconds, args.steps)
-        elif args.command == "bench" and args.which == "soak":
-            from .service.soak import bench_soak
-
-            bench_soak(60.0 if args.seconds is None else args.seconds, args.clients, args.rest)
-        elif args.command == "bench" and args.which == "speed":
-            from .bench import speed
-
-            speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
-        elif args.command == "bench" and args.which in ("accuracy", "stability") and not _has("matplotlib"):
-            raise UsageError(f"rcp bench {args.which} draws its chart with matplotlib: pip install -e '.[bench]'")
-        elif args.command == "bench" and args.which == "accuracy":
-            from .accuracy import run
-
-            run(args.out, quick=args.quick, threads=args.threads)
         elif args.command == "bench":
-            from .stability import run
-
-            run(args.out, quick=args.quick)
-    except (UsageError, SceneError, CameraError, ValueError) as exc:
+            args.run_bench(args)
+    except (UsageError, MissingExtra, SceneError, CameraError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
     except MemoryError:

@@ -84,6 +84,13 @@ def register_mapping(
     return register(field) if field is not None else register
 
 
+def unregister_mapping(name: str) -> None:
+    """Forget mapping ``name``, one that :func:`register_mapping` added for a while (the built-ins stay)."""
+    if name in BUILT_IN:
+        raise ValueError(f"mapping {name!r} is built in")
+    del MAPPINGS[get_mapping(name).name]
+
+
 def get_mapping(name: str) -> Mapping:
     try:
         return MAPPINGS[name]

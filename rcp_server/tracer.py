@@ -57,6 +57,10 @@ class Tracer:
                 getattr(hits, name)[valid] = getattr(sub, name)
         return hits
 
+    def bare_query(self, origins: np.ndarray, directions: np.ndarray) -> dict:
+        """TEMP shim (lead: drop at merge): Embree's own query, no validity mask and no wrapping."""
+        return self._scene.run(origins, directions, output=1)
+
     def _intersect(self, origins: np.ndarray, directions: np.ndarray) -> Hits:
         out = self._scene.run(origins, directions, output=1)
         return Hits(out["primID"], out["tfar"], out["u"], out["v"])

@@ -3,7 +3,15 @@
 import numpy as np
 import pytest
 
-from rcp_server.mappings import CHANNELS, MAPPINGS, MappingInput, get_mapping, register_mapping
+from rcp_server.mappings import (
+    BUILT_IN,
+    CHANNELS,
+    MAPPINGS,
+    MappingInput,
+    get_mapping,
+    register_mapping,
+    unregister_mapping,
+)
 
 
 def _input(n=64, seed=0, z0=3.0):
@@ -127,3 +135,15 @@ def test_register_mapping_adds_color_and_refuses_unknown_channels():
     with pytest.raises(ValueError, match="albedo"):
         register_mapping("test-mappings-bad", {"albedo"}, lambda data: data.color)
     assert "test-mappings-bad" not in MAPPINGS
+
+
+def test_unregister_mapping_forgets_a_registered_one_and_keeps_the_built_ins():
+    register_mapping("test-mappings-passing", {"color"}, lambda data: data.color_field())
+    unregister_mapping("test-mappings-passing")
+    assert "test-mappings-passing" not in MAPPINGS
+    with pytest.raises(ValueError, match="unknown mapping 'test-mappings-passing'"):
+        unregister_mapping("test-mappings-passing")
+    for name in BUILT_IN:
+        with pytest.raises(ValueError, match="built in"):
+            unregister_mapping(name)
+    assert tuple(MAPPINGS)[: len(BUILT_IN)] == BUILT_IN

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 from websockets.sync.client import connect
 
-from rcp_server.service.background import BackgroundServer
+from rcp_server.bench.harness import BackgroundServer
 
 
 @pytest.fixture(scope="session")

@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from rcp_server.bench.harness import BackgroundServer
 from rcp_server.params import PaintParams
 from rcp_server.service import protocol
-from rcp_server.service.background import BackgroundServer
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = [

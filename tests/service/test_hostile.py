@@ -15,9 +15,8 @@ import httpx
 import pytest
 from websockets.exceptions import ConnectionClosed
 
-from rcp_server.service.background import BackgroundServer
+from rcp_server.bench.harness import BackgroundServer, rcp_serve
 from rcp_server.service.server import Server
-from rcp_server.service.soak import rcp_serve
 
 from .conftest import Walk, decode
 

@@ -15,7 +15,7 @@ import httpx
 import pytest
 import schemathesis
 
-from rcp_server.service.background import BackgroundServer
+from rcp_server.bench.harness import BackgroundServer
 
 MAX_PIXELS = 64 * 64
 TOKEN = "schema-token"  # schemathesis brings it, and checks that requests without it or with another get 401

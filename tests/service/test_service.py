@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from rcp_server import images
+from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camera import Camera
 from rcp_server.painting import paint
 from rcp_server.service import protocol
-from rcp_server.service.background import BackgroundServer
 from rcp_server.service.workshop import FairPool
 
 from .conftest import decode
@@ -282,7 +282,7 @@ def test_rcp_serve_takes_its_port_from_the_environment_and_stops_cleanly():
     import subprocess
     import sys
 
-    from rcp_server.service.background import free_port
+    from rcp_server.bench.harness import free_port
 
     port = free_port()
     env = {**os.environ, "RCP_PORT": str(port)}

@@ -20,122 +20,30 @@ from __future__ import annotations
 
 import asyncio
 import collections
-import contextlib
+import http.client
 import json
 import math
-import os
-import re
-import signal
 import socket
 import struct
-import subprocess
-import sys
 import tempfile
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import httpx
 import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
-from .background import free_port
-from .latency import _percentile
+from .harness import TIMEOUT, Answer, ProcessSample, Served, get_json, rcp_serve, request
+from .latency import percentile
 
 WIDTH, HEIGHT = 160, 90  # the walk-through canvas and the REST image
 CAMERA_HZ = 30.0  # camera messages per second while a client walks
 WALK_S, REST_S = 3.0, 1.0  # each client walks this long, then rests this long (and the server refines)
-TIMEOUT = 30.0  # the longest any single wait on the server may take
-START_TIMEOUT = 120.0  # a first start may compile the kernels
 SETTLE_S = 1.0  # after the sessions are gone, before the last measurement
 WARM_RENDERS = 8  # REST renders at once in the warm-up: more than the server's default max_renders (4)
 SAMPLE_S = 0.2  # how often the process is measured during the load
-PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding the rcp_server package
-LOG_PROBLEM = re.compile(r"\b(WARNING|ERROR|CRITICAL|Traceback)\b")
-
-
-# ---- the server process ----
-
-
-@dataclass(frozen=True)
-class ProcessSample:
-    rss_mb: float  # resident set size, MiB
-    threads: int
-
-
-def process_sample(pid: int) -> ProcessSample:
-    """RSS and thread count of a live process, from ``/proc/<pid>/status``."""
-    fields = {}
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        key, _, value = line.partition(":")
-        fields[key] = value.split()
-    return ProcessSample(int(fields["VmRSS"][0]) / 1024, int(fields["Threads"][0]))
-
-
-@dataclass
-class Served:
-    """A running ``rcp serve``: its process, its URLs and the file its log goes to."""
-
-    process: subprocess.Popen
-    port: int
-    log: Path
-
-    @property
-    def url(self) -> str:
-        return f"http://127.0.0.1:{self.port}"
-
-    @property
-    def ws_url(self) -> str:
-        return f"ws://127.0.0.1:{self.port}/ws"
-
-    def sample(self) -> ProcessSample:
-        return process_sample(self.process.pid)
-
-    def log_problems(self) -> list[str]:
-        """The log's warnings, errors and tracebacks (uvicorn's and rcp's), each line once in order."""
-        lines = self.log.read_text(errors="replace").splitlines() if self.log.exists() else []
-        return list(dict.fromkeys(line for line in lines if LOG_PROBLEM.search(line)))
-
-    def stop(self) -> int | None:
-        """SIGINT, as a terminal's Ctrl-C; the exit code, or None if it had to be killed."""
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-        try:
-            return self.process.wait(TIMEOUT)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait(TIMEOUT)
-            return None
-
-
-@contextlib.contextmanager
-def rcp_serve(log_dir: Path, **settings: str):
-    """``rcp serve`` in a subprocess on 127.0.0.1 and a free port (``settings`` as ``RCP_*`` variables: ``token=``
-    is ``RCP_TOKEN``), up once ``/api/health`` answers; stopped (or killed) on the way out."""
-    port = free_port()
-    log = log_dir / "rcp-serve.log"
-    command = [sys.executable, "-m", "rcp_server.cli", "serve", "--host", "127.0.0.1", "--port", str(port)]
-    with log.open("w") as out:
-        # the server runs the code this module was imported from, whatever the working directory
-        path = os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")]))
-        env = {**os.environ, "PYTHONPATH": path, "PYTHONUNBUFFERED": "1"}
-        env.update({f"RCP_{name.upper()}": value for name, value in settings.items()})
-        process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
-    served = Served(process, port, log)
-    try:
-        deadline = time.monotonic() + START_TIMEOUT
-        while True:
-            try:
-                httpx.get(f"{served.url}/api/health", timeout=1).raise_for_status()
-                break
-            except httpx.HTTPError:
-                if process.poll() is not None or time.monotonic() > deadline:
-                    raise RuntimeError(f"rcp serve did not come up; its log:\n{log.read_text()[-2000:]}") from None
-                time.sleep(0.2)
-        yield served
-    finally:
-        served.stop()
 
 
 # ---- the report ----
@@ -194,8 +102,8 @@ class SoakReport:
         for k, c in enumerate(self.client_figures):
             out.append(
                 f"{k:>6} {c.scene:>8} {c.role:>10} {c.frames:>6} {'+'.join(map(str, c.connection_frames)):>14} "
-                f"{c.frames / self.seconds:5.1f} {_percentile(c.latencies_ms, 50):11.1f} "
-                f"{_percentile(c.latencies_ms, 95):6.1f}"
+                f"{c.frames / self.seconds:5.1f} {percentile(c.latencies_ms, 50):11.1f} "
+                f"{percentile(c.latencies_ms, 95):6.1f}"
             )
         out.append("latency: camera message sent -> the walk frame showing it received, in ms")
         statuses = ", ".join(f"{code} x{n}" for code, n in sorted(self.rest_status.items())) or "none"
@@ -340,26 +248,34 @@ class _Client:
                 self.errors.append(f"client {self.index}: server says: {msg['message']}")
 
 
+# ---- REST callers ----
+
+
+async def _post(pool: ThreadPoolExecutor, url: str, body: dict) -> Answer:
+    """``request`` on a thread of ``pool``, one per caller, so that the callers post at the same time."""
+    return await asyncio.get_running_loop().run_in_executor(pool, request, url, body)
+
+
 @dataclass
 class _RestLoad:
     renders: int = 0
     status: collections.Counter = field(default_factory=collections.Counter)
 
 
-async def _rest_caller(http: httpx.AsyncClient, url: str, scene: str, until: float, load: _RestLoad, errors: list):
+async def _rest_caller(pool: ThreadPoolExecutor, url: str, scene: str, until: float, load: _RestLoad, errors: list):
     body = {"scene": scene, "width": WIDTH, "height": HEIGHT, "format": "jpeg"}
     while time.monotonic() < until:
         try:
-            response = await http.post(f"{url}/api/render", json=body, timeout=TIMEOUT)
-        except httpx.HTTPError as exc:
+            answer = await _post(pool, f"{url}/api/render", body)
+        except (OSError, http.client.HTTPException) as exc:  # refused, reset, timed out, or not HTTP
             errors.append(f"REST: {exc!r}")
             await asyncio.sleep(0.1)
             continue
-        load.status[response.status_code] += 1
-        if response.status_code != 200:
-            errors.append(f"REST: {response.status_code} {response.text[:200]}")
-        elif response.headers["content-type"] != "image/jpeg" or not response.content.startswith(b"\xff\xd8"):
-            errors.append(f"REST: 200 but not a JPEG ({response.headers['content-type']})")
+        load.status[answer.status] += 1
+        if answer.status != 200:
+            errors.append(f"REST: {answer.status} {answer.body[:200].decode(errors='replace')}")
+        elif answer.content_type != "image/jpeg" or not answer.body.startswith(b"\xff\xd8"):
+            errors.append(f"REST: 200 but not a JPEG ({answer.content_type})")
         else:
             load.renders += 1
 
@@ -384,11 +300,13 @@ async def _warm_up(served: Served, scenes: list[dict]) -> None:
                     if msg["final"]:
                         return
 
-    async with httpx.AsyncClient() as http:
+    with ThreadPoolExecutor(WARM_RENDERS) as pool:
 
         async def render(k: int) -> None:
             body = {"scene": scenes[k % len(scenes)]["name"], "width": WIDTH, "height": HEIGHT, "format": "jpeg"}
-            (await http.post(f"{served.url}/api/render", json=body, timeout=TIMEOUT)).raise_for_status()
+            answer = await _post(pool, f"{served.url}/api/render", body)
+            if answer.status != 200:
+                raise RuntimeError(f"warm-up render: {answer.status} {answer.body[:200].decode(errors='replace')}")
 
         await asyncio.gather(*(walk(scene) for scene in scenes), *(render(k) for k in range(WARM_RENDERS)))
 
@@ -412,10 +330,10 @@ async def _load(served: Served, scenes: list[dict], seconds: float, clients: int
             await asyncio.sleep(SAMPLE_S)
 
     sampler = asyncio.create_task(sample())
-    async with httpx.AsyncClient() as http:
+    with ThreadPoolExecutor(max(rest, 1)) as pool:
         tasks = [asyncio.create_task(c.run(served.ws_url, start, seconds)) for c in walkers]
         tasks += [
-            asyncio.create_task(_rest_caller(http, served.url, scenes[k % len(scenes)]["name"], until, load, errors))
+            asyncio.create_task(_rest_caller(pool, served.url, scenes[k % len(scenes)]["name"], until, load, errors))
             for k in range(rest)
         ]
         _, pending = await asyncio.wait(tasks, timeout=seconds + 3 * TIMEOUT)
@@ -431,13 +349,13 @@ async def _load(served: Served, scenes: list[dict], seconds: float, clients: int
 
 
 def _sessions(served: Served) -> int:
-    return httpx.get(f"{served.url}/api/health", timeout=TIMEOUT).json()["sessions"]
+    return get_json(f"{served.url}/api/health")["sessions"]
 
 
 def soak(seconds: float = 60.0, clients: int = 6, rest: int = 2) -> SoakReport:
     """Start ``rcp serve``, warm it up, measure it, load it for ``seconds``, let it settle, measure it again."""
     with tempfile.TemporaryDirectory(prefix="rcp-soak-") as tmp, rcp_serve(Path(tmp)) as served:
-        scenes = httpx.get(f"{served.url}/api/scenes", timeout=TIMEOUT).json()
+        scenes = get_json(f"{served.url}/api/scenes")
         asyncio.run(asyncio.wait_for(_warm_up(served, scenes), 4 * TIMEOUT))
         _sessions(served)  # the health endpoint's worker thread exists before the baseline, as after
         time.sleep(SETTLE_S)

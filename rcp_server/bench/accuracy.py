@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..painting import default_threads, paint
+from ..params import METHODS
+from ..scenefile import load_scene
 from .metrics import edge_band, psnr, ssim, upscale
-from .painting import default_threads, paint
-from .params import METHODS
-from .scenefile import load_scene
 
 SCENES = ("default", "sea", "sky")
 

@@ -1,10 +1,10 @@
-"""A short soak of a real ``rcp serve`` subprocess (``rcp_server/service/soak.py``): four WebSocket walk-throughs
+"""A short soak of a real ``rcp serve`` subprocess (``rcp_server/bench/soak.py``): four WebSocket walk-throughs
 (two that reconnect twice, one that resets its connection while a refinement is painted) and two REST callers for
 16 s. Everything must be answered, and once the clients are gone the server must hold what it held before."""
 
 from __future__ import annotations
 
-from rcp_server.service.soak import soak
+from rcp_server.bench.soak import soak
 
 SECONDS, CLIENTS, REST = 16.0, 4, 2
 CONNECTIONS = [2, 3, 1, 3]  # client 0 drops and comes back, odd clients reconnect twice, client 2 stays

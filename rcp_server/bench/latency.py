@@ -15,7 +15,6 @@ import json
 import statistics
 import threading
 import time
-import urllib.request
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -23,7 +22,8 @@ import websockets
 
 from ..painting import paint
 from ..params import PaintParams
-from .background import BackgroundServer
+from ..scenefile import load_scene
+from .harness import BackgroundServer, get_json, request
 
 SIZES = ((320, 180), (640, 360))
 RATE = 60.0  # camera messages per second while walking
@@ -43,7 +43,8 @@ class WalkFigures:
         return self.frames / self.seconds
 
 
-def _percentile(values: list[float], q: float) -> float:
+def percentile(values: list[float], q: float) -> float:
+    """The ``q``-th percentile (0..100) of ``values``; NaN for none."""
     return float(np.percentile(values, q)) if values else float("nan")
 
 
@@ -136,13 +137,13 @@ def _rest_load(url: str, scene_name: str, on: bool):
     """A REST caller asking for large paintings back to back while the walk runs (when ``on``)."""
     load, stop = _Load(), threading.Event()
 
-    body = json.dumps({"scene": scene_name, **REST_LOAD}).encode()
+    body = {"scene": scene_name, **REST_LOAD}
 
     def call():
         while not stop.is_set():
-            request = urllib.request.Request(f"{url}/api/render", body, {"content-type": "application/json"})
-            with urllib.request.urlopen(request, timeout=300) as response:
-                response.read()
+            answer = request(f"{url}/api/render", body, timeout=300)
+            if answer.status != 200:
+                raise RuntimeError(f"REST load: {answer.status} {answer.body[:200].decode(errors='replace')}")
             load.done += 1
 
     caller = threading.Thread(target=call, daemon=True)
@@ -158,8 +159,9 @@ def _rest_load(url: str, scene_name: str, on: bool):
 
 def latency(scene_name: str, seconds: float, steps: int) -> dict:
     with BackgroundServer() as server:
-        scene = server.app.state.service.scenes[scene_name]
-        info = server.app.state.service.infos[scene_name].model_dump()
+        # the server's scenes folder, loaded again here for the paintings timed alone
+        scene = load_scene(scene_name, server.settings.scenes)
+        info = next(s for s in get_json(f"{server.url}/api/scenes") if s["name"] == scene_name)
         params = scene.paint
         print(
             f"rcp bench latency: scene {scene_name}, {server.settings.threads} threads, camera messages at "
@@ -185,12 +187,12 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
                 "temporal": temporal,
                 "alone_ms": round(alone, 1),
                 "fps": round(f.fps, 1),
-                "latency_p50_ms": round(_percentile(f.latencies_ms, 50), 1),
-                "latency_p95_ms": round(_percentile(f.latencies_ms, 95), 1),
-                "render_p50_ms": round(_percentile(f.render_ms, 50), 1),
+                "latency_p50_ms": round(percentile(f.latencies_ms, 50), 1),
+                "latency_p95_ms": round(percentile(f.latencies_ms, 95), 1),
+                "render_p50_ms": round(percentile(f.render_ms, 50), 1),
                 "scale_mean": round(statistics.fmean(f.scales), 2) if f.scales else None,
-                "step_p50_ms": round(_percentile(f.step_ms, 50), 1),
-                "step_p95_ms": round(_percentile(f.step_ms, 95), 1),
+                "step_p50_ms": round(percentile(f.step_ms, 50), 1),
+                "step_p95_ms": round(percentile(f.step_ms, 95), 1),
                 "rest_renders": load.done if busy else 0,
             }
             rows.append(row)

@@ -7,20 +7,24 @@ import numpy as np
 import pytest
 from conftest import CAMERA, make_scene
 
-from rcp_server.camera import Camera, CameraError, Region
-from rcp_server.imagespace import bilinear, lookup_coords
-from rcp_server.painting import _frame, displacements, paint
-from rcp_server.params import EDGES, PaintParams
-from rcp_server.stability import (
+from rcp_server.bench.stability import (
+    BROKEN,
     eye_section,
     flicker,
     grazing_scene,
+    non_finite_section,
     pan,
     primary_directions,
     project,
     smudge_correlations,
     thin_poles_scene,
 )
+from rcp_server.camera import Camera, CameraError, Region
+from rcp_server.imagespace import bilinear, lookup_coords
+from rcp_server.mappings import MAPPINGS
+from rcp_server.painting import paint
+from rcp_server.params import EDGES, PaintParams
+from rcp_server.raytrace import displacements, setup_tile
 
 W, H = 48, 32
 
@@ -32,7 +36,7 @@ def test_image_method_differs_from_ray_tracing_only_where_lookups_leave_the_scre
     looked = paint(gradient_scene, CAMERA, W, H, replace(params, method="image", edge=edge)).image.reshape(-1, 3)
     plain = paint(gradient_scene, CAMERA, W, H, replace(params, iterations=1)).state
     region = Region(W, H)
-    v_p, _ = displacements(plain, _frame(CAMERA, region, params), params, params.focus(CAMERA))
+    v_p, _ = displacements(plain, setup_tile(CAMERA, region, params), params, params.focus(CAMERA))
     x, y, _ = lookup_coords(v_p, CAMERA, region)
     off = (x < 0) | (x > W - 1) | (y < 0) | (y > H - 1)
     assert 0.05 < off.mean() < 0.5
@@ -120,3 +124,10 @@ def test_smudges_stick_to_the_scene_not_to_the_screen(busy_scene, method):
     fixed = [np.random.default_rng(3).normal(0, 0.1, (H, W, 3))] * 3  # a screen-space filter's pattern
     with_scene, with_screen = smudge_correlations(fixed, cameras, lag=2)
     assert with_screen == pytest.approx(1.0) and with_scene < 0.3
+
+
+def test_the_broken_mapping_is_registered_only_while_its_section_paints(busy_scene):
+    assert BROKEN not in MAPPINGS  # importing the benchmark registered nothing
+    measured = non_finite_section(busy_scene, W, H, PaintParams(iterations=2, lambda_p=6.0))
+    assert measured == {m: {"finite": True, "non_finite_pixels_kept_plain": True} for m in ("raytrace", "image")}
+    assert BROKEN not in MAPPINGS

@@ -23,15 +23,16 @@ from pathlib import Path
 import numpy as np
 from scipy.ndimage import binary_dilation
 
-from .camera import Camera, CameraError, Region
-from .imagespace import bilinear, lookup_coords
-from .mappings import register_mapping
-from .meshes import Part, primitive
+from ..camera import Camera, CameraError, Region
+from ..imagespace import bilinear, lookup_coords
+from ..mappings import register_mapping, unregister_mapping
+from ..meshes import Part, primitive
+from ..painting import paint
+from ..params import EDGES, PaintParams
+from ..raytrace import Rays, assign_cameras, displacements, setup_tile
+from ..scene import Environment, Scene, SceneObject
+from ..scenefile import load_scene
 from .metrics import edge_band, psnr
-from .painting import _cast, _frame, _Rays, displacements, paint
-from .params import EDGES, PaintParams
-from .scene import Environment, Scene, SceneObject
-from .scenefile import load_scene
 
 # ---- measures ----
 
@@ -65,7 +66,7 @@ def project(camera: Camera, width: int, height: int, directions: np.ndarray) -> 
 def primary_directions(camera: Camera, width: int, height: int) -> np.ndarray:
     """Unit directions of the rays through every pixel centre, (W*H, 3) float64, row-major."""
     region = Region(width, height)
-    plane = _frame(camera, region, PaintParams()).plane()
+    plane = setup_tile(camera, region, PaintParams()).plane()
     d = plane - np.asarray(camera.eye)
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
@@ -130,8 +131,10 @@ def grazing_scene() -> Scene:
     return Scene("grazing", "grazing ground", camera, Environment.constant((0.5, 0.7, 0.9)), None, [ground])
 
 
-@register_mapping("stability-broken", reads={"color"})
-def _broken(data):
+BROKEN = "stability-broken"  # registered only while non_finite_section paints with it
+
+
+def broken_field(data):
     """The color field with NaN in every other pixel and infinity in every fourth (a broken custom W)."""
     d = data.color_field().astype(np.float64)
     d[::2] = np.nan
@@ -192,15 +195,15 @@ def _miss_fraction(scene: Scene, camera: Camera, state, params: PaintParams, wid
     """The fraction of the rays the next iteration would cast from ``state`` that leave the scene."""
     _, tracer = scene.geometry(0.0)
     region = Region(width, height)
-    rays = _Rays.allocate(region.pixel_count, 1)
-    _cast(state, _frame(camera, region, params), params, params.focus(camera), rays)
+    rays = Rays.allocate(region.pixel_count, 1)
+    assign_cameras(state, setup_tile(camera, region, params), params, params.focus(camera), rays)
     return 1.0 if tracer is None else float((tracer.intersect(rays.origins, rays.directions).face < 0).mean())
 
 
 def _off_screen_fraction(camera: Camera, state, params: PaintParams, width: int, height: int) -> float:
     """The fraction of the lookups the next image iteration would make from ``state`` that leave the screen."""
     region = Region(width, height)
-    v_p, _ = displacements(state, _frame(camera, region, params), params, params.focus(camera))
+    v_p, _ = displacements(state, setup_tile(camera, region, params), params, params.focus(camera))
     x, y, _ = lookup_coords(v_p, camera, region)
     return float(((x < 0) | (x > width - 1) | (y < 0) | (y > height - 1)).mean())
 
@@ -265,18 +268,28 @@ def extremes_section(scene: Scene, width: int, height: int, params: PaintParams,
         except CameraError as exc:
             degenerate[name] = f"CameraError: {exc}"
     out["degenerate_cameras"] = degenerate
-    nan = {}
+    out["non_finite_displacements"] = non_finite_section(scene, width, height, params)
+    return out
+
+
+def non_finite_section(scene: Scene, width: int, height: int, params: PaintParams) -> dict:
+    """Both methods with a mapping whose field is NaN or infinite in three pixels out of four: is every pixel
+    finite, and do those pixels keep the plain render (a non-finite displacement moves nothing)?"""
     plain = paint(scene, scene.camera, width, height, replace(params, iterations=1)).image.reshape(-1, 3)
-    for method in ("raytrace", "image"):
-        p = replace(params, mapping="stability-broken", method=method)
-        image = paint(scene, scene.camera, width, height, p).image.reshape(-1, 3)
-        nan[method] = {
-            "finite": bool(np.all(np.isfinite(image))),
-            "non_finite_pixels_kept_plain": bool(
-                np.array_equal(image[::2], plain[::2]) and np.array_equal(image[1::4], plain[1::4])
-            ),
-        }
-    out["non_finite_displacements"] = nan
+    out = {}
+    register_mapping(BROKEN, reads={"color"}, field=broken_field)
+    try:
+        for method in ("raytrace", "image"):
+            p = replace(params, mapping=BROKEN, method=method)
+            image = paint(scene, scene.camera, width, height, p).image.reshape(-1, 3)
+            out[method] = {
+                "finite": bool(np.all(np.isfinite(image))),
+                "non_finite_pixels_kept_plain": bool(
+                    np.array_equal(image[::2], plain[::2]) and np.array_equal(image[1::4], plain[1::4])
+                ),
+            }
+    finally:
+        unregister_mapping(BROKEN)
     return out
 
 

@@ -4,7 +4,7 @@ import json
 
 import pytest
 
-from rcp_server.accuracy import Sweep, pareto, run
+from rcp_server.bench.accuracy import Sweep, pareto, run
 
 
 def test_pareto_front_keeps_only_points_nothing_beats_on_both_time_and_quality():

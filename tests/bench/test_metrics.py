@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from rcp_server.metrics import PSNR_CAP, edge_band, psnr, ssim, ssim_map, upscale
+from rcp_server.bench.metrics import PSNR_CAP, edge_band, psnr, ssim, ssim_map, upscale
 
 
 def test_psnr_of_a_known_error_and_of_identical_images():

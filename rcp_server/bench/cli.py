@@ -1,0 +1,141 @@
+"""``rcp bench X``: one subcommand per benchmark, each with its own flags.
+
+A benchmark's module is imported only when it runs, after the packages it needs beyond a plain install are
+found: a missing one is reported in one line that names the extra to install (``MissingExtra``, exit code 2),
+never as a traceback minutes into a run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+from pathlib import Path
+
+from ..argtypes import finite, positive_int
+
+EXTRA = "pip install '.[bench]' in the rcp source folder"
+# (module to find, requirement to name): what the bench extra adds to a plain install
+MATPLOTLIB = ("matplotlib", "matplotlib")
+WEBSOCKETS = ("websockets.asyncio.client", "websockets>=14")  # a plain install has it through uvicorn[standard]
+
+
+class MissingExtra(Exception):
+    """A benchmark needs a package that this install lacks; the message says which extra brings it."""
+
+
+def _findable(module: str) -> bool:
+    try:
+        return importlib.util.find_spec(module) is not None
+    except (ImportError, ValueError):  # a parent package missing, or blocked (None in sys.modules)
+        return False
+
+
+def require(benchmark: str, *needs: tuple[str, str]) -> None:
+    """Raise ``MissingExtra`` unless every ``(module, requirement)`` of ``needs`` can be imported."""
+    missing = [requirement for module, requirement in needs if not _findable(module)]
+    if missing:
+        raise MissingExtra(f"rcp bench {benchmark} needs {', '.join(missing)}, which the bench extra installs: {EXTRA}")
+
+
+# ---- what each subcommand runs ----
+
+
+def _speed(args: argparse.Namespace) -> None:
+    from .speed import speed
+
+    speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
+
+
+def _latency(args: argparse.Namespace) -> None:
+    require("latency", WEBSOCKETS)
+    from .latency import latency
+
+    latency(args.scene, args.seconds, args.steps)
+
+
+def _soak(args: argparse.Namespace) -> None:
+    require("soak", WEBSOCKETS)
+    from .soak import bench_soak
+
+    bench_soak(args.seconds, args.clients, args.rest)
+
+
+def _accuracy(args: argparse.Namespace) -> None:
+    require("accuracy", MATPLOTLIB)  # for the chart, drawn at the end: refuse before measuring for minutes
+    from .accuracy import run
+
+    run(args.out, quick=args.quick, threads=args.threads)
+
+
+def _stability(args: argparse.Namespace) -> None:
+    require("stability", MATPLOTLIB)
+    from .stability import run
+
+    run(args.out, quick=args.quick)
+
+
+# ---- the subcommands ----
+
+
+def _out_and_quick(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--out", type=Path, default=Path("bench-out"), help="folder for the JSON and the PNG chart (default bench-out)"
+    )
+    p.add_argument("--quick", action="store_true", help="a smaller, faster run (320x180)")
+
+
+def add_bench_commands(subparsers) -> None:
+    """Add ``bench`` and its subcommands to ``rcp``'s subparsers; each sets ``run_bench(args)``."""
+    bench = subparsers.add_parser(
+        "bench",
+        help="benchmarks that print figures (accuracy and stability also chart them)",
+        description="Benchmarks that print figures; 'rcp bench BENCHMARK --help' gives each one's flags.",
+    )
+    which = bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK")
+
+    def command(name: str, summary: str) -> argparse.ArgumentParser:
+        return which.add_parser(name, help=summary, description=f"rcp bench {name}: {summary}.")
+
+    p = command("speed", "the engine against Embree alone: where an iteration's time goes")
+    p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")
+    p.add_argument("--width", type=positive_int, default=640, help="pixels (default 640)")
+    p.add_argument("--height", type=positive_int, default=360, help="pixels (default 360)")
+    p.add_argument("--iterations", type=positive_int, default=6, help="recursion depth (default 6)")
+    p.add_argument(
+        "--repeats", type=positive_int, default=5, help="paintings timed, each paired with Embree alone (default 5)"
+    )
+    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    p.set_defaults(run_bench=_speed)
+
+    p = command("latency", "the walk-through's latency and frame rate, against a real server")
+    p.add_argument("--scene", default="default", help="a scene the server serves (default: default)")
+    p.add_argument("--seconds", type=finite, default=4.0, help="seconds of walking per size and mode (default 4)")
+    p.add_argument("--steps", type=positive_int, default=10, help="single camera steps from rest (default 10)")
+    p.set_defaults(run_bench=_latency)
+
+    p = command("soak", "rcp serve under WebSocket and REST load: its memory and threads after")
+    p.add_argument("--seconds", type=finite, default=60.0, help="seconds of load (default 60)")
+    p.add_argument(
+        "--clients",
+        type=positive_int,
+        default=6,
+        help="WebSocket walk-throughs at once (the server takes RCP_MAX_SESSIONS, 8; default 6)",
+    )
+    p.add_argument(
+        "--rest",
+        type=int,
+        default=2,
+        choices=range(0, 65),
+        metavar="0..64",
+        help="REST callers posting renders back to back (default 2)",
+    )
+    p.set_defaults(run_bench=_soak)
+
+    p = command("accuracy", "time per frame against error, both methods (needs the bench extra)")
+    _out_and_quick(p)
+    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    p.set_defaults(run_bench=_accuracy)
+
+    p = command("stability", "where each method breaks (needs the bench extra)")
+    _out_and_quick(p)
+    p.set_defaults(run_bench=_stability)
