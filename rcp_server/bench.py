@@ -12,19 +12,18 @@ import time
 from concurrent.futures import ThreadPoolExecutor
 
 from .camera import Region
-from .painting import STAGES, _cast, _frame, _Rays, default_threads, paint, tile_rows
+from .painting import STAGES, default_threads, paint, tile_rows
 from .params import PaintParams
+from .raytrace import Rays, assign_cameras, setup_tile
 from .scenefile import load_scene
 
 
 def _embree_alone(tracer, origins, directions, tiles, pool, passes: int) -> float:
     """Seconds per pass of the tracer's raw Embree query over the given ray bands, threads as in painting
     (as many passes as the painting has iterations, so both sides of a pair span the same stretch of time)."""
-    raw = tracer._scene  # the native scene itself: no validity masks, no wrapping
-
     def run(band):
         for _ in range(passes):
-            raw.run(origins[band], directions[band], output=1)
+            tracer.bare_query(origins[band], directions[band])
 
     clock = time.perf_counter()
     list(pool.map(run, tiles))
@@ -48,10 +47,10 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     # the rays a painted iteration casts (those after the sixth), in the same row bands as the painting
     region = Region(width, height)
     state = paint(scene, camera, width, height, params, threads=threads).state
-    frame = _frame(camera, region, params)
+    frame = setup_tile(camera, region, params)
     n = region.pixel_count
-    rays = _Rays.allocate(n, 1)
-    _cast(state, frame, params, params.focus(camera), rays)
+    rays = Rays.allocate(n, 1)
+    assign_cameras(state, frame, params, params.focus(camera), rays)
     origins, directions = rays.origins, rays.directions
     bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(tile_rows(region, threads))]
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0

@@ -28,8 +28,9 @@ from .imagespace import bilinear, lookup_coords
 from .mappings import register_mapping
 from .meshes import Part, primitive
 from .metrics import edge_band, psnr
-from .painting import _cast, _frame, _Rays, displacements, paint
+from .painting import paint
 from .params import EDGES, PaintParams
+from .raytrace import Rays, assign_cameras, displacements, setup_tile
 from .scene import Environment, Scene, SceneObject
 from .scenefile import load_scene
 
@@ -65,7 +66,7 @@ def project(camera: Camera, width: int, height: int, directions: np.ndarray) -> 
 def primary_directions(camera: Camera, width: int, height: int) -> np.ndarray:
     """Unit directions of the rays through every pixel centre, (W*H, 3) float64, row-major."""
     region = Region(width, height)
-    plane = _frame(camera, region, PaintParams()).plane()
+    plane = setup_tile(camera, region, PaintParams()).plane()
     d = plane - np.asarray(camera.eye)
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
@@ -192,15 +193,15 @@ def _miss_fraction(scene: Scene, camera: Camera, state, params: PaintParams, wid
     """The fraction of the rays the next iteration would cast from ``state`` that leave the scene."""
     _, tracer = scene.geometry(0.0)
     region = Region(width, height)
-    rays = _Rays.allocate(region.pixel_count, 1)
-    _cast(state, _frame(camera, region, params), params, params.focus(camera), rays)
+    rays = Rays.allocate(region.pixel_count, 1)
+    assign_cameras(state, setup_tile(camera, region, params), params, params.focus(camera), rays)
     return 1.0 if tracer is None else float((tracer.intersect(rays.origins, rays.directions).face < 0).mean())
 
 
 def _off_screen_fraction(camera: Camera, state, params: PaintParams, width: int, height: int) -> float:
     """The fraction of the lookups the next image iteration would make from ``state`` that leave the screen."""
     region = Region(width, height)
-    v_p, _ = displacements(state, _frame(camera, region, params), params, params.focus(camera))
+    v_p, _ = displacements(state, setup_tile(camera, region, params), params, params.focus(camera))
     x, y, _ = lookup_coords(v_p, camera, region)
     return float(((x < 0) | (x > width - 1) | (y < 0) | (y > height - 1)).mean())
 
