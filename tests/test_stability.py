@@ -9,8 +9,9 @@ from conftest import CAMERA, make_scene
 
 from rcp_server.camera import Camera, CameraError, Region
 from rcp_server.imagespace import bilinear, lookup_coords
-from rcp_server.painting import _frame, displacements, paint
+from rcp_server.painting import paint
 from rcp_server.params import EDGES, PaintParams
+from rcp_server.raytrace import displacements, setup_tile
 from rcp_server.stability import (
     eye_section,
     flicker,
@@ -32,7 +33,7 @@ def test_image_method_differs_from_ray_tracing_only_where_lookups_leave_the_scre
     looked = paint(gradient_scene, CAMERA, W, H, replace(params, method="image", edge=edge)).image.reshape(-1, 3)
     plain = paint(gradient_scene, CAMERA, W, H, replace(params, iterations=1)).state
     region = Region(W, H)
-    v_p, _ = displacements(plain, _frame(CAMERA, region, params), params, params.focus(CAMERA))
+    v_p, _ = displacements(plain, setup_tile(CAMERA, region, params), params, params.focus(CAMERA))
     x, y, _ = lookup_coords(v_p, CAMERA, region)
     off = (x < 0) | (x > W - 1) | (y < 0) | (y > H - 1)
     assert 0.05 < off.mean() < 0.5
