@@ -36,18 +36,8 @@ class TileSetup:
     image_plane: kernels.ImagePlane = field(init=False)  # the image plane and the tile, as the kernels take them
 
     def __post_init__(self):
-        self.basis = np.stack(self.camera.basis())
-        region = self.region
-        self.image_plane = kernels.ImagePlane(
-            basis=self.basis,
-            tan_half=self.camera.half_height(),
-            aspect=region.full_width / region.full_height,
-            full_width=region.full_width,
-            full_height=region.full_height,
-            x0=region.x0,
-            y0=region.y0,
-            width=region.width,
-        )
+        self.image_plane = kernels.ImagePlane.of(self.camera, self.region)
+        self.basis = self.image_plane.basis
 
     def plane(self) -> np.ndarray:
         """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""

@@ -11,6 +11,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..camera import Camera, Region
 from ..paintstate import CHANNELS, channel_shape
 
 Channels = namedtuple("Channels", CHANNELS)
@@ -32,6 +33,20 @@ class ImagePlane(NamedTuple):
     x0: int  # the tile's top-left pixel
     y0: int
     width: int  # the tile's width: its pixels are row-major
+
+    @classmethod
+    def of(cls, camera: Camera, region: Region) -> ImagePlane:
+        """The image plane of ``camera`` and where ``region`` lies on it."""
+        return cls(
+            basis=np.stack(camera.basis()),
+            tan_half=camera.half_height(),
+            aspect=region.full_width / region.full_height,
+            full_width=region.full_width,
+            full_height=region.full_height,
+            x0=region.x0,
+            y0=region.y0,
+            width=region.width,
+        )
 
 
 class Field(NamedTuple):

@@ -23,34 +23,29 @@ def fill_field(field, basis, previous, z0, noise, noise_scale, out):
     (dummies where the mapping does not read them);  z0 : focus depth;  noise : (n, 3) float32.
     One loop per kind (a branch per pixel costs more than the field itself). Non-finite values move nothing.
     """
-    kind = field.kind
-    scale = field.scale
-    given = field.given
-    color = previous.color
-    depth = previous.depth
-    normal = previous.normal
-    direction = previous.direction
     n = out.shape[0]
-    if kind == FIELD_ZERO:
+    if field.kind == FIELD_ZERO:
         out[:] = 0.0
         return
-    if kind == FIELD_COLOR or kind == FIELD_DEPTH:
+    if field.kind == FIELD_COLOR or field.kind == FIELD_DEPTH:
         for pix in range(n):
-            k = abs(depth[pix] - z0) if kind == FIELD_DEPTH else 1.0
-            a = 2.0 * color[pix, 0] - 1.0
-            b = 2.0 * color[pix, 1] - 1.0
-            c = 2.0 * color[pix, 2] - 1.0
+            k = abs(previous.depth[pix] - z0) if field.kind == FIELD_DEPTH else 1.0
+            a = 2.0 * previous.color[pix, 0] - 1.0
+            b = 2.0 * previous.color[pix, 1] - 1.0
+            c = 2.0 * previous.color[pix, 2] - 1.0
             for q in range(3):
                 out[pix, q] = k * (a * basis[0, q] + b * basis[1, q] + c * basis[2, q])
-    elif kind == FIELD_NORMAL:
+    elif field.kind == FIELD_NORMAL:
+        d, nrm = previous.direction, previous.normal
         for pix in range(n):
-            out[pix, 0] = direction[pix, 1] * normal[pix, 2] - direction[pix, 2] * normal[pix, 1]
-            out[pix, 1] = direction[pix, 2] * normal[pix, 0] - direction[pix, 0] * normal[pix, 2]
-            out[pix, 2] = direction[pix, 0] * normal[pix, 1] - direction[pix, 1] * normal[pix, 0]
+            out[pix, 0] = d[pix, 1] * nrm[pix, 2] - d[pix, 2] * nrm[pix, 1]
+            out[pix, 1] = d[pix, 2] * nrm[pix, 0] - d[pix, 0] * nrm[pix, 2]
+            out[pix, 2] = d[pix, 0] * nrm[pix, 1] - d[pix, 1] * nrm[pix, 0]
     else:
         for pix in range(n):
             for q in range(3):
-                out[pix, q] = given[pix, q]
+                out[pix, q] = field.given[pix, q]
+    scale = field.scale
     for pix in range(n):
         for q in range(3):
             v = scale * (out[pix, q] + noise_scale * noise[pix, q]) if noise_scale != 0.0 else scale * out[pix, q]
@@ -89,14 +84,9 @@ def cast_rays(
     P_p' = P_p(s, t) + V_p with P_p as in camera.py. A non-finite displacement moves nothing.
     write_origins : False when the eyes do not move and origins already hold the eye (saves a pass of writes)
     """
-    basis = plane.basis
-    tan_half = plane.tan_half
-    aspect = plane.aspect
-    full_width = plane.full_width
-    full_height = plane.full_height
-    x0 = plane.x0
-    y0 = plane.y0
-    width = plane.width
+    basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
+    full_width, full_height = plane.full_width, plane.full_height
+    x0, y0, width = plane.x0, plane.y0, plane.width
     n_pix, spp = xi.shape
     # what does not move is neither filled nor read: at this size every pass over memory counts
     targets_move = target.kind != FIELD_ZERO

@@ -32,22 +32,11 @@ def look_up(v_p, moves, plane, edge, plain, out):
     matching plain channel is full-size; out.direction is renormalised (a bilinear mix of unit vectors
     is shorter than one).
     """
-    basis = plane.basis
-    tan_half = plane.tan_half
-    aspect = plane.aspect
-    full_width = plane.full_width
-    full_height = plane.full_height
-    x0 = plane.x0
-    y0 = plane.y0
-    width = plane.width
-    color = plain.color
-    depth = plain.depth
-    normal = plain.normal
-    direction = plain.direction
-    out_color = out.color
-    out_depth = out.depth
-    out_normal = out.normal
-    out_direction = out.direction
+    basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
+    full_width, full_height = plane.full_width, plane.full_height
+    x0, y0, width = plane.x0, plane.y0, plane.width
+    color, depth, normal, direction = plain.color, plain.depth, plain.normal, plain.direction
+    out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = out_color.shape[0]
     n_full = full_width * full_height
     has_depth = depth.shape[0] == n_full

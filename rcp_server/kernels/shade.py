@@ -104,22 +104,11 @@ def shade(
     view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
     miss); direction (n, 3) ray direction. The channels not needed are not written.
     """
-    face = hits.face
-    t = hits.t
-    b1 = hits.b1
-    b2 = hits.b2
-    normals = surfaces.normals
-    colors = surfaces.colors
-    uv = surfaces.uv
-    texture_id = surfaces.texture_id
-    texels = surfaces.texels
-    texture_offset = surfaces.texture_offset
-    texture_width = surfaces.texture_width
-    texture_height = surfaces.texture_height
-    out_color = out.color
-    out_depth = out.depth
-    out_normal = out.normal
-    out_direction = out.direction
+    face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
+    normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
+    texels, texture_offset = surfaces.texels, surfaces.texture_offset
+    texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
+    out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = out_color.shape[0]
     env_h = environment.shape[0]
     env_w = environment.shape[1]

@@ -95,16 +95,7 @@ def test_look_up_kernel_matches_numpy_reference(edge, channels):
     v_p[0] = -2.0 * np.stack(camera.basis())[2]  # behind the eye
     v_p[1] = (np.nan, 0.0, 0.0)
     out = {name: np.full((n, 3) if name != "depth" else n, 7.0, np.float32) for name in plain}
-    plane = kernels.ImagePlane(
-        basis=np.stack(camera.basis()),
-        tan_half=camera.half_height(),
-        aspect=w / h,
-        full_width=w,
-        full_height=h,
-        x0=region.x0,
-        y0=region.y0,
-        width=region.width,
-    )
+    plane = kernels.ImagePlane.of(camera, region)
     kernels.look_up(
         v_p=v_p,
         moves=True,

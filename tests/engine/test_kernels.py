@@ -86,27 +86,12 @@ def _cast_inputs(seed, region, spp):
     return data, xi, eta
 
 
-def _image_plane(camera, region):
-    return kernels.ImagePlane(
-        basis=np.stack(camera.basis()),
-        tan_half=camera.half_height(),
-        aspect=region.full_width / region.full_height,
-        full_width=region.full_width,
-        full_height=region.full_height,
-        x0=region.x0,
-        y0=region.y0,
-        width=region.width,
-    )
-
-
-def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
+def _cast_args(camera, region, xi, eta, data, z0, target, eye, noise_scale) -> dict:
+    """Every argument of kernels.cast_rays but write_origins; the outputs start at 7.0 (never written: still 7.0)."""
     n, spp = xi.shape
-    v_p, v_e = np.full((n, 3), 7.0), np.full((n, 3), 7.0)
-    origins = np.full((n * spp, 3), 7.0, np.float32)
-    directions = np.full((n * spp, 3), 7.0, np.float32)
-    bad = kernels.cast_rays(
+    return dict(
         eye=np.asarray(camera.eye, np.float64),
-        plane=_image_plane(camera, region),
+        plane=kernels.ImagePlane.of(camera, region),
         xi=xi,
         eta=eta,
         previous=kernels.Channels(data["color"], data["depth"], data["normal"], data["direction"]),
@@ -115,13 +100,17 @@ def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
         eye_field=kernels.Field(eye[0], eye[1], data["given"][::-1].copy()),
         noise=data["noise"],
         noise_scale=noise_scale,
-        v_p=v_p,
-        v_e=v_e,
-        origins=origins,
-        directions=directions,
-        write_origins=True,
+        v_p=np.full((n, 3), 7.0),
+        v_e=np.full((n, 3), 7.0),
+        origins=np.full((n * spp, 3), 7.0, np.float32),
+        directions=np.full((n * spp, 3), 7.0, np.float32),
     )
-    return bad, v_p, v_e, origins, directions
+
+
+def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
+    args = _cast_args(camera, region, xi, eta, data, z0, target, eye, noise_scale)
+    bad = kernels.cast_rays(**args, write_origins=True)
+    return bad, args["v_p"], args["v_e"], args["origins"], args["directions"]
 
 
 @pytest.mark.parametrize("noise_scale", [0.0, 0.35])
@@ -500,26 +489,9 @@ def test_environment_texel_centres_are_exact():
 def test_cast_rays_leaves_origins_alone_when_told_they_already_hold_the_eye():
     camera = Camera((0.5, 1.0, 2.0), (-1.0, 0.0, -3.0))
     region = Region(6, 4)
-    n = region.pixel_count
     data, xi, eta = _cast_inputs(4, region, 1)
-    origins = np.full((n, 3), 7.0, np.float32)
-    directions = np.empty_like(origins)
-    args = dict(
-        eye=np.asarray(camera.eye, np.float64),
-        plane=_image_plane(camera, region),
-        xi=xi,
-        eta=eta,
-        previous=kernels.Channels(data["color"], data["depth"], data["normal"], data["direction"]),
-        z0=1.0,
-        target=kernels.Field(kernels.FIELD_COLOR, 0.1, data["given"]),
-        eye_field=kernels.Field(kernels.FIELD_ZERO, 0.0, data["given"]),
-        noise=data["noise"],
-        noise_scale=0.0,
-        v_p=np.empty((n, 3)),
-        v_e=np.empty((n, 3)),
-        origins=origins,
-        directions=directions,
-    )
+    args = _cast_args(camera, region, xi, eta, data, 1.0, (kernels.FIELD_COLOR, 0.1), (kernels.FIELD_ZERO, 0.0), 0.0)
+    origins = args["origins"]
     kernels.cast_rays(**args, write_origins=False)
     assert np.all(origins == 7.0)  # untouched
     kernels.cast_rays(**args, write_origins=True)
