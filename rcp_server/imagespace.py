@@ -14,20 +14,21 @@ Off screen, an integer pixel index ``k`` of a row of ``n`` pixels is mapped back
   then the image runs backwards: the paper's choice, and the default).
 
 A pixel whose displaced target is not in front of the eye (``(P_p' - eye) . f <= 0``: it has no
-projection) or whose offset is not finite keeps its own plain value. :func:`look_up` is the compiled
-pass the painting runs; :func:`lookup_coords` and :func:`bilinear` are its plain numpy form (the tests
-check that they agree).
+projection) or whose offset is not finite keeps its own plain value. ``kernels.look_up`` is the
+compiled pass the painting runs (:func:`tile_iteration`); :func:`lookup_coords` and :func:`bilinear` are
+its plain numpy form (the tests check that they agree).
 """
 
 from __future__ import annotations
 
-import math
-
-import numba
 import numpy as np
 
+from . import kernels
 from .camera import Camera, Region
-from .params import EDGES
+from .paintstate import PaintState, TileIteration
+from .params import EDGES, PaintParams
+from .raytrace import TileSetup, field_plan
+from .stopwatch import Stopwatch
 
 
 def lookup_coords(v_p: np.ndarray, camera: Camera, region: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -105,127 +106,49 @@ def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray, edge: str) -> np.n
     return top * (1.0 - fy) + bottom * fy
 
 
-EDGE_CLAMP, EDGE_WRAP, EDGE_MIRROR = 0, 1, 2  # the kernel's codes for EDGES, in order
+def tile_iteration(plain: PaintState, setup: TileSetup, params: PaintParams) -> TileIteration:
+    """One image-space iteration of the tile ``setup`` describes: ``I_{n-1} -> I_n``, each pixel looking up
+    ``plain`` (the full frame's plain render, every recorded channel) where its displaced target projects,
+    one bilinear lookup per pixel at its centre (samples per pixel only antialias the plain render).
 
-_jit = numba.njit(nogil=True, cache=True, error_model="numpy")
-
-
-@numba.njit(inline="always")
-def _edge(k, n, edge):
-    if edge == EDGE_CLAMP:
-        return min(max(k, 0), n - 1)
-    k %= n if edge == EDGE_WRAP else 2 * n  # Python's modulo: never negative
-    return 2 * n - 1 - k if k >= n else k
-
-
-@_jit
-def look_up(
-    v_p,
-    moves,
-    basis,
-    tan_half,
-    aspect,
-    full_width,
-    full_height,
-    x0,
-    y0,
-    width,
-    edge,
-    color,
-    depth,
-    normal,
-    direction,
-    out_color,
-    out_depth,
-    out_normal,
-    out_direction,
-):
-    """:func:`lookup_coords` and :func:`bilinear` fused, for one region and every recorded channel.
-
-    v_p : (n, 3) float64 displacement per pixel of the region (not read unless ``moves``)
-    basis : (3, 3) rows r, u, f;  tan_half, aspect : as in kernels.cast_rays;  edge : EDGE_*
-    color, depth, normal, direction : the plain render of the full image, row-major (W*H, ...) float32;
-    the last three may be dummies. out_* : (n, ...) float32, written only when the matching input is
-    full-size; out_direction is renormalised (a bilinear mix of unit vectors is shorter than one).
+    Stages: "camera" is the displacement, "shade" the projection and lookup. A state that cannot move a
+    pixel (the canvas, a missing channel) leaves it its plain value.
     """
-    n_pix = out_color.shape[0]
-    n_full = full_width * full_height
-    has_depth = depth.shape[0] == n_full
-    has_normal = normal.shape[0] == n_full
-    has_direction = direction.shape[0] == n_full
-    inv_pitch = full_height / (2.0 * tan_half)
-    last_x = float(full_width - 1)
-    last_y = float(full_height - 1)
-    rows = n_pix // width
-    span_x = float(full_width) if edge == EDGE_WRAP else 2.0 * full_width
-    span_y = float(full_height) if edge == EDGE_WRAP else 2.0 * full_height
-    for row in range(rows):
-        j = y0 + row
-        ty = (1.0 - 2.0 * (j + 0.5) / full_height) * tan_half
-        for col in range(width):
-            pix = row * width + col
-            i = x0 + col
-            x = float(i)
-            y = float(j)
-            if moves:
-                sx = (2.0 * (i + 0.5) / full_width - 1.0) * aspect * tan_half
-                vr = v_p[pix, 0] * basis[0, 0] + v_p[pix, 1] * basis[0, 1] + v_p[pix, 2] * basis[0, 2]
-                vu = v_p[pix, 0] * basis[1, 0] + v_p[pix, 1] * basis[1, 1] + v_p[pix, 2] * basis[1, 2]
-                vf = v_p[pix, 0] * basis[2, 0] + v_p[pix, 1] * basis[2, 1] + v_p[pix, 2] * basis[2, 2]
-                ahead = 1.0 + vf
-                if ahead > 0.0:
-                    scale = inv_pitch / ahead
-                    dx = (vr - sx * vf) * scale
-                    dy = (ty * vf - vu) * scale
-                    if math.isfinite(dx) and math.isfinite(dy):
-                        x += dx
-                        y += dy
-            if 0.0 <= x < last_x and 0.0 <= y < last_y:  # on screen, all four neighbours too: most pixels
-                c0 = int(x)
-                r0 = int(y)
-                fx = x - c0
-                fy = y - r0
-                c1 = c0 + 1
-                r1 = r0 + 1
-            else:
-                # ---- into a range whose integer neighbours fit, then the four pixels by the edge mode ----
-                if edge == EDGE_CLAMP:
-                    x = min(max(x, -1.0), float(full_width))
-                    y = min(max(y, -1.0), float(full_height))
-                else:
-                    x %= span_x
-                    y %= span_y
-                fx0 = math.floor(x)
-                fy0 = math.floor(y)
-                fx = x - fx0
-                fy = y - fy0
-                c0 = _edge(int(fx0), full_width, edge)
-                c1 = _edge(int(fx0) + 1, full_width, edge)
-                r0 = _edge(int(fy0), full_height, edge)
-                r1 = _edge(int(fy0) + 1, full_height, edge)
-            a0 = r0 * full_width + c0
-            a1 = r0 * full_width + c1
-            b0 = r1 * full_width + c0
-            b1 = r1 * full_width + c1
-            w00 = (1.0 - fx) * (1.0 - fy)
-            w01 = fx * (1.0 - fy)
-            w10 = (1.0 - fx) * fy
-            w11 = fx * fy
-            for q in range(3):
-                out_color[pix, q] = w00 * color[a0, q] + w01 * color[a1, q] + w10 * color[b0, q] + w11 * color[b1, q]
-            if has_depth:
-                out_depth[pix] = w00 * depth[a0] + w01 * depth[a1] + w10 * depth[b0] + w11 * depth[b1]
-            if has_normal:
-                for q in range(3):
-                    out_normal[pix, q] = (
-                        w00 * normal[a0, q] + w01 * normal[a1, q] + w10 * normal[b0, q] + w11 * normal[b1, q]
-                    )
-            if has_direction:
-                dx = w00 * direction[a0, 0] + w01 * direction[a1, 0] + w10 * direction[b0, 0] + w11 * direction[b1, 0]
-                dy = w00 * direction[a0, 1] + w01 * direction[a1, 1] + w10 * direction[b0, 1] + w11 * direction[b1, 1]
-                dz = w00 * direction[a0, 2] + w01 * direction[a1, 2] + w10 * direction[b0, 2] + w11 * direction[b1, 2]
-                length = math.sqrt(dx * dx + dy * dy + dz * dz)
-                inv = 1.0 / length if length > 0.0 else 0.0
-                out_direction[pix, 0] = dx * inv
-                out_direction[pix, 1] = dy * inv
-                out_direction[pix, 2] = dz * inv
+    region = setup.region
+    z0 = params.focus(setup.camera)
+    reads = params.reads()
+    pitch = setup.camera.pixel_pitch(region.full_height)
+    edge = EDGES.index(params.edge)
+    source = kernels.channels(plain)
+    noise = kernels.or_dummy(setup.noise, 2)
+    v_p = np.zeros((region.pixel_count, 3))
+
+    def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
+        with watch.stage("camera"):
+            # V_p, the same fused fields as the traced method
+            moves = not state.blank and state.has(reads)
+            field = field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves)
+            if field.kind != kernels.FIELD_ZERO:
+                kernels.fill_field(
+                    field=field,
+                    basis=setup.basis,
+                    previous=kernels.channels(state),
+                    z0=float(z0),
+                    noise=noise,
+                    noise_scale=float(params.noise),
+                    out=v_p,
+                )
+        with watch.stage("shade"):
+            # every recorded channel, where the displaced ray crosses the image plane
+            new = PaintState.empty(region, plain.recorded())
+            kernels.look_up(
+                v_p=v_p,
+                moves=field.kind != kernels.FIELD_ZERO,
+                plane=setup.image_plane,
+                edge=edge,
+                plain=source,
+                out=kernels.channels(new),
+            )
+        return new
+
+    return iterate

@@ -20,8 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kernels import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL
-
-CHANNELS = frozenset({"color", "depth", "normal", "direction"})
+from .paintstate import CHANNELS
 
 
 @dataclass(frozen=True)
@@ -72,7 +71,7 @@ def register_mapping(
     same field without leaving the kernel (``field`` stays its reference).
     """
     reads = frozenset(reads) | {"color"}  # color is always recorded: it is the image itself
-    unknown = reads - CHANNELS
+    unknown = reads - set(CHANNELS)
     if unknown:
         raise ValueError(f"mapping {name!r} reads unknown channels {sorted(unknown)}; known: {sorted(CHANNELS)}")
 

@@ -1,10 +1,193 @@
-"""TEMP shim (lead: drop at merge): the public names the engine helper is giving the ray-traced method,
-aliased to painting's current private ones so that the benchmarks run on this branch meanwhile."""
+"""The traced method: every iteration casts one ray per sample from its per-pixel camera into the scene.
 
-from .painting import _cast as assign_cameras
-from .painting import _Frame as TileSetup
-from .painting import _frame as setup_tile
-from .painting import _Rays as Rays
-from .painting import displacements
+A tile's iteration has three stages: camera assignment (:func:`assign_cameras`: the mapping turns
+``I_{n-1}`` into displacements ``V_p, V_e``, and those into rays, fused in ``kernels.cast_rays``),
+intersection (Embree, through ``tracer.py``) and shading (``kernels.shade``). :func:`displacements` is
+the plain numpy form of the camera assignment's displacements.
+"""
 
-__all__ = ["Rays", "TileSetup", "assign_cameras", "displacements", "setup_tile"]
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import kernels
+from .camera import RAY_DTYPE, Camera, Region, plane_points
+from .mappings import MappingInput, get_mapping
+from .paintstate import PaintState, TileIteration
+from .params import PaintParams
+from .sampling import noise_vectors, stratified_offsets
+from .scene import Scene
+from .stopwatch import Stopwatch
+from .tracer import Hits
+
+
+@dataclass
+class TileSetup:
+    """What stays fixed over the iterations of one tile: sample offsets, the noise, the camera's numbers."""
+
+    camera: Camera
+    region: Region
+    xi: np.ndarray  # (n, spp) float64 sub-pixel offsets
+    eta: np.ndarray
+    noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
+    basis: np.ndarray = field(init=False)  # (3, 3) rows r, u, f
+    image_plane: kernels.ImagePlane = field(init=False)  # the image plane and the tile, as the kernels take them
+
+    def __post_init__(self):
+        self.image_plane = kernels.ImagePlane.of(self.camera, self.region)
+        self.basis = self.image_plane.basis
+
+    def plane(self) -> np.ndarray:
+        """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
+        i, j = self.region.pixel_coords()
+        s = ((i[:, None] + self.xi) / self.region.full_width).ravel()
+        t = ((j[:, None] + self.eta) / self.region.full_height).ravel()
+        return plane_points(self.camera, self.region, s, t)
+
+
+def setup_tile(camera: Camera, region: Region, params: PaintParams) -> TileSetup:
+    """The constants of ``region``'s iterations seen by ``camera``: exactly those of the same pixels of the
+    full image (counter-based sampling), so a tile is a crop."""
+    if params.spp == 1 and params.noise == 0:  # the common case needs no pixel coordinates at all
+        half = np.full((region.pixel_count, 1), 0.5)
+        return TileSetup(camera, region, half, half, None)
+    i, j = region.pixel_coords()
+    xi, eta = stratified_offsets(params.seed, i, j, params.spp)
+    noise = (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) if params.noise else None
+    return TileSetup(camera, region, xi, eta, noise)
+
+
+def _mapping_input(state: PaintState, setup: TileSetup, z0: float) -> MappingInput:
+    r, u, f = setup.basis
+    i, j = setup.region.pixel_coords()
+    return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
+
+
+def displacements(state: PaintState, setup: TileSetup, params: PaintParams, z0: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(V_p, V_e)`` per pixel from ``I_{n-1}`` in plain numpy: two (n, 3) float64, scene units.
+
+    The reference for what ``kernels.cast_rays`` computes fused; a non-finite displacement moves nothing.
+    """
+    data = _mapping_input(state, setup, z0)
+    noise = 0.0 if setup.noise is None else params.noise * setup.noise
+
+    def scaled(mapping: str, scale: float) -> np.ndarray:
+        if scale == 0.0:
+            return np.zeros((state.region.pixel_count, 3))
+        d = scale * (np.asarray(get_mapping(mapping).field(data), dtype=np.float64) + noise)
+        return np.where(np.isfinite(d), d, 0.0)
+
+    pitch = setup.camera.pixel_pitch(setup.region.full_height)
+    return scaled(params.mapping, params.lambda_p * pitch), scaled(params.eye_mapping, params.lambda_e)
+
+
+@dataclass
+class Rays:
+    """One tile's buffers for camera assignment, reused over its iterations (a large allocation inside a
+    kernel costs more than the kernel). ``at_eye``: every origin already is the camera's eye."""
+
+    v_p: np.ndarray  # (n, 3) float64 target displacement per pixel
+    v_e: np.ndarray  # (n, 3) float64 eye displacement per pixel
+    origins: np.ndarray  # (n*spp, 3) float32
+    directions: np.ndarray  # (n*spp, 3) float32
+    at_eye: bool = False
+
+    @classmethod
+    def allocate(cls, pixels: int, spp: int) -> Rays:
+        rays = pixels * spp
+        return cls(
+            np.empty((pixels, 3)), np.empty((pixels, 3)), np.empty((rays, 3), RAY_DTYPE), np.empty((rays, 3), RAY_DTYPE)
+        )
+
+
+def field_plan(
+    state: PaintState, setup: TileSetup, z0: float, mapping: str, scale: float, moves: bool
+) -> kernels.Field:
+    """How ``kernels.fill_field`` computes the displacement field of ``mapping`` times ``scale`` for
+    ``state``: fused for a built-in mapping, given (computed here, in numpy) for a registered one;
+    FIELD_ZERO when nothing ``moves`` or the scale is 0."""
+    fused = get_mapping(mapping).fused
+    if not moves or scale == 0.0:
+        return kernels.Field(kernels.FIELD_ZERO, 0.0, kernels.or_dummy(None, 2))
+    if fused != kernels.FIELD_GIVEN:
+        return kernels.Field(fused, scale, kernels.or_dummy(None, 2))
+    given = get_mapping(mapping).field(_mapping_input(state, setup, z0))
+    return kernels.Field(kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32))
+
+
+def assign_cameras(state: PaintState, setup: TileSetup, params: PaintParams, z0: float, rays: Rays) -> int:
+    """Camera assignment: fill ``rays`` from ``I_{n-1}``. Returns how many rays came out non-finite (they
+    must not reach Embree)."""
+    pitch = setup.camera.pixel_pitch(setup.region.full_height)
+    moves = not state.blank and state.has(params.reads())
+    target = field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves)
+    eye = field_plan(state, setup, z0, params.eye_mapping, params.lambda_e, moves)
+    eye_fixed = eye.kind == kernels.FIELD_ZERO
+    bad = kernels.cast_rays(
+        eye=np.asarray(setup.camera.eye, np.float64),
+        plane=setup.image_plane,
+        xi=setup.xi,
+        eta=setup.eta,
+        previous=kernels.channels(state),
+        z0=float(z0),
+        target=target,
+        eye_field=eye,
+        noise=kernels.or_dummy(setup.noise, 2),
+        noise_scale=float(params.noise) if moves else 0.0,
+        v_p=rays.v_p,
+        v_e=rays.v_e,
+        origins=rays.origins,
+        directions=rays.directions,
+        write_origins=not (eye_fixed and rays.at_eye),
+    )
+    rays.at_eye = eye_fixed
+    return bad
+
+
+def tile_iteration(scene: Scene, time: float, setup: TileSetup, params: PaintParams) -> TileIteration:
+    """One traced iteration of the tile ``setup`` describes, of ``scene`` at ``time``: ``I_{n-1} -> I_n``.
+    It records the channels ``params`` reads; its buffers are the tile's, reused by every iteration."""
+    geometry, tracer = scene.geometry(time)
+    surfaces = kernels.Surfaces(**{name: getattr(geometry, name) for name in kernels.Surfaces._fields})
+    light = scene.light
+    light_dir = np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64)
+    ambient = float(light.ambient if light else 1.0)
+    eye = np.asarray(setup.camera.eye, np.float64)
+    z0 = params.focus(setup.camera)
+    z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
+    reads = params.reads()
+    rays = Rays.allocate(setup.region.pixel_count, params.spp)
+
+    def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
+        with watch.stage("camera"):
+            invalid = assign_cameras(state, setup, params, z0, rays)
+        with watch.stage("intersect"):
+            if tracer is None:
+                hits = Hits.misses(len(rays.origins))
+            else:
+                hits = tracer.intersect(rays.origins, rays.directions, checked=invalid == 0)
+        with watch.stage("shade"):
+            new = PaintState.empty(setup.region, reads)
+            kernels.shade(
+                origins=rays.origins,
+                directions=rays.directions,
+                hits=hits,
+                spp=params.spp,
+                surfaces=surfaces,
+                environment=scene.environment.image,
+                light_dir=light_dir,
+                ambient=ambient,
+                lit=light is not None,
+                eye=eye,
+                forward=setup.basis[2],
+                z_max=float(z_max),
+                out=kernels.channels(new),
+                need_depth=new.depth is not None,
+                need_normal=new.normal is not None,
+                need_direction=new.direction is not None,
+            )
+        return new
+
+    return iterate

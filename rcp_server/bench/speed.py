@@ -79,7 +79,7 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         share = stage_sums[stage] / thread_total if thread_total else 0.0
         print(f"  {stage:12s} {stage_sums[stage] * 1e3:7.2f} ms thread time  {share:6.1%}")
     frame_setup = per_iteration * threads - thread_total
-    print(f"  {'(frame setup, threads, joins)':12s} ~{max(frame_setup, 0.0) * 1e3:.2f} ms thread time")
+    print(f"  {'(tile setup, threads, joins)':12s} ~{max(frame_setup, 0.0) * 1e3:.2f} ms thread time")
     if tracer is None:
         print("Embree alone: nothing to compare with, this scene has no triangles (every ray sees the sky)")
         return

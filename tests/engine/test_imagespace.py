@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from conftest import CAMERA
 
-from rcp_server import imagespace
+from rcp_server import kernels
 from rcp_server.camera import Camera, Region
 from rcp_server.imagespace import bilinear, edge_index, lookup_coords
 from rcp_server.params import EDGES
@@ -95,20 +95,16 @@ def test_look_up_kernel_matches_numpy_reference(edge, channels):
     v_p[0] = -2.0 * np.stack(camera.basis())[2]  # behind the eye
     v_p[1] = (np.nan, 0.0, 0.0)
     out = {name: np.full((n, 3) if name != "depth" else n, 7.0, np.float32) for name in plain}
-    imagespace.look_up(
-        v_p,
-        True,
-        np.stack(camera.basis()),
-        camera.half_height(),
-        w / h,
-        w,
-        h,
-        region.x0,
-        region.y0,
-        region.width,
-        EDGES.index(edge),
-        *(plain[name] if name in channels else _dummy(2 - (name == "depth")) for name in plain),
-        *(out[name] for name in plain),
+    plane = kernels.ImagePlane.of(camera, region)
+    kernels.look_up(
+        v_p=v_p,
+        moves=True,
+        plane=plane,
+        edge=EDGES.index(edge),
+        plain=kernels.Channels(
+            **{name: plain[name] if name in channels else _dummy(2 - (name == "depth")) for name in plain}
+        ),
+        out=kernels.Channels(**out),
     )
     x, y, ok = lookup_coords(v_p, camera, region)
     assert not ok[0] and not ok[1] and ok[2:].all()
@@ -123,9 +119,13 @@ def test_look_up_kernel_matches_numpy_reference(edge, channels):
             expected /= np.linalg.norm(expected, axis=1, keepdims=True)
         np.testing.assert_allclose(out[name], expected, rtol=1e-5, atol=1e-5)
     # no displacement: each pixel reads exactly its own plain value
-    imagespace.look_up(
-        v_p, False, np.stack(camera.basis()), camera.half_height(), w / h, w, h, 3, 4, 15, EDGES.index(edge),
-        plain["color"], _dummy(1), _dummy(2), _dummy(2), out["color"], _dummy(1), _dummy(2), _dummy(2),
-    )  # fmt: skip
+    kernels.look_up(
+        v_p=v_p,
+        moves=False,
+        plane=plane,
+        edge=EDGES.index(edge),
+        plain=kernels.Channels(plain["color"], _dummy(1), _dummy(2), _dummy(2)),
+        out=kernels.Channels(out["color"], _dummy(1), _dummy(2), _dummy(2)),
+    )
     i, j = region.pixel_coords()
     np.testing.assert_array_equal(out["color"], plain["color"][j * w + i])

@@ -11,8 +11,10 @@ import pytest
 
 from rcp_server import kernels
 from rcp_server.camera import Camera, Region, plane_points
-from rcp_server.painting import PaintState, _frame, displacements
+from rcp_server.painting import PaintState
 from rcp_server.params import PaintParams
+from rcp_server.raytrace import displacements, setup_tile
+from rcp_server.tracer import Hits
 
 KINDS = {
     "zero": kernels.FIELD_ZERO,
@@ -84,43 +86,31 @@ def _cast_inputs(seed, region, spp):
     return data, xi, eta
 
 
-def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
+def _cast_args(camera, region, xi, eta, data, z0, target, eye, noise_scale) -> dict:
+    """Every argument of kernels.cast_rays but write_origins; the outputs start at 7.0 (never written: still 7.0)."""
     n, spp = xi.shape
-    v_p, v_e = np.full((n, 3), 7.0), np.full((n, 3), 7.0)
-    origins = np.full((n * spp, 3), 7.0, np.float32)
-    directions = np.full((n * spp, 3), 7.0, np.float32)
-    bad = kernels.cast_rays(
-        np.asarray(camera.eye, np.float64),
-        np.stack(camera.basis()),
-        camera.half_height(),
-        region.full_width / region.full_height,
-        region.full_width,
-        region.full_height,
-        region.x0,
-        region.y0,
-        region.width,
-        xi,
-        eta,
-        data["color"],
-        data["depth"],
-        data["normal"],
-        data["direction"],
-        float(z0),
-        target[0],
-        target[1],
-        data["given"],
-        eye[0],
-        eye[1],
-        data["given"][::-1].copy(),
-        data["noise"],
-        noise_scale,
-        v_p,
-        v_e,
-        origins,
-        directions,
-        True,
+    return dict(
+        eye=np.asarray(camera.eye, np.float64),
+        plane=kernels.ImagePlane.of(camera, region),
+        xi=xi,
+        eta=eta,
+        previous=kernels.Channels(data["color"], data["depth"], data["normal"], data["direction"]),
+        z0=float(z0),
+        target=kernels.Field(target[0], target[1], data["given"]),
+        eye_field=kernels.Field(eye[0], eye[1], data["given"][::-1].copy()),
+        noise=data["noise"],
+        noise_scale=noise_scale,
+        v_p=np.full((n, 3), 7.0),
+        v_e=np.full((n, 3), 7.0),
+        origins=np.full((n * spp, 3), 7.0, np.float32),
+        directions=np.full((n * spp, 3), 7.0, np.float32),
     )
-    return bad, v_p, v_e, origins, directions
+
+
+def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
+    args = _cast_args(camera, region, xi, eta, data, z0, target, eye, noise_scale)
+    bad = kernels.cast_rays(**args, write_origins=True)
+    return bad, args["v_p"], args["v_e"], args["origins"], args["directions"]
 
 
 @pytest.mark.parametrize("noise_scale", [0.0, 0.35])
@@ -193,22 +183,22 @@ def test_cast_rays_counts_rays_that_overflow_and_leaves_them_nan():
 
 
 def test_cast_rays_agrees_with_the_painting_reference():
-    """painting.displacements is the numpy form of the fused fields; _Frame.plane of the image plane."""
+    """raytrace.displacements is the numpy form of the fused fields; TileSetup.plane of the image plane."""
     camera = Camera((1.0, 0.5, 4.0), (0.0, 0.0, 0.0), fov=45.0)
     region = Region(20, 14, 4, 3, 9, 7)
     for mapping in ("color", "depth", "normal"):
         params = PaintParams(mapping=mapping, eye_mapping="depth", lambda_p=6.0, lambda_e=0.2, noise=0.4, spp=2)
-        frame = _frame(camera, region, params)
+        setup = setup_tile(camera, region, params)
         data, _, _ = _cast_inputs(3, region, 2)
         state = PaintState(region, data["color"], data["depth"], data["normal"].copy(), data["direction"])
-        v_p, v_e = displacements(state, frame, params, 3.0)
+        v_p, v_e = displacements(state, setup, params, 3.0)
         pitch = camera.pixel_pitch(region.full_height)
-        data["noise"] = frame.noise
+        data["noise"] = setup.noise
         _, kv_p, kv_e, origins, directions = _run_cast(
             camera,
             region,
-            frame.xi,
-            frame.eta,
+            setup.xi,
+            setup.eta,
             data,
             3.0,
             (KINDS[mapping], params.lambda_p * pitch),
@@ -218,7 +208,7 @@ def test_cast_rays_agrees_with_the_painting_reference():
         # the mappings' numpy fields are float32 (the state's dtype); the kernel sums in float64
         np.testing.assert_allclose(kv_p, v_p, rtol=1e-6, atol=1e-7)
         np.testing.assert_allclose(kv_e, v_e, rtol=1e-6, atol=1e-7)
-        target = frame.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
+        target = setup.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
         np.testing.assert_allclose(directions, target / np.linalg.norm(target, axis=1, keepdims=True), atol=2e-7)
 
 
@@ -402,7 +392,24 @@ def _run_shade(inputs, need=(True, True, True)):
         np.full((n_pix, 3), -9.0, np.float32),
         np.full((n_pix, 3), -9.0, np.float32),
     )
-    kernels.shade(*inputs.values(), *out, *need)
+    kernels.shade(
+        origins=inputs["origins"],
+        directions=inputs["directions"],
+        hits=Hits(inputs["face"], inputs["t"], inputs["b1"], inputs["b2"]),
+        spp=inputs["spp"],
+        surfaces=kernels.Surfaces(**{name: inputs[name] for name in kernels.Surfaces._fields}),
+        environment=inputs["environment"],
+        light_dir=inputs["light_dir"],
+        ambient=inputs["ambient"],
+        lit=inputs["lit"],
+        eye=inputs["eye"],
+        forward=inputs["forward"],
+        z_max=inputs["z_max"],
+        out=kernels.Channels(*out),
+        need_depth=need[0],
+        need_normal=need[1],
+        need_direction=need[2],
+    )
     return out
 
 
@@ -482,15 +489,10 @@ def test_environment_texel_centres_are_exact():
 def test_cast_rays_leaves_origins_alone_when_told_they_already_hold_the_eye():
     camera = Camera((0.5, 1.0, 2.0), (-1.0, 0.0, -3.0))
     region = Region(6, 4)
-    n = region.pixel_count
     data, xi, eta = _cast_inputs(4, region, 1)
-    origins = np.full((n, 3), 7.0, np.float32)
-    directions = np.empty_like(origins)
-    args = [np.asarray(camera.eye, np.float64), np.stack(camera.basis()), camera.half_height(), 1.5, 6, 4, 0, 0, 6]
-    args += [xi, eta, data["color"], data["depth"], data["normal"], data["direction"], 1.0]
-    args += [kernels.FIELD_COLOR, 0.1, data["given"], kernels.FIELD_ZERO, 0.0, data["given"], data["noise"], 0.0]
-    args += [np.empty((n, 3)), np.empty((n, 3))]
-    kernels.cast_rays(*args, origins, directions, False)
+    args = _cast_args(camera, region, xi, eta, data, 1.0, (kernels.FIELD_COLOR, 0.1), (kernels.FIELD_ZERO, 0.0), 0.0)
+    origins = args["origins"]
+    kernels.cast_rays(**args, write_origins=False)
     assert np.all(origins == 7.0)  # untouched
-    kernels.cast_rays(*args, origins, directions, True)
+    kernels.cast_rays(**args, write_origins=True)
     np.testing.assert_array_equal(origins, np.broadcast_to(np.float32(camera.eye), origins.shape))

@@ -39,7 +39,7 @@ def test_builtin_mappings_declare_what_they_read():
     assert get_mapping("color").reads == {"color"}
     assert get_mapping("depth").reads == {"color", "depth"}
     assert get_mapping("normal").reads == {"color", "normal", "direction"}
-    assert all(m.reads <= CHANNELS for m in MAPPINGS.values())
+    assert all(m.reads <= set(CHANNELS) for m in MAPPINGS.values())
 
 
 def test_color_field_formula():

@@ -1,10 +1,6 @@
-"""The two hot passes of an iteration, fused and compiled (numba); numpy cannot fuse them.
+"""Shading, fused and compiled: Embree's hits -> per-pixel data (shading plus the per-pixel mean).
 
-``cast_rays`` turns the previous iteration's data into per-sample rays (camera assignment, with the
-built-in mappings fused in) and ``shade``
-turns Embree's hits into per-pixel data (shading plus the per-pixel mean). Both release the GIL so
-tiles run on threads side by side with Embree. ``tests/test_kernels.py`` holds a plain numpy
-reference of each and checks that they agree.
+``tests/engine/test_kernels.py`` holds its numpy reference.
 """
 
 from __future__ import annotations
@@ -14,152 +10,7 @@ import math
 import numba
 import numpy as np
 
-# fast math without the no-NaN/no-inf assumptions: the kernels test for NaN rays on purpose
-_jit = numba.njit(nogil=True, cache=True, error_model="numpy")
-
-
-# how cast_rays gets a pixel's displacement field D: the built-in mappings fused, or a field given
-FIELD_ZERO, FIELD_COLOR, FIELD_DEPTH, FIELD_NORMAL, FIELD_GIVEN = 0, 1, 2, 3, 4
-
-
-@_jit
-def fill_field(kind, scale, basis, color, depth, normal, direction, z0, given, noise, noise_scale, out):
-    """``scale * (D + noise_scale * noise)`` for every pixel into out (n, 3) float64; see mappings.py for D.
-
-    One loop per kind (a branch per pixel costs more than the field itself). Non-finite values move nothing.
-    """
-    n = out.shape[0]
-    if kind == FIELD_ZERO:
-        out[:] = 0.0
-        return
-    if kind == FIELD_COLOR or kind == FIELD_DEPTH:
-        for pix in range(n):
-            k = abs(depth[pix] - z0) if kind == FIELD_DEPTH else 1.0
-            a = 2.0 * color[pix, 0] - 1.0
-            b = 2.0 * color[pix, 1] - 1.0
-            c = 2.0 * color[pix, 2] - 1.0
-            for q in range(3):
-                out[pix, q] = k * (a * basis[0, q] + b * basis[1, q] + c * basis[2, q])
-    elif kind == FIELD_NORMAL:
-        for pix in range(n):
-            out[pix, 0] = direction[pix, 1] * normal[pix, 2] - direction[pix, 2] * normal[pix, 1]
-            out[pix, 1] = direction[pix, 2] * normal[pix, 0] - direction[pix, 0] * normal[pix, 2]
-            out[pix, 2] = direction[pix, 0] * normal[pix, 1] - direction[pix, 1] * normal[pix, 0]
-    else:
-        for pix in range(n):
-            for q in range(3):
-                out[pix, q] = given[pix, q]
-    for pix in range(n):
-        for q in range(3):
-            v = scale * (out[pix, q] + noise_scale * noise[pix, q]) if noise_scale != 0.0 else scale * out[pix, q]
-            out[pix, q] = v if math.isfinite(v) else 0.0
-
-
-@_jit
-def cast_rays(
-    eye,
-    basis,
-    tan_half,
-    aspect,
-    full_width,
-    full_height,
-    x0,
-    y0,
-    width,
-    xi,
-    eta,
-    color,
-    depth,
-    normal,
-    direction,
-    z0,
-    target_kind,
-    target_scale,
-    target_given,
-    eye_kind,
-    eye_scale,
-    eye_given,
-    noise,
-    noise_scale,
-    v_p,
-    v_e,
-    origins,
-    directions,
-    write_origins,
-):
-    """Per-pixel cameras for every sample: camera assignment fused with the mapping. Returns the number
-    of rays that came out non-finite (a NaN or infinite input), so the caller masks only when needed.
-
-    eye : (3,) float64;  basis : (3, 3) rows r, u, f;  tan_half : tan(fov/2);  aspect : W / H
-    full_width, full_height : W, H;  x0, y0, width : the region's corner and width (pixels row-major)
-    xi, eta : (n, spp) float64 sub-pixel offsets of each sample (not read at 1 spp: the centre)
-    color, depth, normal, direction : I_{n-1} per pixel (dummies where the mapping does not read them)
-    *_kind : FIELD_*; *_scale : lambda_p * p and lambda_e; *_given : (n, 3) precomputed fields (FIELD_GIVEN)
-    noise : (n, 3) world-space random vectors, added to both fields times noise_scale
-    v_p, v_e : (n, 3) float64 out: the displacements (scratch owned by the caller: a large allocation
-    inside a kernel costs more than the whole pass); a field of kind FIELD_ZERO is not written
-    xi, eta at 1 spp are not read: that sample is the pixel centre
-    origins, directions : (n*spp, 3) float32 out: P_e' = eye + V_e, unit direction to
-    P_p' = P_p(s, t) + V_p with P_p as in camera.py. A non-finite displacement moves nothing.
-    write_origins : False when the eyes do not move and origins already hold the eye (saves a pass of writes)
-    """
-    n_pix, spp = xi.shape
-    # what does not move is neither filled nor read: at this size every pass over memory counts
-    targets_move = target_kind != FIELD_ZERO
-    eyes_move = eye_kind != FIELD_ZERO
-    if targets_move:
-        fill_field(
-            target_kind, target_scale, basis, color, depth, normal, direction, z0, target_given, noise, noise_scale, v_p
-        )
-    if eyes_move:
-        fill_field(eye_kind, eye_scale, basis, color, depth, normal, direction, z0, eye_given, noise, noise_scale, v_e)
-    px = py = pz = 0.0
-    ox = eye[0]
-    oy = eye[1]
-    oz = eye[2]
-    sx0 = 0.5
-    # plane point = centre + sx * r + ty * u with centre = eye + f; sx, ty affine in the sample position
-    cx = eye[0] + basis[2, 0]
-    cy = eye[1] + basis[2, 1]
-    cz = eye[2] + basis[2, 2]
-    sx_scale = 2.0 * aspect * tan_half / full_width
-    ty_scale = 2.0 * tan_half / full_height
-    bad = 0
-    for row in range(n_pix // width):  # nested loops: an integer division per pixel costs more than a ray
-        ty0 = tan_half - (y0 + row) * ty_scale
-        for col in range(width):
-            pix = row * width + col
-            i = x0 + col
-            if targets_move:
-                px = v_p[pix, 0]
-                py = v_p[pix, 1]
-                pz = v_p[pix, 2]
-            if eyes_move:
-                ox = eye[0] + v_e[pix, 0]
-                oy = eye[1] + v_e[pix, 1]
-                oz = eye[2] + v_e[pix, 2]
-            for k in range(spp):
-                # one sample sits at the pixel centre (MISSION.md); only jittered samples read their offsets
-                sx = (i + (xi[pix, k] if spp > 1 else sx0)) * sx_scale - aspect * tan_half
-                ty = ty0 - (eta[pix, k] if spp > 1 else sx0) * ty_scale
-                dx = cx + sx * basis[0, 0] + ty * basis[1, 0] + px - ox
-                dy = cy + sx * basis[0, 1] + ty * basis[1, 1] + py - oy
-                dz = cz + sx * basis[0, 2] + ty * basis[1, 2] + pz - oz
-                norm2 = dx * dx + dy * dy + dz * dz
-                if norm2 > 0.0 and norm2 < math.inf:
-                    inv = 1.0 / math.sqrt(norm2)
-                else:  # eye on its target, or a non-finite input: a NaN ray, which misses
-                    inv = math.nan
-                    bad += 1
-                s = pix * spp + k
-                if write_origins:
-                    origins[s, 0] = ox
-                    origins[s, 1] = oy
-                    origins[s, 2] = oz
-                directions[s, 0] = dx * inv
-                directions[s, 1] = dy * inv
-                directions[s, 2] = dz * inv
-    return bad
+from .jit import jit
 
 
 @numba.njit(inline="always")
@@ -225,23 +76,13 @@ def _bilinear(texels, offset, width, height, x, y, wrap_y):
     )
 
 
-@_jit
+@jit
 def shade(
     origins,
     directions,
-    face,
-    t,
-    b1,
-    b2,
+    hits,
     spp,
-    normals,
-    colors,
-    uv,
-    texture_id,
-    texels,
-    texture_offset,
-    texture_width,
-    texture_height,
+    surfaces,
     environment,
     light_dir,
     ambient,
@@ -249,23 +90,25 @@ def shade(
     eye,
     forward,
     z_max,
-    out_color,
-    out_depth,
-    out_normal,
-    out_direction,
+    out,
     need_depth,
     need_normal,
     need_direction,
 ):
     """Shade every sample and average the samples of each pixel.
 
-    origins, directions : (n*spp, 3) float32 rays; face, t, b1, b2 : their hits (face -1 on a miss)
-    normals, colors : (F, 3, 3) float32; uv : (F, 3, 2); texture_id : (F,) int32; texels etc: packed textures
+    origins, directions : (n*spp, 3) float32 rays;  hits : their closest hits (``tracer.Hits``: face, t,
+    b1, b2; face -1 on a miss);  surfaces : a bundles.Surfaces
     environment : (h, w, 3) float32 equirectangular; light_dir : (3,) float64 travel direction
-    out_color : (n, 3) float32 displayed color in [0, 1]; out_depth : (n,) float32 view depth along
-    ``forward`` from ``eye`` (``z_max`` on a miss); out_normal : (n, 3) world normal (0 on a miss);
-    out_direction : (n, 3) ray direction. The out_* that are not needed are not written.
+    out : bundles.Channels of n pixels: color (n, 3) float32 displayed color in [0, 1]; depth (n,) float32
+    view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
+    miss); direction (n, 3) ray direction. The channels not needed are not written.
     """
+    face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
+    normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
+    texels, texture_offset = surfaces.texels, surfaces.texture_offset
+    texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
+    out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = out_color.shape[0]
     env_h = environment.shape[0]
     env_w = environment.shape[1]

@@ -1,0 +1,84 @@
+"""The named bundles the kernels take (numba passes tuples of arrays and numbers without copying).
+
+A kernel is called by keyword, with these bundles for the arrays that travel together, so that two
+arguments of the same type cannot swap without an error: positionally, a swap gave a wrong image.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+from typing import NamedTuple
+
+import numpy as np
+
+from ..camera import Camera, Region
+from ..paintstate import CHANNELS, channel_shape
+
+Channels = namedtuple("Channels", CHANNELS)
+Channels.__doc__ = """Per-pixel data of n pixels, row-major, as PaintState holds it (fields: ``paintstate.CHANNELS``).
+
+color : (n, 3) float32;  depth : (n,) float32;  normal, direction : (n, 3) float32. A channel that is
+not recorded is a dummy (:func:`channels`): numba needs an array of the right type even where it
+reads or writes nothing."""
+
+
+class ImagePlane(NamedTuple):
+    """The frame camera's image plane and where a tile of it lies (``camera.py`` has the formulas)."""
+
+    basis: np.ndarray  # (3, 3) float64, rows r, u, f
+    tan_half: float  # tan(fov / 2)
+    aspect: float  # W / H of the full image
+    full_width: int  # W
+    full_height: int  # H
+    x0: int  # the tile's top-left pixel
+    y0: int
+    width: int  # the tile's width: its pixels are row-major
+
+    @classmethod
+    def of(cls, camera: Camera, region: Region) -> ImagePlane:
+        """The image plane of ``camera`` and where ``region`` lies on it."""
+        return cls(
+            basis=np.stack(camera.basis()),
+            tan_half=camera.half_height(),
+            aspect=region.full_width / region.full_height,
+            full_width=region.full_width,
+            full_height=region.full_height,
+            x0=region.x0,
+            y0=region.y0,
+            width=region.width,
+        )
+
+
+class Field(NamedTuple):
+    """How :func:`~rcp_server.kernels.cast.fill_field` computes a displacement field (see mappings.py)."""
+
+    kind: int  # FIELD_*
+    scale: float  # lambda_p * p for V_p, lambda_e for V_e
+    given: np.ndarray  # (n, 3) float32: the field itself when kind is FIELD_GIVEN, else a dummy
+
+
+class Surfaces(NamedTuple):
+    """What shading reads of the scene's triangles (``scene.Geometry`` has the shapes)."""
+
+    normals: np.ndarray  # (F, 3, 3) float32 unit shading normals per corner
+    colors: np.ndarray  # (F, 3, 3) float32 albedo per corner
+    uv: np.ndarray  # (F, 3, 2) float32
+    texture_id: np.ndarray  # (F,) int32, -1 none
+    texels: np.ndarray  # (T, 3) float32, every texture packed
+    texture_offset: np.ndarray  # (K,) int64 first texel of each texture
+    texture_width: np.ndarray  # (K,) int64
+    texture_height: np.ndarray  # (K,) int64
+
+
+_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
+
+
+def or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:
+    """``array``, or a one-row float32 stand-in of ``ndim`` dimensions for a kernel argument that is absent."""
+    return array if array is not None else _DUMMY[ndim]
+
+
+def channels(source) -> Channels:
+    """The channels of ``source`` (anything with the attributes of :data:`CHANNELS`, such as a PaintState),
+    dummies for those it does not hold."""
+    return Channels(*(or_dummy(getattr(source, name), len(channel_shape(name, 1))) for name in CHANNELS))
