@@ -32,7 +32,8 @@ USER rcp
 WORKDIR /home/rcp
 # Compile numba's kernels now, as the user that serves, so that start-up and the first request don't wait.
 # (The cache is keyed on the CPU: on a host of another CPU model they compile once more at start-up.)
-RUN rcp scenes && rcp render default --width 32 --height 18 --iterations 2 --out /tmp/warm.png && rm /tmp/warm.png
+RUN rcp scenes && rcp render default --width 32 --height 18 --iterations 2 --out /tmp/warm.png \
+ && rcp render default --width 32 --height 18 --iterations 2 --method image --out /tmp/warm.png && rm /tmp/warm.png
 EXPOSE 8000
 # the port comes from RCP_PORT when the check runs, so `-e RCP_PORT=9000` keeps the check right
 HEALTHCHECK --interval=30s --timeout=5s --start-period=120s --retries=3 \

@@ -225,7 +225,7 @@ export const PROTOCOL = {
     "iterations": {
      "anyOf": [
       {
-       "maximum": 64,
+       "maximum": 256,
        "minimum": 1,
        "type": "integer"
       },
@@ -335,7 +335,7 @@ export const PROTOCOL = {
     "spp": {
      "anyOf": [
       {
-       "maximum": 64,
+       "maximum": 1024,
        "minimum": 1,
        "type": "integer"
       },
@@ -491,7 +491,7 @@ export const PROTOCOL = {
    "iterations": {
     "anyOf": [
      {
-      "maximum": 64,
+      "maximum": 256,
       "minimum": 1,
       "type": "integer"
      },
@@ -601,7 +601,7 @@ export const PROTOCOL = {
    "spp": {
     "anyOf": [
      {
-      "maximum": 64,
+      "maximum": 1024,
       "minimum": 1,
       "type": "integer"
      },

@@ -42,17 +42,17 @@ class PaintParams:
     ``method`` is one of :data:`METHODS`; ``edge`` (one of :data:`EDGES`) is how the image method reads
     off screen.
 
-    One set of bounds serves the engine, the wire and the command line. It is the wire's former set (the
-    OpenAPI fuzzing of ``tests/test_schema.py`` relies on 64 iterations and 64 spp as the most a request
-    may ask; 64 spp is also the accuracy benchmark's reference) except ``lambda_p``, widened from 256 to
-    1e6 pixels because the engine paints that far in the stability study and stays finite, and a painting
-    costs the same at any ``lambda_p``.
+    One set of bounds serves the engine, the wire and the command line: they keep numbers sane (finite,
+    the right sign, nothing a painting cannot mean), not cost. ``lambda_p`` reaches 1e6 pixels because the
+    engine paints that far in the stability study and stays finite; ``iterations`` and ``spp`` reach what
+    an offline still may want. What a painting may cost is the service's limit (``RCP_MAX_WORK``: pixels x
+    spp x iterations), not a bound of one setting.
     """
 
     mapping: str = setting("color", "target displacement mapping", choices=BUILT_IN, lookup=get_mapping)
     eye_mapping: str = setting("color", "eye displacement mapping", choices=BUILT_IN, lookup=get_mapping)
-    iterations: int = setting(6, "recursion depth N", ge=1, le=64)
-    spp: int = setting(1, "samples per pixel, stratified and seeded", ge=1, le=64)
+    iterations: int = setting(6, "recursion depth N", ge=1, le=256)
+    spp: int = setting(1, "samples per pixel, stratified and seeded", ge=1, le=1024)
     lambda_p: float = setting(8.0, "largest target displacement, in pixels", ge=-1e6, le=1e6)
     lambda_e: float = setting(0.0, "largest eye displacement, in scene units", ge=-100, le=100)
     z0: float | None = setting(

@@ -20,14 +20,15 @@ from rcp_server.bench.harness import BackgroundServer
 MAX_PIXELS = 64 * 64
 TOKEN = "schema-token"  # schemathesis brings it, and checks that requests without it or with another get 401
 AUTH = {"authorization": f"Bearer {TOKEN}"}
-TIMEOUT = 30  # seconds; the largest painting the limit allows (64x64, 64 iterations, 64 spp) takes about 4
+TIMEOUT = 30  # seconds; the largest painting the limits allow (MAX_WORK rays) takes about 4
+MAX_WORK = 1 << 24  # 64x64 pixels x 64 iterations x 64 spp
 SIZES = [1, 7, 16, 64]  # widths and heights whose products stay within MAX_PIXELS
 PARSE_ERROR = {"detail": "There was an error parsing the body"}
 
 
 @pytest.fixture(scope="module")
 def server():
-    with BackgroundServer(max_pixels=MAX_PIXELS, token=TOKEN) as server:
+    with BackgroundServer(max_pixels=MAX_PIXELS, max_work=MAX_WORK, token=TOKEN) as server:
         yield server
 
 
