@@ -117,7 +117,6 @@ def paint(
         raise ValueError("keep_iterations needs the full image")
 
     def on_tiles(run) -> list:
-        nonlocal pool
         if pool is not None:
             return list(pool.map(run, tiles))
         if threads == 1 or len(tiles) == 1:
