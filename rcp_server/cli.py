@@ -13,8 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from . import images
-from .argtypes import finite as _finite
-from .argtypes import positive_int as _positive_int
+from .argtypes import finite, positive_int
 from .bench.cli import MissingExtra, add_bench_commands
 from .camera import Camera, CameraError
 from .painting import PaintState, paint
@@ -47,10 +46,10 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
 
 def _add_camera_options(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("camera (default: the scene's)")
-    g.add_argument("--eye", nargs=3, type=_finite, metavar=("X", "Y", "Z"))
-    g.add_argument("--look-at", nargs=3, type=_finite, metavar=("X", "Y", "Z"))
-    g.add_argument("--up", nargs=3, type=_finite, metavar=("X", "Y", "Z"))
-    g.add_argument("--fov", type=_finite, help="vertical field of view in degrees")
+    g.add_argument("--eye", nargs=3, type=finite, metavar=("X", "Y", "Z"))
+    g.add_argument("--look-at", nargs=3, type=finite, metavar=("X", "Y", "Z"))
+    g.add_argument("--up", nargs=3, type=finite, metavar=("X", "Y", "Z"))
+    g.add_argument("--fov", type=finite, help="vertical field of view in degrees")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -66,41 +65,41 @@ def _parser() -> argparse.ArgumentParser:
         type=Path,
         help="image file (.png, .jpg); with --frames, frames go to OUT's stem _0000, _0001, ...",
     )
-    r.add_argument("--width", type=_positive_int, default=640)
-    r.add_argument("--height", type=_positive_int, default=360)
+    r.add_argument("--width", type=positive_int, default=640)
+    r.add_argument("--height", type=positive_int, default=360)
     _add_paint_options(r)
     _add_camera_options(r)
-    r.add_argument("--time", type=_finite, default=0.0, help="scene time in seconds (animated scenes)")
+    r.add_argument("--time", type=finite, default=0.0, help="scene time in seconds (animated scenes)")
     r.add_argument(
         "--environment",
         type=Path,
         metavar="IMAGE",
         help="replace what misses see: an equirectangular image or Radiance .hdr panorama",
     )
-    r.add_argument("--exposure", type=_finite, default=0.0, help="stops of exposure for a .hdr environment")
+    r.add_argument("--exposure", type=finite, default=0.0, help="stops of exposure for a .hdr environment")
     r.add_argument("--save-iterations", type=Path, metavar="DIR", help="also write every iteration to DIR")
-    r.add_argument("--threads", type=_positive_int, help="worker threads (default: all cores)")
+    r.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
     r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100", help="JPEG quality")
     s = r.add_argument_group("sequences")
-    s.add_argument("--frames", type=_positive_int, default=1, help="number of frames")
-    s.add_argument("--fps", type=_finite, default=24.0, help="frames per second of scene time")
+    s.add_argument("--frames", type=positive_int, default=1, help="number of frames")
+    s.add_argument("--fps", type=finite, default=24.0, help="frames per second of scene time")
     s.add_argument(
         "--orbit",
-        type=_finite,
+        type=finite,
         default=0.0,
         metavar="DEG",
         help="turn the eye this many degrees around look-at over the sequence",
     )
     s.add_argument(
         "--walk",
-        type=_finite,
+        type=finite,
         default=0.0,
         metavar="DIST",
         help="move eye and look-at this far forward over the sequence",
     )
     s.add_argument(
         "--temporal",
-        type=_positive_int,
+        type=positive_int,
         metavar="K",
         help="temporal mode: after the first frame, run K iterations from the previous frame",
     )
