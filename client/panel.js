@@ -21,6 +21,7 @@ const PAINT_UI = {
   seed: { label: "Seed", slider: [0, 99], step: 1, more: true },
   z_max: { label: "Miss depth z_max", unit: "units", slider: [1, 10000], log: true, more: true },
   edge: { label: "Edge (image method)", more: true },
+  fast: { label: "Fast", hint: "shortcuts that keep every pixel within 2/255 of tracing every ray", more: true },
 };
 
 const LOG_STEPS = 1000;
@@ -60,6 +61,18 @@ function choiceControl(name, schema, emit) {
     input: group,
     show(value) {
       for (const button of buttons) button.setAttribute("aria-pressed", String(button.dataset.value === value));
+    },
+  };
+}
+
+/** A switch for a true/false field. */
+function switchControl(name, emit) {
+  const box = element("input", { type: "checkbox", class: "switch", id: `paint-${name}` });
+  box.addEventListener("change", () => emit(box.checked));
+  return {
+    input: box,
+    show(value) {
+      box.checked = Boolean(value);
     },
   };
 }
@@ -138,7 +151,11 @@ export function paintPanel(container, onChange) {
       render(name);
       onChange(name, value);
     };
-    const control = schema.enum ? choiceControl(name, schema, emit) : numberControl(name, schema, ui, emit);
+    const control = schema.enum
+      ? choiceControl(name, schema, emit)
+      : schema.type === "boolean"
+        ? switchControl(name, emit)
+        : numberControl(name, schema, ui, emit);
     const reset = element("button", { type: "button", class: "reset", title: "Back to the scene's value", text: "↺" });
     reset.addEventListener("click", () => {
       delete overrides[name];

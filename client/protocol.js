@@ -222,6 +222,19 @@ export const PROTOCOL = {
      "description": "eye displacement mapping",
      "title": "Eye Mapping"
     },
+    "fast": {
+     "anyOf": [
+      {
+       "type": "boolean"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
+     "title": "Fast"
+    },
     "iterations": {
      "anyOf": [
       {
@@ -487,6 +500,19 @@ export const PROTOCOL = {
     "default": null,
     "description": "eye displacement mapping",
     "title": "Eye Mapping"
+   },
+   "fast": {
+    "anyOf": [
+     {
+      "type": "boolean"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
+    "title": "Fast"
    },
    "iterations": {
     "anyOf": [
@@ -931,5 +957,6 @@ export const ENGINE_DEFAULTS = {
  "seed": 0,
  "z_max": null,
  "method": "raytrace",
- "edge": "mirror"
+ "edge": "mirror",
+ "fast": true
 };

@@ -40,8 +40,12 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
         open_names = declared.lookup is not None  # more can be registered: the engine says which it knows
         help = declared.help + (f": {', '.join(declared.choices)}" if open_names else "")
         help += "" if declared.default is None else f" (default {declared.default})"
+        flag = f"--{name.replace('_', '-')}"
+        if declared.kind is bool:  # --fast / --no-fast
+            g.add_argument(flag, action=argparse.BooleanOptionalAction, default=None, help=help)
+            continue
         choices = None if open_names or not declared.choices else declared.choices
-        g.add_argument(f"--{name.replace('_', '-')}", type=declared.kind, choices=choices, help=help)
+        g.add_argument(flag, type=declared.kind, choices=choices, help=help)
 
 
 def _add_camera_options(p: argparse.ArgumentParser) -> None:

@@ -136,6 +136,7 @@ def tile_iteration(plain: PaintState, setup: TileSetup, params: PaintParams) -> 
                     z0=float(z0),
                     noise=noise,
                     noise_scale=float(params.noise),
+                    pixels=setup.pixels,
                     out=v_p,
                 )
         with watch.stage("shade"):

@@ -116,22 +116,52 @@ def paint(
     if keep is not None and region != Region(width, height):
         raise ValueError("keep_iterations needs the full image")
 
-    def on_tiles(run) -> list:
+    def on_tiles(work, over: list[Region] = tiles) -> list:
         if pool is not None:
-            return list(pool.map(run, tiles))
-        if threads == 1 or len(tiles) == 1:
-            return [run(tile) for tile in tiles]
+            return list(pool.map(work, over))
+        if threads == 1 or len(over) == 1:
+            return [work(tile) for tile in over]
         with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as own:
-            return list(own.map(run, tiles))
+            return list(own.map(work, over))
 
     def run(iteration: Callable[[Region], TileIteration], start: PaintState, iterations: int, keep) -> list:
         """Every tile: ``iterations`` of ``iteration(tile)`` from ``start``; each tile's state and seconds."""
         return on_tiles(lambda tile: _run_tile(iteration(tile), start.rows(tile), iterations, keep, should_stop))
 
-    def traced(settings: PaintParams) -> Callable[[Region], TileIteration]:
-        return lambda tile: raytrace.tile_iteration(scene, time, setup_tile(camera, tile, settings), settings)
+    def then(first: list, rest: list) -> list:
+        """The parts of two runs over the same tiles, one after the other: the second's states, both's seconds."""
+        return [(state, total([first[n][1], seconds])) for n, (state, seconds) in enumerate(rest)]
 
-    if params.method == "raytrace":
+    full = Region(width, height)
+    seen = np.empty(full.pixel_count, np.int32) if _sees_first(scene, time, params) else None
+    # a one-sample painting's first iteration casts the plain render's rays: what they hit comes free
+    free = previous.blank and params.spp == 1 and region == full
+    extra: list[dict[str, float]] = []  # seconds outside the tiles' iterations
+
+    def traced(settings: PaintParams, record: bool = False) -> Callable[[Region], TileIteration]:
+        """The traced iteration of a tile; ``record``: the iteration writes what it hits into ``seen``."""
+
+        def iteration(tile: Region) -> TileIteration:
+            setup = setup_tile(camera, tile, settings)
+            if record:
+                return raytrace.tile_iteration(scene, time, setup, settings, record_seen=_rows_of(seen, tile))
+            return raytrace.tile_iteration(scene, time, setup, settings, seen=seen)
+
+        return iteration
+
+    if seen is not None and free:
+        # ---- fast, eyes at rest: the first iteration casts the plain render's rays; what they hit decides
+        # most rays of the later iterations (raytrace.tile_iteration) ----
+        first = run(traced(replace(params, iterations=1), record=True), previous, 1, keep)
+        parts = first
+        if params.iterations > 1:
+            start = PaintState.joined([p[0] for p in first], region)
+            kept = keep[1:] if keep is not None else None
+            parts = then(first, run(traced(params), start, params.iterations - 1, kept))
+    elif params.method == "raytrace":
+        if seen is not None:  # what the pixel centres see, in a pass of its own
+            visible = full.tiles(tile_rows(full, threads))
+            extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), visible)
         parts = run(traced(params), previous, params.iterations, keep)
     else:
         # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
@@ -149,6 +179,28 @@ def paint(
             lookups,
             kept,
         )
-        parts = [(state, total([plain_parts[n][1], seconds])) for n, (state, seconds) in enumerate(looked)]
+        parts = then(plain_parts, looked)
     state = PaintState.joined([p[0] for p in parts], region)
-    return PaintResult(state, total([p[1] for p in parts]), keep or [])
+    return PaintResult(state, total([p[1] for p in parts] + extra), keep or [])
+
+
+def _sees_first(scene: Scene, time: float, params: PaintParams) -> bool:
+    """Whether this painting decides rays by what the pixel centres see (``kernels.resolve_seen``): with
+    ``fast``, traced, eyes at rest (every ray starts at the eye) and targets that move (else every
+    iteration casts the first one's rays, and the exact painting costs nothing more), a scene with
+    triangles, and more than one ray a pixel. Not the region's size: a tile must be a crop."""
+    fast = params.fast and params.method == "raytrace" and params.lambda_e == 0.0 and params.lambda_p != 0.0
+    return fast and params.iterations * params.spp > 1 and scene.geometry(time)[1] is not None
+
+
+def _rows_of(array: np.ndarray, tile: Region) -> np.ndarray:
+    """The part of a per-pixel array of the full image at ``tile``'s rows (full-width rows)."""
+    return array[tile.y0 * tile.full_width : (tile.y0 + tile.height) * tile.full_width]
+
+
+def _visible(scene: Scene, time: float, camera: Camera, tile: Region, seen: np.ndarray) -> dict[str, float]:
+    """:func:`raytrace.visible_faces` of one tile of the full image into ``seen``; its seconds."""
+    watch = Stopwatch()
+    with watch.stage("intersect"):
+        raytrace.visible_faces(scene, time, camera, tile, _rows_of(seen, tile))
+    return watch.seconds

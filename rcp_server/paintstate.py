@@ -67,6 +67,11 @@ class PaintState:
 
         return cls(region, **{name: cat(name) for name in CHANNELS})
 
+    def copy(self) -> PaintState:
+        """A state of its own with this one's values."""
+        arrays = {name: None if (a := getattr(self, name)) is None else a.copy() for name in CHANNELS}
+        return PaintState(self.region, blank=self.blank, **arrays)
+
     def recorded(self) -> frozenset[str]:
         """The channels this state holds."""
         return frozenset(name for name in CHANNELS if getattr(self, name) is not None)

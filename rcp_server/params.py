@@ -67,6 +67,11 @@ class PaintParams:
         choices=METHODS,
     )
     edge: str = setting("mirror", "how the image method reads off screen", choices=EDGES)
+    fast: bool = setting(
+        True,
+        "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change "
+        "(off: trace every ray of every iteration)",
+    )
 
     def __post_init__(self):
         for declared in PAINT_SETTINGS.values():
@@ -103,7 +108,7 @@ class PaintParams:
 
 @dataclass(frozen=True)
 class PaintSetting:
-    """One painting setting as declared: ``kind`` is int, float or str; ``optional``: None is a value (it
+    """One painting setting as declared: ``kind`` is bool, int, float or str; ``optional``: None is a value (it
     means "derive it", as the help says). Numbers are finite and within ``ge``/``gt``/``le``; a name is
     one of ``choices``, or, with ``lookup``, whatever the registry knows (mappings are registered at run
     time; ``choices`` are then the built-in ones, those every server and command line offer)."""
@@ -135,6 +140,10 @@ class PaintSetting:
                     raise ValueError(f"{self.name}: {exc}") from None
             elif value not in self.choices:
                 raise ValueError(f"unknown {self.name} {value!r}; choose one of {', '.join(self.choices)}")
+            return
+        if self.kind is bool:
+            if not isinstance(value, bool):
+                raise ValueError(f"{self.name} must be true or false, got {value!r}")
             return
         whole = self.kind is int
         if isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real):

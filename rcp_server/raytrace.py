@@ -34,10 +34,12 @@ class TileSetup:
     noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
     basis: np.ndarray = field(init=False)  # (3, 3) rows r, u, f
     image_plane: kernels.ImagePlane = field(init=False)  # the image plane and the tile, as the kernels take them
+    pixels: np.ndarray = field(init=False)  # (n,) int64 every pixel of the tile: what an iteration paints
 
     def __post_init__(self):
         self.image_plane = kernels.ImagePlane.of(self.camera, self.region)
         self.basis = self.image_plane.basis
+        self.pixels = np.arange(self.region.pixel_count)
 
     def plane(self) -> np.ndarray:
         """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
@@ -117,9 +119,12 @@ def field_plan(
     return kernels.Field(kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32))
 
 
-def assign_cameras(state: PaintState, setup: TileSetup, params: PaintParams, z0: float, rays: Rays) -> int:
-    """Camera assignment: fill ``rays`` from ``I_{n-1}``. Returns how many rays came out non-finite (they
-    must not reach Embree)."""
+def assign_cameras(
+    state: PaintState, setup: TileSetup, params: PaintParams, z0: float, rays: Rays, pixels: np.ndarray | None = None
+) -> int:
+    """Camera assignment: fill ``rays`` from ``I_{n-1}`` for ``pixels`` (ascending; default every pixel of
+    the tile), sample k of the m-th pixel listed in row m * spp + k. Returns how many rays came out
+    non-finite (they must not reach Embree)."""
     pitch = setup.camera.pixel_pitch(setup.region.full_height)
     moves = not state.blank and state.has(params.reads())
     target = field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves)
@@ -136,6 +141,7 @@ def assign_cameras(state: PaintState, setup: TileSetup, params: PaintParams, z0:
         eye_field=eye,
         noise=kernels.or_dummy(setup.noise, 2),
         noise_scale=float(params.noise) if moves else 0.0,
+        pixels=setup.pixels if pixels is None else pixels,
         v_p=rays.v_p,
         v_e=rays.v_e,
         origins=rays.origins,
@@ -146,9 +152,34 @@ def assign_cameras(state: PaintState, setup: TileSetup, params: PaintParams, z0:
     return bad
 
 
-def tile_iteration(scene: Scene, time: float, setup: TileSetup, params: PaintParams) -> TileIteration:
+def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out: np.ndarray) -> None:
+    """What ``region``'s pixel centres see, the rays of the plain render at one sample: the face hit, -1
+    for the sky, into ``out`` (n,) int32. ``fast`` paintings read it for the whole image
+    (``kernels.resolve_seen``); it equals the faces that a one-sample painting's first iteration hits."""
+    setup = setup_tile(camera, region, PaintParams(spp=1, noise=0.0))
+    rays = Rays.allocate(region.pixel_count, 1)
+    assign_cameras(PaintState.canvas(region), setup, PaintParams(), 0.0, rays)
+    tracer = scene.geometry(time)[1]
+    out[:] = -1 if tracer is None else tracer.intersect(rays.origins, rays.directions).face
+
+
+def tile_iteration(
+    scene: Scene,
+    time: float,
+    setup: TileSetup,
+    params: PaintParams,
+    seen: np.ndarray | None = None,
+    record_seen: np.ndarray | None = None,
+) -> TileIteration:
     """One traced iteration of the tile ``setup`` describes, of ``scene`` at ``time``: ``I_{n-1} -> I_n``.
-    It records the channels ``params`` reads; its buffers are the tile's, reused by every iteration."""
+    It records the channels ``params`` reads; its buffers are the tile's, reused by every iteration.
+
+    With ``params.fast`` an iteration paints again only the pixels whose inputs changed since the
+    iteration before (``kernels.changed_pixels``: exact), and, given ``seen`` (:func:`visible_faces` of the
+    full image, for paintings whose eyes rest), intersects without the BVH where ``seen`` decides
+    (``kernels.resolve_seen``). ``record_seen`` (n,) int32: where to write the faces this iteration's
+    rays hit, for a one-sample iteration from the canvas (whose rays are those of :func:`visible_faces`).
+    """
     geometry, tracer = scene.geometry(time)
     surfaces = kernels.Surfaces(**{name: getattr(geometry, name) for name in kernels.Surfaces._fields})
     light = scene.light
@@ -158,23 +189,75 @@ def tile_iteration(scene: Scene, time: float, setup: TileSetup, params: PaintPar
     z0 = params.focus(setup.camera)
     z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
     reads = params.reads()
-    rays = Rays.allocate(setup.region.pixel_count, params.spp)
+    n = setup.region.pixel_count
+    rays = Rays.allocate(n, params.spp)
+    if tracer is None:
+        seen = None
+    if seen is not None:  # the hits of the rays decided without Embree, and the rays left to it
+        decided = Hits(*(np.empty(n * params.spp, a.dtype) for a in Hits.misses(1)))
+        pending = np.empty(n * params.spp, np.int64)
+    changed = np.empty(n, np.int64) if params.fast else None
+    compared = {name: name in reads for name in ("color", "depth", "normal", "direction")}
+    last: list[PaintState] = []  # the state the iteration before started from
+
+    def to_paint(state: PaintState) -> np.ndarray:
+        """The pixels this iteration must paint: all of them, or with ``fast`` the ones whose inputs changed."""
+        before = last[0] if last else None
+        last[:] = [state]
+        if changed is None or before is None or before.blank or state.blank or not before.has(reads):
+            return setup.pixels
+        count = kernels.changed_pixels(
+            before=kernels.channels(before),
+            after=kernels.channels(state),
+            **compared,
+            color_levels=kernels.DISPLAY_LEVELS,
+            out=changed,
+        )
+        return changed[:count]
+
+    def intersect(count: int, checked: bool, canvas: bool) -> Hits:
+        if tracer is None:
+            return Hits.misses(count)
+        # an iteration from the canvas is the plain render: traced exactly, always (at one sample it casts
+        # the very rays whose hits ``seen`` holds), so ``fast`` never changes the plain render and a first
+        # iteration never depends on where ``seen`` came from (a tile stays a crop)
+        if seen is None or canvas:
+            return tracer.intersect(rays.origins[:count], rays.directions[:count], checked=checked)
+        left = kernels.resolve_seen(
+            origins=rays.origins,
+            directions=rays.directions,
+            count=count,
+            plane=setup.image_plane,
+            seen=seen,
+            triangles=geometry.triangles,
+            hits=decided,
+            pending=pending,
+        )
+        if left:
+            rest = pending[:left]
+            found = tracer.intersect(rays.origins[rest], rays.directions[rest])
+            for mine, theirs in zip(decided, found, strict=True):
+                mine[rest] = theirs
+        return decided
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
         with watch.stage("camera"):
-            invalid = assign_cameras(state, setup, params, z0, rays)
+            pixels = to_paint(state)
+            invalid = assign_cameras(state, setup, params, z0, rays, pixels)
+        count = len(pixels) * params.spp
         with watch.stage("intersect"):
-            if tracer is None:
-                hits = Hits.misses(len(rays.origins))
-            else:
-                hits = tracer.intersect(rays.origins, rays.directions, checked=invalid == 0)
+            hits = intersect(count, invalid == 0, state.blank)
+            if record_seen is not None:
+                record_seen[:] = hits.face[:count]
         with watch.stage("shade"):
-            new = PaintState.empty(setup.region, reads)
+            # the pixels not painted keep their value: start from a copy of the state
+            new = PaintState.empty(setup.region, reads) if len(pixels) == n else state.copy()
             kernels.shade(
                 origins=rays.origins,
                 directions=rays.directions,
                 hits=hits,
                 spp=params.spp,
+                pixels=pixels,
                 surfaces=surfaces,
                 environment=scene.environment.image,
                 light_dir=light_dir,

@@ -2,8 +2,10 @@
 
 ``cast.py``: camera assignment (``cast_rays``, with the built-in mappings fused in, and ``fill_field``);
 ``shade.py``: Embree's hits -> per-pixel data (``shade``); ``lookup.py``: the image-space method's
-lookup (``look_up``). Each releases the GIL, so tiles run on threads side by side with Embree, and each
-has a plain numpy reference in ``tests/engine`` that it is checked against.
+lookup (``look_up``); ``seen.py`` and ``reuse.py``: the shortcuts of the ``fast`` setting (``resolve_seen``
+intersects where the plain render already knows the answer, ``changed_pixels`` finds what must be
+painted again). Each releases the GIL, so tiles run on threads side by side with Embree, and each has a
+plain numpy reference in ``tests/engine`` that it is checked against.
 
 Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same type passed in each
 other's place must be an error, not a wrong image.
@@ -12,9 +14,12 @@ other's place must be an error, not a wrong image.
 from .bundles import Channels, Field, ImagePlane, Surfaces, channels, or_dummy
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
+from .reuse import DISPLAY_LEVELS, changed_pixels
+from .seen import resolve_seen
 from .shade import shade
 
 __all__ = [
+    "DISPLAY_LEVELS",
     "EDGE_CLAMP",
     "EDGE_MIRROR",
     "EDGE_WRAP",
@@ -28,9 +33,11 @@ __all__ = [
     "ImagePlane",
     "Surfaces",
     "cast_rays",
+    "changed_pixels",
     "channels",
     "fill_field",
     "look_up",
     "or_dummy",
+    "resolve_seen",
     "shade",
 ]

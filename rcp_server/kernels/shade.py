@@ -82,6 +82,7 @@ def shade(
     directions,
     hits,
     spp,
+    pixels,
     surfaces,
     environment,
     light_dir,
@@ -97,8 +98,9 @@ def shade(
 ):
     """Shade every sample and average the samples of each pixel.
 
-    origins, directions : (n*spp, 3) float32 rays;  hits : their closest hits (``tracer.Hits``: face, t,
-    b1, b2; face -1 on a miss);  surfaces : a bundles.Surfaces
+    origins, directions : (m*spp, 3) float32 rays;  hits : their closest hits (``tracer.Hits``: face, t,
+    b1, b2; face -1 on a miss);  pixels : (m,) int64 the pixel of each group of spp rays, where its mean is
+    written (the others are left as they are);  surfaces : a bundles.Surfaces
     environment : (h, w, 3) float32 equirectangular; light_dir : (3,) float64 travel direction
     out : bundles.Channels of n pixels: color (n, 3) float32 displayed color in [0, 1]; depth (n,) float32
     view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
@@ -109,7 +111,7 @@ def shade(
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
     out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
-    n_pix = out_color.shape[0]
+    n_pix = len(pixels)
     env_h = environment.shape[0]
     env_w = environment.shape[1]
     env_flat = environment.reshape(env_h * env_w, 3)
@@ -133,12 +135,13 @@ def shade(
                     sky[s - base, 0] = (lon / (2.0 * math.pi) + 0.5) * env_w
                     sky[s - base, 1] = lat / math.pi * env_h
         # scalars rather than small arrays throughout: they stay in registers
-        for pix in range(first, last):
+        for m in range(first, last):
+            pix = pixels[m]
             acc_r = acc_g = acc_b = 0.0
             acc_nx = acc_ny = acc_nz = 0.0
             acc_dx = acc_dy = acc_dz = 0.0
             acc_z = 0.0
-            for s in range(pix * spp, (pix + 1) * spp):
+            for s in range(m * spp, (m + 1) * spp):
                 f = face[s]
                 dx = directions[s, 0]
                 dy = directions[s, 1]

@@ -12,7 +12,7 @@ import json
 from dataclasses import asdict
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
 from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
@@ -38,6 +38,8 @@ def _wire(declared: PaintSetting):
     """A painting setting on the wire, from its declaration: optional, ``null`` meaning the scene's value."""
     if declared.kind is str:
         kind = Literal[declared.choices]  # mappings: the built-in ones (others are registered in Python only)
+    elif declared.kind is bool:
+        kind = StrictBool  # true or false, not "yes" or 1
     else:
         bounds = {k: v for k in ("ge", "gt", "le") if (v := getattr(declared, k)) is not None}
         kind = Annotated[declared.kind, Field(allow_inf_nan=False, **bounds)]
