@@ -18,7 +18,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import imagespace, raytrace
+from . import imagespace, kernels, raytrace
 from .camera import Camera, Region
 from .paintstate import Abandoned, PaintState, TileIteration
 from .params import PaintParams
@@ -133,7 +133,11 @@ def paint(
         return [(state, total([first[n][1], seconds])) for n, (state, seconds) in enumerate(rest)]
 
     full = Region(width, height)
-    seen = np.empty(full.pixel_count, np.int32) if _sees_first(scene, time, params) else None
+    # where the pixel centres look: at several samples a grid twice as fine, which sees the thin geometry
+    # that the samples antialias
+    fine = 1 if params.spp == 1 else 2
+    grid = Region(fine * width, fine * height)
+    seen = kernels.Seen.empty(grid.width, grid.height) if _sees_first(scene, time, params) else None
     # a one-sample painting's first iteration casts the plain render's rays: what they hit comes free
     free = previous.blank and params.spp == 1 and region == full
     extra: list[dict[str, float]] = []  # seconds outside the tiles' iterations
@@ -144,7 +148,7 @@ def paint(
         def iteration(tile: Region) -> TileIteration:
             setup = setup_tile(camera, tile, settings)
             if record:
-                return raytrace.tile_iteration(scene, time, setup, settings, record_seen=_rows_of(seen, tile))
+                return raytrace.tile_iteration(scene, time, setup, settings, record_seen=seen.rows(tile))
             return raytrace.tile_iteration(scene, time, setup, settings, seen=seen)
 
         return iteration
@@ -160,7 +164,7 @@ def paint(
             parts = then(first, run(traced(params), start, params.iterations - 1, kept))
     elif params.method == "raytrace":
         if seen is not None:  # what the pixel centres see, in a pass of its own
-            visible = full.tiles(tile_rows(full, threads))
+            visible = grid.tiles(tile_rows(grid, threads))
             extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), visible)
         parts = run(traced(params), previous, params.iterations, keep)
     else:
@@ -193,14 +197,9 @@ def _sees_first(scene: Scene, time: float, params: PaintParams) -> bool:
     return fast and params.iterations * params.spp > 1 and scene.geometry(time)[1] is not None
 
 
-def _rows_of(array: np.ndarray, tile: Region) -> np.ndarray:
-    """The part of a per-pixel array of the full image at ``tile``'s rows (full-width rows)."""
-    return array[tile.y0 * tile.full_width : (tile.y0 + tile.height) * tile.full_width]
-
-
-def _visible(scene: Scene, time: float, camera: Camera, tile: Region, seen: np.ndarray) -> dict[str, float]:
+def _visible(scene: Scene, time: float, camera: Camera, tile: Region, seen: kernels.Seen) -> dict[str, float]:
     """:func:`raytrace.visible_faces` of one tile of the full image into ``seen``; its seconds."""
     watch = Stopwatch()
     with watch.stage("intersect"):
-        raytrace.visible_faces(scene, time, camera, tile, _rows_of(seen, tile))
+        raytrace.visible_faces(scene, time, camera, tile, seen.rows(tile))
     return watch.seconds

@@ -152,15 +152,23 @@ def assign_cameras(
     return bad
 
 
-def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out: np.ndarray) -> None:
-    """What ``region``'s pixel centres see, the rays of the plain render at one sample: the face hit, -1
-    for the sky, into ``out`` (n,) int32. ``fast`` paintings read it for the whole image
-    (``kernels.resolve_seen``); it equals the faces that a one-sample painting's first iteration hits."""
+def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out: kernels.Seen) -> None:
+    """What ``region``'s pixel centres see, into ``out`` (a bundles.Seen of the region): the hits of the
+    plain render's rays at one sample, the very hits of a one-sample painting's first iteration. ``fast``
+    paintings read it for the whole image (``kernels.resolve_seen``)."""
     setup = setup_tile(camera, region, PaintParams(spp=1, noise=0.0))
     rays = Rays.allocate(region.pixel_count, 1)
     assign_cameras(PaintState.canvas(region), setup, PaintParams(), 0.0, rays)
-    tracer = scene.geometry(time)[1]
-    out[:] = -1 if tracer is None else tracer.intersect(rays.origins, rays.directions).face
+    geometry, tracer = scene.geometry(time)
+    if tracer is None:
+        out.face[:] = -1
+        return
+    hits = tracer.intersect(rays.origins, rays.directions)
+    kernels.place_hits(
+        origins=rays.origins, directions=rays.directions, rays=setup.pixels, triangles=geometry.triangles, hits=hits
+    )
+    out.face[:] = hits.face
+    out.distance[:] = hits.t
 
 
 def tile_iteration(
@@ -168,17 +176,19 @@ def tile_iteration(
     time: float,
     setup: TileSetup,
     params: PaintParams,
-    seen: np.ndarray | None = None,
-    record_seen: np.ndarray | None = None,
+    seen: kernels.Seen | None = None,
+    record_seen: kernels.Seen | None = None,
 ) -> TileIteration:
     """One traced iteration of the tile ``setup`` describes, of ``scene`` at ``time``: ``I_{n-1} -> I_n``.
     It records the channels ``params`` reads; its buffers are the tile's, reused by every iteration.
 
     With ``params.fast`` an iteration paints again only the pixels whose inputs changed since the
-    iteration before (``kernels.changed_pixels``: exact), and, given ``seen`` (:func:`visible_faces` of the
+    iteration before (``kernels.changed_pixels``: colors in display levels while the eyes rest, else
+    exact), and, given ``seen`` (:func:`visible_faces` of the
     full image, for paintings whose eyes rest), intersects without the BVH where ``seen`` decides
-    (``kernels.resolve_seen``). ``record_seen`` (n,) int32: where to write the faces this iteration's
-    rays hit, for a one-sample iteration from the canvas (whose rays are those of :func:`visible_faces`).
+    (``kernels.resolve_seen``). ``record_seen`` (a bundles.Seen of the tile): where to write what this
+    iteration's rays hit, for a one-sample iteration from the canvas (whose rays are those of
+    :func:`visible_faces`).
     """
     geometry, tracer = scene.geometry(time)
     surfaces = kernels.Surfaces(**{name: getattr(geometry, name) for name in kernels.Surfaces._fields})
@@ -189,6 +199,7 @@ def tile_iteration(
     z0 = params.focus(setup.camera)
     z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
     reads = params.reads()
+    triangles = geometry.triangles
     n = setup.region.pixel_count
     rays = Rays.allocate(n, params.spp)
     if tracer is None:
@@ -198,6 +209,8 @@ def tile_iteration(
         pending = np.empty(n * params.spp, np.int64)
     changed = np.empty(n, np.int64) if params.fast else None
     compared = {name: name in reads for name in ("color", "depth", "normal", "direction")}
+    # colors compare in display levels while the eyes rest; with moving eyes every shortcut is exact
+    color_levels = kernels.DISPLAY_LEVELS if params.lambda_e == 0.0 else 0
     last: list[PaintState] = []  # the state the iteration before started from
 
     def to_paint(state: PaintState) -> np.ndarray:
@@ -210,7 +223,7 @@ def tile_iteration(
             before=kernels.channels(before),
             after=kernels.channels(state),
             **compared,
-            color_levels=kernels.DISPLAY_LEVELS,
+            color_levels=color_levels,
             out=changed,
         )
         return changed[:count]
@@ -222,22 +235,28 @@ def tile_iteration(
         # the very rays whose hits ``seen`` holds), so ``fast`` never changes the plain render and a first
         # iteration never depends on where ``seen`` came from (a tile stays a crop)
         if seen is None or canvas:
-            return tracer.intersect(rays.origins[:count], rays.directions[:count], checked=checked)
+            hits = tracer.intersect(rays.origins[:count], rays.directions[:count], checked=checked)
+            kernels.place_hits(
+                origins=rays.origins, directions=rays.directions, rays=np.arange(count), triangles=triangles, hits=hits
+            )
+            return hits
         left = kernels.resolve_seen(
             origins=rays.origins,
             directions=rays.directions,
             count=count,
             plane=setup.image_plane,
             seen=seen,
-            triangles=geometry.triangles,
+            triangles=triangles,
             hits=decided,
             pending=pending,
         )
         if left:
             rest = pending[:left]
             found = tracer.intersect(rays.origins[rest], rays.directions[rest])
-            for mine, theirs in zip(decided, found, strict=True):
-                mine[rest] = theirs
+            decided.face[rest] = found.face
+            kernels.place_hits(
+                origins=rays.origins, directions=rays.directions, rays=rest, triangles=triangles, hits=decided
+            )
         return decided
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
@@ -248,7 +267,8 @@ def tile_iteration(
         with watch.stage("intersect"):
             hits = intersect(count, invalid == 0, state.blank)
             if record_seen is not None:
-                record_seen[:] = hits.face[:count]
+                record_seen.face[:] = hits.face[:count]
+                record_seen.distance[:] = hits.t[:count]
         with watch.stage("shade"):
             # the pixels not painted keep their value: start from a copy of the state
             new = PaintState.empty(setup.region, reads) if len(pixels) == n else state.copy()

@@ -70,6 +70,26 @@ class Surfaces(NamedTuple):
     texture_height: np.ndarray  # (K,) int64
 
 
+class Seen(NamedTuple):
+    """What the camera sees at the pixel centres of a ``width x height`` image (the painting's, or a finer
+    one for many samples): the hits of its plain render's rays, row-major (``raytrace.visible_faces``;
+    ``seen.resolve_seen`` reads it)."""
+
+    face: np.ndarray  # (height * width,) int32, -1: the sky
+    distance: np.ndarray  # (height * width,) float32 along the unit ray to the hit, meaningless on the sky
+    width: int
+    height: int
+
+    @classmethod
+    def empty(cls, width: int, height: int) -> Seen:
+        return cls(np.empty(width * height, np.int32), np.empty(width * height, np.float32), width, height)
+
+    def rows(self, tile: Region) -> Seen:
+        """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""
+        rows = slice(tile.y0 * self.width, (tile.y0 + tile.height) * self.width)
+        return Seen(self.face[rows], self.distance[rows], self.width, tile.height)
+
+
 _DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
 
 
