@@ -26,7 +26,7 @@ const state = {
   scene: null, // SceneInfo of the walk-through, from `ready`
   defaults: {}, // the scene's painting settings, engine defaults filled in
   paint: {}, // the painting settings the user changed (sent as `paint`)
-  temporal: true,
+  temporal: false, // per-frame: every frame is the painting of its camera
   animate: false,
   quality: Number(query.get("quality")) || 80,
   resolution: 1, // painting size as a fraction of the window's (or of ?width, ?height)

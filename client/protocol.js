@@ -694,7 +694,7 @@ export const PROTOCOL = {
    "type": "object"
   },
   "frame": {
-   "description": "Sent before the binary JPEG it describes. ``phase``: ``walk`` while the camera moves (temporal or\nreduced), ``refine`` once it rests; ``final`` when no further refinement follows.",
+   "description": "Sent before the binary JPEG it describes: the painting of camera ``camera_id`` at ``width`` x\n``height`` with ``paint`` (what ``POST /api/render`` gives for the same, up to the JPEG). ``phase``:\n``walk`` while the camera moves (reduced in size and samples), ``refine`` once it rests; ``final`` when\nno further refinement follows; ``temporal``: it continues the last frame instead.",
    "properties": {
     "camera_id": {
      "anyOf": [
@@ -723,6 +723,29 @@ export const PROTOCOL = {
      "title": "Iteration",
      "type": "integer"
     },
+    "paint": {
+     "additionalProperties": {
+      "anyOf": [
+       {
+        "type": "boolean"
+       },
+       {
+        "type": "integer"
+       },
+       {
+        "type": "number"
+       },
+       {
+        "type": "string"
+       },
+       {
+        "type": "null"
+       }
+      ]
+     },
+     "title": "Paint",
+     "type": "object"
+    },
     "phase": {
      "enum": [
       "walk",
@@ -730,6 +753,10 @@ export const PROTOCOL = {
      ],
      "title": "Phase",
      "type": "string"
+    },
+    "quality": {
+     "title": "Quality",
+     "type": "integer"
     },
     "render_ms": {
      "title": "Render Ms",
@@ -777,6 +804,8 @@ export const PROTOCOL = {
     "phase",
     "final",
     "temporal",
+    "quality",
+    "paint",
     "camera_id",
     "time",
     "dropped"

@@ -5,8 +5,9 @@ happened (the view changed, the camera moved, a frame was painted in so many sec
 next frame's :class:`Plan`, or how long to wait for one. Clocks are monotonic seconds, passed in as ``now``.
 
 While the camera moves, *walk* frames hold the frame budget: one sample per pixel, at the largest of
-:data:`SCALES` that the measured seconds per ray allow, in temporal mode one iteration continuing from the
-last frame (the paper's ``I_n = F(I_{n-1}, S(n))``), else all iterations from the canvas. Once the camera
+:data:`SCALES` that the measured seconds per ray allow, each the painting of its camera (all iterations
+from the canvas); in temporal mode, asked for explicitly, one iteration continuing from the last frame
+instead (the paper's ``I_n = F(I_{n-1}, S(n))``). Once the camera
 has been still for ``settle_ms``, *refine* frames paint the full canvas with all iterations: first at the
 painting's own samples, then at :data:`REFINE_SPP` or more (what the work limit allows), the final one.
 """
@@ -23,6 +24,7 @@ FIRST_SCALE = 0.5  # the walk-frame size before any painting has been timed
 REFINE_SPP = 4  # once at rest, the second refinement takes at least this many samples per pixel
 MAX_REFINE_SPP = 64  # ... and at most this many: past it the image no longer visibly changes
 WALK_SHARE = 0.8  # of the frame budget, for painting a walk frame; encoding and sending take the rest
+WALK_QUALITY = 70  # the most JPEG quality a walk frame is sent with: fewer bytes while the eye is moving
 SOON = 0.005  # seconds: the shortest wait for rest, so a wait that is due still yields to the receiver
 
 
@@ -164,3 +166,9 @@ class Planner:
     def _plan(self, phase, width, height, params: PaintParams, continues: bool, scene_time: float, final) -> Plan:
         iteration = self.iteration + params.iterations if continues else params.iterations
         return Plan(phase, width, height, params, continues, iteration, final, scene_time, self.version)
+
+
+def frame_quality(plan: Plan, quality: int) -> int:
+    """The JPEG quality of ``plan``'s frame for a client that asked for ``quality``: lower while walking,
+    as remote viewers do (a moving picture hides it; the painting at rest gets the quality asked for)."""
+    return min(quality, WALK_QUALITY) if plan.phase == "walk" else quality

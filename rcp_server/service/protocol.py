@@ -140,8 +140,10 @@ class Ready(BaseModel):
 
 
 class Frame(BaseModel):
-    """Sent before the binary JPEG it describes. ``phase``: ``walk`` while the camera moves (temporal or
-    reduced), ``refine`` once it rests; ``final`` when no further refinement follows."""
+    """Sent before the binary JPEG it describes: the painting of camera ``camera_id`` at ``width`` x
+    ``height`` with ``paint`` (what ``POST /api/render`` gives for the same, up to the JPEG). ``phase``:
+    ``walk`` while the camera moves (reduced in size and samples), ``refine`` once it rests; ``final`` when
+    no further refinement follows; ``temporal``: it continues the last frame instead."""
 
     type: Literal["frame"] = "frame"
     seq: int
@@ -154,6 +156,8 @@ class Frame(BaseModel):
     phase: Literal["walk", "refine"]
     final: bool
     temporal: bool
+    quality: int  # of the JPEG: lower while walking
+    paint: dict[str, bool | int | float | str | None]  # every painting setting of this image (spp included)
     camera_id: int | None
     time: float
     dropped: int  # frames rendered but never sent, because a newer one replaced them

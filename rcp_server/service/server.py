@@ -52,6 +52,7 @@ class Server(uvicorn.Server):
             port=settings.port,
             ws=CappedWebSockets,
             ws_max_size=64 * settings.max_message_bytes,
+            ws_per_message_deflate=False,  # frames are JPEGs: deflating them costs CPU and saves nothing
             limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
             timeout_graceful_shutdown=self.GRACE_S,
             **options,

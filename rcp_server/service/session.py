@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import time as _time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
@@ -26,7 +26,7 @@ from ..scene import Scene
 from ..scenefile import one_line
 from . import protocol
 from .faults import fault_message, report_fault
-from .planner import Plan, Planner, View
+from .planner import Plan, Planner, View, frame_quality
 from .state import Service
 
 
@@ -53,7 +53,7 @@ class Session:
         self.width = self.height = 0
         self.quality = 80
         self.overrides: dict = {}  # painting settings the client changed from the scene's
-        self.temporal = True
+        self.temporal = False  # per-frame paintings: every frame is the painting of its camera
         self.animate = False
         self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
         self.changed = asyncio.Event()
@@ -236,7 +236,7 @@ class Session:
             should_stop=should_stop,
         )
         seconds = _time.perf_counter() - clock
-        return (result, images.encode(result.image, "JPEG", job.quality)), seconds
+        return (result, images.encode(result.image, "JPEG", frame_quality(plan, job.quality))), seconds
 
     def _finished(self, job: _Job, painted: tuple[PaintResult, bytes], seconds: float) -> None:
         result, jpeg = painted
@@ -254,6 +254,8 @@ class Session:
             phase=plan.phase,
             final=plan.final,
             temporal=plan.continues,
+            quality=frame_quality(plan, job.quality),
+            paint=asdict(plan.params),
             camera_id=job.camera_id,
             time=plan.time,
             dropped=0,

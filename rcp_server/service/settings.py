@@ -42,7 +42,7 @@ class Settings(BaseSettings):
     max_message_bytes: int = Field(16 * 1024, ge=256)  # a WebSocket text message; longer ones get an error
     send_timeout_s: float = Field(30.0, gt=0)  # a client that takes no data for this long is disconnected
     # ---- walking ----
-    frame_ms: float = Field(60.0, gt=0)  # while walking, aim for frames at least this fast
+    frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message
 
     @field_validator("cors_origins", mode="before")

@@ -288,7 +288,7 @@ def test_every_message_the_client_sends_is_in_the_protocol(page):
     assert page.get_attribute('#paint-method [data-value="raytrace"]', "aria-pressed") == "true"
     assert "method" not in page.evaluate("rcp.state.paint")
     page.click("#reset-paint")
-    page.uncheck("#temporal")
+    page.check("#temporal")
     page.locator("#quality").fill("60")
     page.select_option("#resolution", "0.5")
     page.select_option("#scene", "sea")

@@ -208,7 +208,7 @@ def test_hostile_messages_get_errors_and_the_walk_goes_on(tight, walk_to):
         assert reply["type"] == "error" and "Traceback" not in reply["message"], (text[:40], reply)
     walk.send(type="camera", eye=[0, 0, 0], look_at=[0, 0.2, -1], id=7)
     meta, image = walk.frame()
-    assert meta["camera_id"] == 7 and image.shape == (18, 32, 3)
+    assert meta["camera_id"] == 7 and image.shape == (meta["height"], meta["width"], 3)
 
 
 def test_a_message_past_the_transport_limit_closes_with_1009(tight, walk_to):
@@ -238,7 +238,8 @@ def test_a_client_that_stops_reading_is_dropped_and_never_buffered(walk_to):
         sock.connect(("127.0.0.1", server.settings.port))
         reader = walk_to(server, sock=sock, max_queue=1)  # reads nothing it is not asked for
         reader.send(type="hello", scene="sea", width=640, height=360, quality=100)
-        reader.send(type="mode", animate=True)  # the waves move: a new frame as fast as it can paint
+        # the waves move: a new frame as fast as it can paint (one iteration each, temporal)
+        reader.send(type="mode", animate=True, temporal=True)
         other = walk_to(server)
         other.send(type="hello", scene="sky", width=32, height=18)
         other.next()

@@ -145,7 +145,7 @@ def test_fair_pool_passes_errors_and_drops_the_rest_of_a_failed_batch():
 def test_hello_gives_ready_then_walk_and_refined_frames(walk):
     walk.send(type="hello", scene="default", width=160, height=90)
     ready = walk.next()
-    assert ready["type"] == "ready" and ready["scene"]["name"] == "default" and ready["temporal"]
+    assert ready["type"] == "ready" and ready["scene"]["name"] == "default" and not ready["temporal"]
     frames = walk.until_final()
     first, last = frames[0][0], frames[-1][0]
     assert first["phase"] == "walk" and last["phase"] == "refine" and last["spp"] >= 4
@@ -179,9 +179,40 @@ def test_camera_messages_are_coalesced_and_the_newest_wins(walk):
     assert ids == sorted(ids)
 
 
+def test_walk_frames_are_the_rest_paintings_of_their_cameras(walk, live_server):
+    """Walking, every frame is the painting of its camera at the frame's size and settings: the very JPEG
+    that ``POST /api/render`` gives for them."""
+    walk.send(type="hello", scene="default", width=320, height=180)
+    walk.next()
+    walk.until_final()
+    cameras = {k: {"eye": [0.8 + 0.3 * k, 1.7, 38.0 - k], "look_at": [0.0, 3.0, 0.0]} for k in range(3)}
+    seen = 0
+    for k, camera in cameras.items():
+        walk.send(type="camera", id=k, **camera)
+        while (meta := walk.next())["type"] != "frame" or meta["camera_id"] != k:
+            if meta["type"] == "frame":
+                walk.ws.recv(30)  # an older camera's frame
+        jpeg = walk.ws.recv(30)
+        assert meta["phase"] == "walk" and not meta["temporal"] and meta["iteration"] == meta["paint"]["iterations"]
+        assert meta["paint"]["spp"] == meta["spp"] == 1 and meta["quality"] <= 70
+        body = {
+            "scene": "default",
+            "width": meta["width"],
+            "height": meta["height"],
+            "camera": camera,
+            "paint": meta["paint"],
+            "format": "jpeg",
+            "quality": meta["quality"],
+        }
+        assert post(live_server, body).content == jpeg
+        seen += 1
+    assert seen == 3
+
+
 def test_temporal_walk_frames_continue_the_recursion(walk):
     walk.send(type="hello", scene="default", width=160, height=90)
     walk.next()
+    walk.send(type="mode", temporal=True)
     walk.until_final()
     iterations = []
     for k in range(4):
