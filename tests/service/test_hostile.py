@@ -237,7 +237,8 @@ def test_a_client_that_stops_reading_is_dropped_and_never_buffered(walk_to):
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)  # before connecting, or the kernel ignores it
         sock.connect(("127.0.0.1", server.settings.port))
         reader = walk_to(server, sock=sock, max_queue=1)  # reads nothing it is not asked for
-        reader.send(type="hello", scene="sea", width=640, height=360, quality=100)
+        # walk frames go out at JPEG quality 70 at most: a large canvas, so they fill the buffers soon
+        reader.send(type="hello", scene="sea", width=1920, height=1080, quality=100)
         # the waves move: a new frame as fast as it can paint (one iteration each, temporal)
         reader.send(type="mode", animate=True, temporal=True)
         other = walk_to(server)
