@@ -13,7 +13,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
-from .routes import rest, walk
+from .routes import rest, styles, walk
 from .settings import Settings
 from .state import Service
 
@@ -47,6 +47,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RequestValidationError, _invalid)
     app.include_router(rest.public)
     app.include_router(rest.router)
+    app.include_router(styles.router)
     app.include_router(walk.router)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))

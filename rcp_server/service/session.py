@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import time as _time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
@@ -24,6 +24,7 @@ from ..painting import Abandoned, PaintResult, PaintState
 from ..params import PaintParams
 from ..scene import Scene
 from ..scenefile import one_line
+from ..styles import with_style
 from . import protocol
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View
@@ -52,7 +53,7 @@ class Session:
         self.camera_id: int | None = None
         self.width = self.height = 0
         self.quality = 80
-        self.overrides: dict = {}  # painting settings the client changed from the scene's
+        self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
         self.temporal = True
         self.animate = False
         self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
@@ -158,7 +159,7 @@ class Session:
 
     def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> None:
         """Refuses a view whose paintings could not be made: a bad setting, or more work than one may take."""
-        self.settings.check_painting(width, height, replace(scene.paint, **overrides))
+        self.settings.check_painting(width, height, with_style(scene.paint, overrides))
 
     def _changed(self) -> None:
         self.planner.view_changed()
@@ -195,7 +196,7 @@ class Session:
             self._finished(job, result, seconds)
 
     def _params(self) -> PaintParams:
-        return replace(self.scene.paint, **self.overrides)
+        return with_style(self.scene.paint, self.overrides)
 
     def _view(self) -> View:
         moving = self.animate and self.scene.animated
