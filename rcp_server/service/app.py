@@ -13,6 +13,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
+from .guard import Capacity
 from .routes import rest, styles, walk
 from .settings import Settings
 from .state import Service
@@ -37,6 +38,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         max_body_size=settings.max_body_bytes,
     )
     app.add_middleware(InternalErrors)
+    app.add_middleware(Capacity, limit=settings.max_requests)  # inside CORS: a 503 keeps its CORS headers
     if settings.cors_origins:  # off unless configured: only the client served here calls the API
         app.add_middleware(
             CORSMiddleware,

@@ -31,6 +31,11 @@ from .planner import Plan, Planner, View
 from .state import Service
 
 
+def busy_message(limit: int) -> str:
+    """What a walk-through turned away for the server's ``max_sessions`` is told."""
+    return f"the server is at its limit of {limit} walk-throughs; try again later"
+
+
 @dataclass
 class _Job:
     """One frame to paint: the planner's plan, and a snapshot of the view it shows."""
@@ -78,6 +83,7 @@ class Session:
                 tasks.create_task(self._receive())
                 tasks.create_task(self._paint())
                 tasks.create_task(self._send())
+                tasks.create_task(self._expect_hello())
         except* WebSocketDisconnect:
             pass
         finally:
@@ -86,6 +92,22 @@ class Session:
     def close(self) -> None:
         """End the walk-through's painting: one still in flight stops at its next iteration."""
         self.closed = True
+
+    @property
+    def walking(self) -> bool:
+        """Whether it has said hello: only then does it hold one of the server's ``max_sessions`` places."""
+        return self.scene is not None
+
+    async def _expect_hello(self) -> None:
+        """Close a WebSocket that has not opened a walk-through within ``hello_timeout_s`` (1008): one that
+        only holds a connection open is let go."""
+        seconds = self.settings.hello_timeout_s
+        await asyncio.sleep(seconds)
+        if self.scene is None:
+            message = f"no hello within {seconds:g} s"
+            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=message).model_dump_json()})
+            await self.ws.close(code=1008, reason=message)
+            raise WebSocketDisconnect(1008, message)
 
     async def _receive(self) -> None:
         while True:
@@ -136,6 +158,8 @@ class Session:
 
     def _hello(self, msg: protocol.Hello) -> None:
         scenes = self.service.scenes
+        if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
+            raise ValueError(busy_message(self.settings.max_sessions))
         if msg.scene not in scenes:
             raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(scenes))}")
         self._check(scenes[msg.scene], msg.width, msg.height, {})
