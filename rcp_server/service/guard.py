@@ -6,7 +6,8 @@ turned everyone else away with a plain-text 503. Here instead:
 
 - a request (headers and body) must arrive within ``header_timeout_s`` of the connection opening or of
   the previous response; a connection that is slower gets a 408 and is closed (:class:`GuardedHttp`);
-- a client that takes none of a response for ``send_timeout_s`` is closed (its kernel buffer stays full);
+- a client that takes none of a response for ``send_timeout_s`` is closed (behind a kernel send buffer
+  capped at :data:`SEND_BUFFER`);
 - past ``max_connections`` open connections, the one idle longest (no request in progress) is closed to
   make room, so idle sockets never keep a real client out;
 - only requests in progress count against the capacity, ``max_requests`` of them (:class:`Capacity`);
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import socket
 import time
 
 from starlette.responses import JSONResponse
@@ -29,6 +31,9 @@ from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 from .settings import Settings
 
 RETRY_AFTER_S = 2  # what a caller turned away for capacity is told to wait: requests in progress end fast
+SEND_BUFFER = 256 * 1024
+"""The kernel's send buffer of a connection, in bytes. Uncapped, the kernel grows it to megabytes for a client
+that stops reading, so a send would wait (and ``send_timeout_s`` run) only seconds of stale data later."""
 
 
 def _answer(status: int, reason: str, detail: str, **headers: str) -> bytes:
@@ -47,6 +52,9 @@ class GuardedHttp(HttpToolsProtocol):
 
     def connection_made(self, transport) -> None:  # type: ignore[override]
         super().connection_made(transport)
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, SEND_BUFFER)
         self.idle_since: float | None = time.monotonic()  # None while a request is in progress
         self.request_timer: asyncio.TimerHandle | None = None
         self.send_timer: asyncio.TimerHandle | None = None

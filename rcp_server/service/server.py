@@ -12,7 +12,7 @@ from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIO
 
 from .access import HideTokens
 from .app import create_app
-from .guard import guarded_http
+from .guard import SEND_BUFFER, guarded_http
 from .settings import Settings
 from .state import service_of
 
@@ -24,7 +24,7 @@ class CappedWebSockets(WebSocketsSansIOProtocol):
     megabytes for a client that stops reading, holding seconds of stale frames before a send ever waits. With
     the cap, sends wait after ``SEND_BUFFER`` bytes and newer frames replace the unsent one (session.py)."""
 
-    SEND_BUFFER = 256 * 1024
+    SEND_BUFFER = SEND_BUFFER
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
