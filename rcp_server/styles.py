@@ -72,14 +72,13 @@ STYLES: dict[str, Style] = {
         _style(
             "cross-hatching",
             "Cross-hatching",
-            "paper section 5, the second randomness: the normal smudge, with the random vector moving the eyes "
-            "as well as the targets, so edges break into short slanted strokes (an approximation: the engine's "
-            "noise is per pixel, not drawn along hatch lines)",
+            "paper section 5, the other randomness: long smudges along surfaces over ten iterations, broken by a "
+            "faint random vector per pixel, so outlines and roofs turn into scratchy strokes that follow each "
+            "surface (an approximation: the engine's noise is one random vector per pixel, not drawn along lines)",
             mapping="normal",
-            eye_mapping="normal",
-            lambda_p=14.0,
-            lambda_e=0.03,
-            noise=0.3,
+            lambda_p=30.0,
+            noise=0.1,
+            iterations=10,
             spp=2,
         ),
         _style(
