@@ -92,7 +92,8 @@ class GuardedHttp(HttpToolsProtocol):
 
     def on_response_complete(self) -> None:
         super().on_response_complete()
-        if not self.transport.is_closing():  # kept alive: the next request has the same time to arrive
+        # kept alive: the next request has the same time to arrive (unless it is here already, pipelined)
+        if not self.transport.is_closing() and not self.pipeline and self.cycle.response_complete:
             self.idle_since = time.monotonic()
             self._await_request()
 
