@@ -12,6 +12,7 @@ import { Connection } from "./connection.js";
 import { FrameView } from "./frames.js";
 import { Overlay } from "./overlay.js";
 import { paintPanel } from "./panel.js";
+import { stylesPanel } from "./styles.js";
 import { WalkController } from "./walk.js";
 
 const $ = (id) => document.getElementById(id);
@@ -25,7 +26,8 @@ const state = {
   sceneName: query.get("scene"),
   scene: null, // SceneInfo of the walk-through, from `ready`
   defaults: {}, // the scene's painting settings, engine defaults filled in
-  paint: {}, // the painting settings the user changed (sent as `paint`)
+  paint: {}, // the painting settings the user changed (sent as `paint`), a style among them
+  styles: {}, // name -> StyleInfo (GET /api/styles)
   temporal: false, // per-frame: every frame is the painting of its camera
   animate: false,
   quality: Number(query.get("quality")) || 80,
@@ -113,6 +115,7 @@ function startScene(scene) {
   state.paint = {};
   state.defaults = { ...ENGINE_DEFAULTS, z0: Number(walk.walk.distance.toPrecision(3)), ...scene.paint };
   panel.setScene(state.defaults);
+  stylesUi?.show(null);
   $("scene").value = scene.name;
   $("animate").disabled = !scene.animated;
   $("animate-row").classList.toggle("disabled", !scene.animated);
@@ -190,6 +193,35 @@ const panel = paintPanel($("paint"), (name, value) => {
   paintChanges[name] = value;
 });
 
+// ---- styles and presets ----
+
+let stylesUi = null; // the Style section, once the styles are known
+
+/** Replace the user's painting settings by `settings` (a style and what is changed beside it). */
+function applyPaint(settings) {
+  for (const name of Object.keys(state.paint)) if (!(name in settings)) paintChanges[name] = null;
+  Object.assign(paintChanges, settings);
+  state.paint = { ...settings };
+  showPaint();
+}
+
+/** The panel shows the style's settings as the base, and the user's own changes over them. */
+function showPaint() {
+  const { style, ...changed } = state.paint;
+  panel.setScene({ ...state.defaults, ...(state.styles[style]?.settings ?? {}) });
+  panel.show(changed);
+}
+
+async function loadStyles() {
+  try {
+    const response = await fetch("api/styles", { headers: authorization });
+    if (response.ok) return await response.json();
+  } catch {
+    // no styles: the picker stays empty, presets still work
+  }
+  return [];
+}
+
 function flushPaint() {
   if (Object.keys(paintChanges).length && state.scene && send(MESSAGES.paint(paintChanges))) {
     lastPaint = { changes: paintChanges, before: paintBefore, at: performance.now() };
@@ -225,7 +257,8 @@ $("reset-camera").addEventListener("click", resetCamera);
 $("reset-paint").addEventListener("click", () => {
   for (const name of Object.keys(state.paint)) paintChanges[name] = null; // sent with this frame's edits
   state.paint = {};
-  panel.show({});
+  showPaint();
+  stylesUi?.show(null);
 });
 $("temporal").addEventListener("change", (event) => {
   state.temporal = event.target.checked;
@@ -342,6 +375,9 @@ async function start() {
     state.sceneName = names.includes("default") ? "default" : names[0];
   }
   if (!state.sceneName) return notice("the server has no scenes");
+  const styles = await loadStyles();
+  state.styles = Object.fromEntries(styles.map((s) => [s.name, s]));
+  stylesUi = stylesPanel(styles, { current: () => state.paint, apply: applyPaint, notice });
   connection.start();
   requestAnimationFrame(tick);
 }

@@ -137,7 +137,8 @@ function numberControl(name, schema, ui, emit) {
  */
 export function paintPanel(container, onChange) {
   const properties = PROTOCOL.paint.properties;
-  const names = [...Object.keys(PAINT_UI).filter((n) => n in properties), ...Object.keys(properties).filter((n) => !(n in PAINT_UI))];
+  const names = [...Object.keys(PAINT_UI).filter((n) => n in properties), ...Object.keys(properties).filter((n) => !(n in PAINT_UI))]
+    .filter((n) => n !== "style"); // the style has its own picker (styles.js)
   const more = element("details", { class: "more" }, element("summary", { text: "More painting settings" }));
   const controls = {};
   let defaults = {};

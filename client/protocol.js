@@ -360,6 +360,26 @@ export const PROTOCOL = {
      "description": "samples per pixel, stratified and seeded",
      "title": "Spp"
     },
+    "style": {
+     "anyOf": [
+      {
+       "enum": [
+        "smudge",
+        "focus",
+        "fractured",
+        "cross-hatching",
+        "layered"
+       ],
+       "type": "string"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "a named look (GET /api/styles); the settings given beside it override its own",
+     "title": "Style"
+    },
     "type": {
      "const": "paint",
      "title": "Type",
@@ -638,6 +658,26 @@ export const PROTOCOL = {
     "default": null,
     "description": "samples per pixel, stratified and seeded",
     "title": "Spp"
+   },
+   "style": {
+    "anyOf": [
+     {
+      "enum": [
+       "smudge",
+       "focus",
+       "fractured",
+       "cross-hatching",
+       "layered"
+      ],
+      "type": "string"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "a named look (GET /api/styles); the settings given beside it override its own",
+    "title": "Style"
    },
    "z0": {
     "anyOf": [

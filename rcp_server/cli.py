@@ -19,6 +19,7 @@ from .camera import Camera, CameraError
 from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
+from .styles import STYLE, STYLES, with_style
 
 log = logging.getLogger("rcp")
 
@@ -36,6 +37,11 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
     """One option per painting setting (``--lambda-p`` for ``lambda_p``), from its declaration; the bounds
     are checked once, by :class:`PaintParams`."""
     g = p.add_argument_group("painting (defaults: the scene's [paint] table, then the engine's)")
+    g.add_argument(
+        "--style",
+        choices=tuple(STYLES),
+        help="a named look (its settings replace the scene's; the options below replace the style's)",
+    )
     for name, declared in PAINT_SETTINGS.items():
         open_names = declared.lookup is not None  # more can be registered: the engine says which it knows
         help = declared.help + (f": {', '.join(declared.choices)}" if open_names else "")
@@ -119,9 +125,9 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def paint_params(scene_defaults: PaintParams, args: argparse.Namespace) -> PaintParams:
-    """The scene's painting settings, with whatever the command line gives in their place."""
-    given = {name: value for name in PAINT_SETTINGS if (value := getattr(args, name, None)) is not None}
-    return replace(scene_defaults, **given)
+    """The scene's painting settings, with the style and whatever else the command line gives in their place."""
+    given = {name: value for name in (STYLE, *PAINT_SETTINGS) if (value := getattr(args, name, None)) is not None}
+    return with_style(scene_defaults, given)
 
 
 def _camera(default: Camera, args: argparse.Namespace) -> Camera:

@@ -13,7 +13,8 @@ from fastapi.staticfiles import StaticFiles
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
-from .routes import rest, walk
+from .guard import Capacity
+from .routes import rest, styles, walk
 from .settings import Settings
 from .state import Service
 
@@ -37,6 +38,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         max_body_size=settings.max_body_bytes,
     )
     app.add_middleware(InternalErrors)
+    app.add_middleware(Capacity, limit=settings.max_requests)  # inside CORS: a 503 keeps its CORS headers
     if settings.cors_origins:  # off unless configured: only the client served here calls the API
         app.add_middleware(
             CORSMiddleware,
@@ -47,6 +49,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RequestValidationError, _invalid)
     app.include_router(rest.public)
     app.include_router(rest.router)
+    app.include_router(styles.router)
     app.include_router(walk.router)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))

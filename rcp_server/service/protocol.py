@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, crea
 from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
 from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
+from ..styles import STYLE, STYLES
 
 Size = Annotated[int, Field(ge=1, le=4096)]
 Quality = Annotated[int, Field(ge=1, le=100)]
@@ -30,7 +31,8 @@ class _Model(BaseModel):
 
 class _Paint(_Model):
     def given(self) -> dict:
-        """The settings given, name -> value (a null restores the scene's value, so it is not one)."""
+        """The settings given, name -> value, ``style`` among them (a null restores the scene's value, so it is
+        not one); ``styles.with_style`` applies them."""
         return self.model_dump(exclude_none=True)
 
 
@@ -51,6 +53,12 @@ PaintModel = create_model(
     __base__=_Paint,
     __doc__="Painting settings; a field left out takes the scene's value, then the engine's.",
     **{name: _wire(declared) for name, declared in PAINT_SETTINGS.items()},
+    **{
+        STYLE: (
+            Literal[tuple(STYLES)] | None,
+            Field(None, description="a named look (GET /api/styles); the settings given beside it override its own"),
+        )
+    },
 )
 
 
@@ -74,6 +82,15 @@ class SceneInfo(BaseModel):
     paint: dict  # the scene's painting settings that differ from the engine's (client/protocol.js)
     animated: bool
     triangles: int
+
+
+class StyleInfo(BaseModel):
+    """A named look (``GET /api/styles``): ``settings`` are painting settings by name (rcp_server/styles.py)."""
+
+    name: str
+    title: str
+    description: str
+    settings: dict
 
 
 # ---- WebSocket, client -> server ----

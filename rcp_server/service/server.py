@@ -12,6 +12,7 @@ from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIO
 
 from .access import HideTokens
 from .app import create_app
+from .guard import SEND_BUFFER, guarded_http
 from .settings import Settings
 from .state import service_of
 
@@ -23,7 +24,7 @@ class CappedWebSockets(WebSocketsSansIOProtocol):
     megabytes for a client that stops reading, holding seconds of stale frames before a send ever waits. With
     the cap, sends wait after ``SEND_BUFFER`` bytes and newer frames replace the unsent one (session.py)."""
 
-    SEND_BUFFER = 256 * 1024
+    SEND_BUFFER = SEND_BUFFER
 
     def connection_made(self, transport) -> None:
         super().connection_made(transport)
@@ -34,8 +35,9 @@ class CappedWebSockets(WebSocketsSansIOProtocol):
 
 class Server(uvicorn.Server):
     """uvicorn serving the app, with the transport's own limits: WebSocket messages (past this, the connection
-    closes with 1009; the session's own, smaller limit answers with an error first), connections at once
-    (past this, 503), and a stop that loses no answer.
+    closes with 1009; the session's own, smaller limit answers with an error first), deadlines for idle and
+    slow connections and room for real ones (guard.py; uvicorn's ``limit_concurrency`` is not used: it counts
+    idle connections and answers in plain text), and a stop that loses no answer.
 
     On SIGINT or SIGTERM, requests and walk-throughs in flight get ``PAINTING_GRACE_S`` to finish; then their
     paintings are stopped, so each caller is told "the server is stopping" (503) before uvicorn's own grace
@@ -51,9 +53,9 @@ class Server(uvicorn.Server):
             host=settings.host,
             port=settings.port,
             ws=CappedWebSockets,
+            http=guarded_http(settings),  # deadlines for idle and slow clients, room for real ones (guard.py)
             ws_max_size=64 * settings.max_message_bytes,
             ws_per_message_deflate=False,  # frames are JPEGs: deflating them costs CPU and saves nothing
-            limit_concurrency=4 * (settings.max_sessions + settings.max_renders + settings.max_waiting) + 16,
             timeout_graceful_shutdown=self.GRACE_S,
             **options,
         )

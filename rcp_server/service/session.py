@@ -24,10 +24,16 @@ from ..painting import Abandoned, PaintResult, PaintState
 from ..params import PaintParams
 from ..scene import Scene
 from ..scenefile import one_line
+from ..styles import with_style
 from . import protocol
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
 from .state import Service
+
+
+def busy_message(limit: int) -> str:
+    """What a walk-through turned away for the server's ``max_sessions`` is told."""
+    return f"the server is at its limit of {limit} walk-throughs; try again later"
 
 
 @dataclass
@@ -52,8 +58,7 @@ class Session:
         self.camera_id: int | None = None
         self.width = self.height = 0
         self.quality = 80
-        self.overrides: dict = {}  # painting settings the client changed from the scene's
-        self.temporal = False  # per-frame paintings: every frame is the painting of its camera
+from dataclasses import asdict, dataclass, replace
         self.animate = False
         self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
         self.changed = asyncio.Event()
@@ -77,6 +82,7 @@ class Session:
                 tasks.create_task(self._receive())
                 tasks.create_task(self._paint())
                 tasks.create_task(self._send())
+                tasks.create_task(self._expect_hello())
         except* WebSocketDisconnect:
             pass
         finally:
@@ -85,6 +91,22 @@ class Session:
     def close(self) -> None:
         """End the walk-through's painting: one still in flight stops at its next iteration."""
         self.closed = True
+
+    @property
+    def walking(self) -> bool:
+        """Whether it has said hello: only then does it hold one of the server's ``max_sessions`` places."""
+        return self.scene is not None
+
+    async def _expect_hello(self) -> None:
+        """Close a WebSocket that has not opened a walk-through within ``hello_timeout_s`` (1008): one that
+        only holds a connection open is let go."""
+        seconds = self.settings.hello_timeout_s
+        await asyncio.sleep(seconds)
+        if self.scene is None:
+            message = f"no hello within {seconds:g} s"
+            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=message).model_dump_json()})
+            await self.ws.close(code=1008, reason=message)
+            raise WebSocketDisconnect(1008, message)
 
     async def _receive(self) -> None:
         while True:
@@ -135,6 +157,8 @@ class Session:
 
     def _hello(self, msg: protocol.Hello) -> None:
         scenes = self.service.scenes
+        if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
+            raise ValueError(busy_message(self.settings.max_sessions))
         if msg.scene not in scenes:
             raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(scenes))}")
         self._check(scenes[msg.scene], msg.width, msg.height, {})
@@ -158,7 +182,7 @@ class Session:
 
     def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> None:
         """Refuses a view whose paintings could not be made: a bad setting, or more work than one may take."""
-        self.settings.check_painting(width, height, replace(scene.paint, **overrides))
+        self.settings.check_painting(width, height, with_style(scene.paint, overrides))
 
     def _changed(self) -> None:
         self.planner.view_changed()
@@ -195,7 +219,7 @@ class Session:
             self._finished(job, result, seconds)
 
     def _params(self) -> PaintParams:
-        return replace(self.scene.paint, **self.overrides)
+        return with_style(self.scene.paint, self.overrides)
 
     def _view(self) -> View:
         moving = self.animate and self.scene.animated

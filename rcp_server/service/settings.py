@@ -41,6 +41,11 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(64 * 1024, ge=1024)  # an HTTP request body
     max_message_bytes: int = Field(16 * 1024, ge=256)  # a WebSocket text message; longer ones get an error
     send_timeout_s: float = Field(30.0, gt=0)  # a client that takes no data for this long is disconnected
+    # ---- idle and slow connections (guard.py) ----
+    header_timeout_s: float = Field(10.0, gt=0)  # a request's headers and body must arrive within this; else 408
+    hello_timeout_s: float = Field(10.0, gt=0)  # a WebSocket that has not said hello by then is closed (1008)
+    max_connections: int = Field(1024, ge=1)  # open at once; past it the one idle longest is closed
+    max_requests: int = Field(128, ge=1)  # HTTP requests in progress at once; more get 503 and Retry-After
     # ---- walking ----
     frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message

@@ -26,6 +26,8 @@ log = logging.getLogger("rcp.service")
 class Walkthrough(Protocol):
     """An open walk-through, as the service sees it (``session.Session``): one it can close."""
 
+    walking: bool  # it has said hello: it holds one of the max_sessions places
+
     def close(self) -> None: ...
 
 
@@ -50,6 +52,10 @@ class Service:
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
         workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
         return cls(settings, scenes, infos, workshop)
+
+    def walking(self) -> int:
+        """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
+        return sum(session.walking for session in self.sessions)
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""

@@ -272,8 +272,8 @@ def test_a_dropped_connection_comes_back_with_the_same_view(page):
 
 def test_every_message_the_client_sends_is_in_the_protocol(page):
     schema = page.evaluate("rcp.PROTOCOL")
-    # the panel has a control for every painting field, and no other
-    assert sorted(page.evaluate("rcp.panel.fields")) == sorted(set(schema["paint"]["properties"]) - {"type"})
+    # the panel has a control for every painting field, and no other (the style has its own picker)
+    assert sorted(page.evaluate("rcp.panel.fields")) == sorted(set(schema["paint"]["properties"]) - {"type", "style"})
     # engine defaults the panel shows for fields a scene leaves out are the engine's
     assert page.evaluate("rcp.ENGINE_DEFAULTS") == dataclasses.asdict(PaintParams())
 

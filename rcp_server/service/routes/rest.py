@@ -5,13 +5,13 @@ from __future__ import annotations
 import asyncio
 import threading
 import time
-from dataclasses import replace
 
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from ... import images
 from ...camera import Camera, CameraError
 from ...painting import Abandoned
+from ...styles import with_style
 from .. import protocol
 from ..access import admits, require_token
 from ..state import ServiceDep
@@ -64,7 +64,7 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
         raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
     try:
         camera = scene.camera if body.camera is None else Camera(**body.camera.model_dump())
-        params = replace(scene.paint, **body.paint.given())
+        params = with_style(scene.paint, body.paint.given())
         settings.check_painting(body.width, body.height, params)
     except (CameraError, ValueError) as exc:
         raise HTTPException(422, str(exc)) from None

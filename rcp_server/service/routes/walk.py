@@ -6,7 +6,7 @@ from fastapi import APIRouter, WebSocket
 
 from .. import protocol
 from ..access import NEEDS_TOKEN, admits, origin_allowed
-from ..session import Session
+from ..session import Session, busy_message
 from ..state import Service, ServiceDep
 
 router = APIRouter()
@@ -36,6 +36,6 @@ def _refusal(ws: WebSocket, service: Service) -> tuple[int, str] | None:
         return 1008, f"pages from {ws.headers['origin']} may not open walk-throughs here (see RCP_CORS_ORIGINS)"
     if not admits(settings, ws.headers, ws.query_params):
         return 1008, NEEDS_TOKEN
-    if len(service.sessions) >= settings.max_sessions:
-        return 1013, f"the server is at its limit of {settings.max_sessions} walk-throughs; try again later"
+    if service.walking() >= settings.max_sessions:
+        return 1013, busy_message(settings.max_sessions)
     return None

@@ -1,0 +1,20 @@
+"""The styles (``GET /api/styles``): the named looks a ``paint`` may ask for by ``"style"``."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+from fastapi import APIRouter, Depends
+
+from ...styles import STYLES
+from .. import protocol
+from ..access import require_token
+from .rest import NO_TOKEN
+
+router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
+
+
+@router.get("/styles")
+async def styles() -> list[protocol.StyleInfo]:
+    """Every style with its settings, in the order a picker lists them."""
+    return [protocol.StyleInfo(**asdict(style)) for style in STYLES.values()]
