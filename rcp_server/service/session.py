@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import time as _time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
@@ -58,7 +58,8 @@ class Session:
         self.camera_id: int | None = None
         self.width = self.height = 0
         self.quality = 80
-from dataclasses import asdict, dataclass, replace
+        self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
+        self.temporal = False  # per-frame paintings: every frame is the painting of its camera
         self.animate = False
         self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
         self.changed = asyncio.Event()
