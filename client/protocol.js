@@ -860,6 +860,11 @@ export const PROTOCOL = {
       "triangles": {
        "title": "Triangles",
        "type": "integer"
+      },
+      "uploaded": {
+       "default": false,
+       "title": "Uploaded",
+       "type": "boolean"
       }
      },
      "required": [

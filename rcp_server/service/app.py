@@ -13,7 +13,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
-from .routes import rest, walk
+from .routes import rest, scenes, walk
 from .settings import Settings
 from .state import Service
 
@@ -48,6 +48,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(rest.public)
     app.include_router(rest.router)
     app.include_router(walk.router)
+    app.include_router(scenes.router, max_body_size=settings.upload_max_bytes)  # uploads: their own body limit
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app

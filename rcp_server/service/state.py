@@ -18,13 +18,16 @@ from ..scene import Scene
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol
 from .settings import Settings
+from .uploads import Upload, Uploads
 from .workshop import Workshop
 
 log = logging.getLogger("rcp.service")
 
 
 class Walkthrough(Protocol):
-    """An open walk-through, as the service sees it (``session.Session``): one it can close."""
+    """An open walk-through, as the service sees it (``session.Session``): one it can close, showing a scene."""
+
+    scene: Scene | None
 
     def close(self) -> None: ...
 
@@ -39,6 +42,7 @@ class Service:
     infos: dict[str, protocol.SceneInfo]
     workshop: Workshop
     sessions: set[Walkthrough] = field(default_factory=set)
+    uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
 
     @classmethod
     def open(cls, settings: Settings) -> Service:
@@ -50,6 +54,26 @@ class Service:
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
         workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
         return cls(settings, scenes, infos, workshop)
+
+    def scene(self, name: str) -> Scene | None:
+        """The scene a name stands for, the operator's or an uploaded one: the lookup of every route and
+        message that takes a scene name."""
+        found = self.scenes.get(name)
+        if found is None and (upload := self.uploaded(name)) is not None:
+            found = upload.scene
+        return found
+
+    def info(self, name: str) -> protocol.SceneInfo | None:
+        """The description of the scene ``name`` stands for (as :meth:`scene` finds it)."""
+        found = self.infos.get(name)
+        if found is None and (upload := self.uploaded(name)) is not None:
+            found = upload.info
+        return found
+
+    def uploaded(self, name: str) -> Upload | None:
+        """The uploaded scene ``name``, marked as used, after removing the idle ones; None if there is none."""
+        self.uploads.sweep(self.settings.upload_idle_s, (session.scene for session in self.sessions))
+        return self.uploads.get(name)
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""
