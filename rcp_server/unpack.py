@@ -2,11 +2,10 @@
 limits, check every path and image the model names, read it with :func:`meshes.load_mesh_file`, and write
 the parts as plain arrays for the parent (:mod:`rcp_server.untrusted`) to check again.
 
-Run only as ``python -m rcp_server.unpack WORK FILENAME LIMITS_JSON``, with ``WORK/upload`` the uploaded
-bytes: it confines itself (address space, CPU time, priority) before it reads a byte of them, and answers
-with ``WORK/parts.npz`` and exit status 0, or one line on stdout and status 2 (the file is refused) or 3
-(it needs more memory than it may have). Nothing here trusts the file: a GLB's header, a zip's declared
-sizes, a glTF's or an MTL's paths and an image's header are all checked before anything is decoded.
+:func:`job` is the child's entry point, with ``WORK/upload`` the uploaded bytes: it confines itself (address
+space, CPU time, priority) before it reads a byte of them. Nothing here trusts the file: a GLB's header, a
+zip's declared sizes, a glTF's or an MTL's paths and an image's header are all checked before anything is
+decoded.
 """
 
 from __future__ import annotations
@@ -22,7 +21,7 @@ import struct
 import sys
 import warnings
 import zipfile
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from urllib.parse import unquote
 
@@ -66,9 +65,6 @@ class Limits:
     max_meshes: int = 4096  # separate meshes in one model (the staircase has 348)
     memory_bytes: int = 2 << 30
     seconds: float = 60.0
-
-    def to_json(self) -> str:
-        return json.dumps(asdict(self))
 
 
 class Refused(ValueError):
@@ -165,7 +161,9 @@ def unzip(archive: Path, folder: Path, limits: Limits) -> None:
             except FileExistsError:
                 raise Refused(f"the zip holds {entry.filename[:80]!r} twice") from None
             except (zipfile.BadZipFile, NotImplementedError, RuntimeError, EOFError, OSError) as exc:
-                raise Refused(f"the zip entry {entry.filename[:80]!r} cannot be unpacked ({exc})") from None
+                raise Refused(
+                    f"the zip entry {entry.filename[:80]!r} is damaged or lies about its size ({exc})"
+                ) from None
 
 
 def the_model(folder: Path) -> Path:
@@ -366,6 +364,8 @@ def read_upload(upload: Path, filename: str, folder: Path, limits: Limits) -> li
     try:
         parts = load_mesh_file(Path(model.name), refuse_nonfinite=True)
     except MeshError as exc:
+        if isinstance(exc.__context__, MemoryError):  # trimesh ran into the address-space limit
+            raise MemoryError from None
         raise Refused(str(exc)) from None
     triangles = sum(len(p.faces) for p in parts)
     if triangles > limits.max_triangles:
@@ -419,11 +419,14 @@ def confine(limits: Limits) -> None:
     os.nice(15)
 
 
-def main(argv: list[str]) -> int:
-    work, filename, limits = Path(argv[0]), argv[1], Limits(**json.loads(argv[2]))
-    from PIL import Image
+def job(work: Path, filename: str, limits: Limits) -> None:
+    """The child's whole life (forked from :mod:`rcp_server.untrusted`'s warm fork server): confine, read,
+    answer. Exit status 0 with ``work/parts.npz``; 2 (refused) or 3 (over its memory) with ``work/refused``."""
+    sys.exit(_answer(work, filename, limits))
 
-    from . import meshes  # noqa: F401 (loaded before the limits: their libraries count as already mapped)
+
+def _answer(work: Path, filename: str, limits: Limits) -> int:
+    from PIL import Image
 
     confine(limits)
     # a backstop behind check_model's headers: Pillow refuses to decode more pixels than this
@@ -432,17 +435,12 @@ def main(argv: list[str]) -> int:
     try:
         parts = read_upload(work / "upload", filename, work / "files", limits)
         write_parts(work / "parts.npz", parts)
+        return 0
     except Refused as exc:
-        print(" ".join(str(exc).split()), flush=True)
-        return 2
+        message, status = str(exc), 2
     except MemoryError:
-        print(f"reading the model needs more than the {limits.memory_bytes >> 20} MiB it may take", flush=True)
-        return 3
+        message, status = f"reading the model needs more than the {limits.memory_bytes >> 20} MiB it may take", 3
     except Exception as exc:  # a fault the checks did not foresee, in trimesh or here: still only this file's
-        print(f"the model cannot be read ({type(exc).__name__}: {' '.join(str(exc).split())[:160]})", flush=True)
-        return 2
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+        message, status = f"the model cannot be read ({type(exc).__name__}: {str(exc)[:160]})", 2
+    (work / "refused").write_text(" ".join(message.split()), encoding="utf-8")
+    return status
