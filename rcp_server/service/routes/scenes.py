@@ -27,12 +27,13 @@ MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (eac
     "/scenes",
     status_code=201,
     responses={
+        400: {"description": "a body that is not multipart form data"},
         403: {"description": "uploads are off on this server (RCP_UPLOADS=0)"},
         413: {"description": "the file is larger than RCP_UPLOAD_MAX_BYTES"},
         422: {"description": "a file that is not a model this server reads, or one over a limit; the detail says"},
         503: {"description": "the uploaded scenes fill their count or memory, or other uploads are being read"},
     },
-    form_limits={"max_files": 1, "max_fields": 0},
+    form_limits={"max_files": 1, "max_fields": 16},  # fields beside `file` are ignored; a flood of them is a 400
 )
 async def upload(file: UploadFile, response: Response, service: ServiceDep) -> protocol.SceneInfo:
     """A model as a new scene: a `.glb`; a `.gltf` with its files in a `.zip`; an `.obj` alone or in a `.zip`
