@@ -72,8 +72,12 @@ class Service:
 
     def uploaded(self, name: str) -> Upload | None:
         """The uploaded scene ``name``, marked as used, after removing the idle ones; None if there is none."""
-        self.uploads.sweep(self.settings.upload_idle_s, (session.scene for session in self.sessions))
+        self.sweep_uploads()
         return self.uploads.get(name)
+
+    def sweep_uploads(self) -> None:
+        """Removes the uploaded scenes nobody has used for ``upload_idle_s`` (shown in a walk-through is used)."""
+        self.uploads.sweep(self.settings.upload_idle_s, (session.scene for session in self.sessions))
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""

@@ -5,6 +5,7 @@ while another visitor's walk-through goes on."""
 from __future__ import annotations
 
 import threading
+import time
 
 import httpx
 import numpy as np
@@ -180,9 +181,10 @@ def test_uploads_off_token_and_idle_time():
     with BackgroundServer(token="sesame", upload_idle_s=1.0, scenes="/nonexistent-scenes-folder") as guarded:
         assert upload(guarded, "box.glb", files.glb()).status_code == 401
         auth = {"authorization": "Bearer sesame"}
-        name = upload(guarded, "box.glb", files.glb(), headers=auth).json()["name"]
-        assert httpx.get(f"{guarded.url}/api/scenes/{name}").status_code == 401
-        assert httpx.get(f"{guarded.url}/api/scenes/{name}", headers=auth).status_code == 200
-        threading.Event().wait(1.6)  # past the idle time: nobody used it
-        expired = httpx.get(f"{guarded.url}/api/scenes/{name}", headers=auth)
+        made = upload(guarded, "box.glb", files.glb(), headers=auth)
+        assert made.status_code == 201
+        address = f"{guarded.url}/api/scenes/{made.json()['name']}"
+        assert httpx.get(address).status_code == 401
+        time.sleep(1.2)  # longer than the idle time, without using the scene (a lookup uses it): that is the input
+        expired = httpx.get(address, headers=auth)
         assert expired.status_code == 404 and "removed after" in expired.json()["detail"]

@@ -42,7 +42,7 @@ async def upload(file: UploadFile, response: Response, service: ServiceDep) -> p
     settings, uploads = service.settings, service.uploads
     if not settings.uploads:
         raise HTTPException(403, "uploads are off on this server (RCP_UPLOADS=0)")
-    service.uploaded("")  # removes idle uploads before counting
+    service.sweep_uploads()  # before counting
     try:
         uploads.check_room(settings.upload_max_scenes, settings.upload_idle_s)
         if uploads.queued >= MAX_QUEUED:
