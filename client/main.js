@@ -14,6 +14,7 @@ import { Overlay } from "./overlay.js";
 import { paintPanel } from "./panel.js";
 import { stylesPanel } from "./styles.js";
 import { WalkController } from "./walk.js";
+import { Uploader } from "./upload.js";
 
 const $ = (id) => document.getElementById(id);
 const query = new URLSearchParams(location.search);
@@ -370,6 +371,7 @@ async function start() {
   if (state.scenes === null) return; // refused: retrying cannot help
   const names = state.scenes.map((s) => s.name);
   for (const scene of state.scenes) $("scene").append(new Option(`${scene.title} (${scene.name})`, scene.name));
+  names.push(...(await uploads.restore())); // this browser's uploads the server still has
   if (!names.includes(state.sceneName)) {
     if (state.sceneName) notice(`no scene '${state.sceneName}' here; showing another`);
     state.sceneName = names.includes("default") ? "default" : names[0];
@@ -382,5 +384,7 @@ async function start() {
   requestAnimationFrame(tick);
 }
 
-window.rcp = { state, sent, overlay, walk, connection, panel, canvas, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+const uploads = new Uploader($("scene"), authorization, { chosen: switchScene, notice });
+
+window.rcp = { state, sent, overlay, walk, connection, panel, canvas, uploads, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

@@ -955,6 +955,11 @@ export const PROTOCOL = {
       "triangles": {
        "title": "Triangles",
        "type": "integer"
+      },
+      "uploaded": {
+       "default": false,
+       "title": "Uploaded",
+       "type": "boolean"
       }
      },
      "required": [

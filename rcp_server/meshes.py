@@ -231,10 +231,11 @@ class _TrimeshTroubles(logging.Handler):
             self.messages.append(record.getMessage() + cause)
 
 
-def load_mesh_file(path: Path) -> list[Part]:
+def load_mesh_file(path: Path, refuse_nonfinite: bool = False) -> list[Part]:
     """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied.
 
     Meshes of the file with no usable triangle are skipped with a warning; a file with none is an error.
+    ``refuse_nonfinite``: a vertex that is not a finite number is an error, not a repair (files from strangers).
     """
     path = Path(path)
     if not path.is_file():
@@ -269,6 +270,11 @@ def load_mesh_file(path: Path) -> list[Part]:
             parts.append(_part_from_trimesh(mesh, world_from_mesh, str(path), tally, images))
         except MeshError:
             unusable += 1
+    if refuse_nonfinite and tally["non-finite"]:
+        raise MeshError(
+            f"{path}: {tally['non-finite']:,} of {tally['faces']:,} triangles have vertices that are not finite "
+            "numbers (NaN or infinity)"
+        )
     if tally["non-finite"] or tally["zero area"]:
         log.warning("%s: %s", path, dropped_faces(tally))
     if unusable and parts:

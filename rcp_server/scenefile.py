@@ -318,11 +318,15 @@ def mesh_scene(path: Path) -> Scene:
         parts = load_mesh_file(path)
     except MeshError as exc:
         raise SceneError(str(exc)) from None
-    objects = [SceneObject(f"{Path(path).name}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
+    return parts_scene(parts, Path(path).stem, Path(path).name)
+
+
+def parts_scene(parts: list[Part], name: str, title: str) -> Scene:
+    """Parts of a model as a scene: a soft light from the front, a calm backdrop, a camera that frames them
+    from their front (glTF's +z), a little above and to the right."""
+    objects = [SceneObject(f"{title}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
     light = Light(tuple(np.array([-0.4, -1.0, -0.5]) / np.linalg.norm([-0.4, -1.0, -0.5])), 0.35)
-    return Scene(
-        Path(path).stem, Path(path).name, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects
-    )
+    return Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
 
 
 def scene_names(folder: Path = SCENES_DIR) -> list[str]:

@@ -6,15 +6,17 @@ from __future__ import annotations
 from contextlib import asynccontextmanager
 
 from fastapi import FastAPI, Request
+from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
 from .guard import Capacity
-from .routes import rest, styles, walk
+from .routes import rest, scenes, styles, walk
 from .settings import Settings
 from .state import Service
 
@@ -47,10 +49,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_headers=["Authorization", "Content-Type"],
         )
     app.add_exception_handler(RequestValidationError, _invalid)
+    app.add_exception_handler(StarletteHTTPException, _http_error)
     app.include_router(rest.public)
     app.include_router(rest.router)
     app.include_router(styles.router)
     app.include_router(walk.router)
+    app.include_router(scenes.router, max_body_size=settings.upload_max_bytes)  # uploads: their own body limit
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app
@@ -64,6 +68,24 @@ class _ClientFiles(Mount):
         if scope["type"] == "http" and scope["path"].startswith("/api/"):
             return Match.NONE, {}
         return super().matches(scope)
+
+
+async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
+    """FastAPI's answer, except that a 405's ``Allow`` names the methods of every route at the path, not only
+    those of the first (``GET /api/scenes`` lists and ``POST /api/scenes`` uploads, from two routers)."""
+    if exc.status_code == 405:
+        allowed = [
+            method
+            for method in ("GET", "HEAD", "POST", "PUT", "PATCH", "DELETE")
+            if any(route.matches({**request.scope, "method": method})[0] == Match.FULL for route in app_routes(request))
+        ]
+        exc.headers = {**(exc.headers or {}), "Allow": ", ".join(allowed)}
+    return await http_exception_handler(request, exc)
+
+
+def app_routes(request: Request) -> list:
+    """The API's routes (the client's files, which take every path outside /api/, left out)."""
+    return [route for route in request.app.routes if not isinstance(route, _ClientFiles)]
 
 
 async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -82,6 +82,7 @@ class SceneInfo(BaseModel):
     paint: dict  # the scene's painting settings that differ from the engine's (client/protocol.js)
     animated: bool
     triangles: int
+    uploaded: bool = False  # a visitor's (POST /api/scenes): never listed, removed when idle
 
 
 class StyleInfo(BaseModel):

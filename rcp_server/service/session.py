@@ -157,13 +157,13 @@ class Session:
         self._changed()
 
     def _hello(self, msg: protocol.Hello) -> None:
-        scenes = self.service.scenes
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
             raise ValueError(busy_message(self.settings.max_sessions))
-        if msg.scene not in scenes:
-            raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(scenes))}")
-        self._check(scenes[msg.scene], msg.width, msg.height, {})
-        self.scene = scenes[msg.scene]
+        scene = self.service.scene(msg.scene)
+        if scene is None:
+            raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(self.service.scenes))}")
+        self._check(scene, msg.width, msg.height, {})
+        self.scene = scene
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
         self.overrides, self.state = {}, None
@@ -172,7 +172,7 @@ class Session:
         self.frame = None  # a frame of the scene being left must not follow the new `ready`
         self._note(
             protocol.Ready(
-                scene=self.service.infos[msg.scene],
+                scene=self.service.info(msg.scene),
                 width=self.width,
                 height=self.height,
                 quality=self.quality,

@@ -13,6 +13,7 @@ from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from ..painting import default_threads
 from ..params import PaintParams
+from ..untrusted import Limits
 
 REPOSITORY = Path(__file__).resolve().parent.parent.parent
 CLIENT_DIR = REPOSITORY / "client"
@@ -49,11 +50,31 @@ class Settings(BaseSettings):
     # ---- walking ----
     frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message
+    # ---- uploaded scenes (POST /api/scenes) ----
+    uploads: bool = True  # RCP_UPLOADS=0 turns uploads off
+    upload_max_bytes: int = Field(64 << 20, ge=1024)  # one uploaded file (the body's own limit, not max_body_bytes)
+    upload_max_scenes: int = Field(16, ge=1)  # uploaded scenes kept at once
+    upload_total_bytes: int = Field(1 << 30, ge=1 << 20)  # the memory all uploaded scenes take together
+    upload_max_triangles: int = Field(2_000_000, ge=1)  # in one uploaded model
+    upload_max_texture_pixels: int = Field(32 << 20, ge=1)  # all images of one model, width x height
+    upload_idle_s: float = Field(1800.0, gt=0)  # an uploaded scene nobody has used this long is removed
+    upload_read_s: float = Field(60.0, gt=0)  # the reader of one upload: wall-clock seconds
+    upload_memory_bytes: int = Field(2 << 30, ge=64 << 20)  # the reader of one upload: address space it may add
 
     @field_validator("cors_origins", mode="before")
     @classmethod
     def _comma_separated(cls, value):
         return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
+
+    def upload_limits(self) -> Limits:
+        """What the sandbox lets one upload take."""
+        return Limits(
+            max_triangles=self.upload_max_triangles,
+            max_texture_pixels=self.upload_max_texture_pixels,
+            max_unpacked_bytes=8 * self.upload_max_bytes,  # zipped OBJ text shrinks about 4x; never more than 8
+            memory_bytes=self.upload_memory_bytes,
+            seconds=self.upload_read_s,
+        )
 
     def check_painting(self, width: int, height: int, params: PaintParams) -> None:
         """Refuses (``ValueError``, said to the caller) a painting larger than one request may ask for."""

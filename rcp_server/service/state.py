@@ -18,13 +18,16 @@ from ..scene import Scene
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol
 from .settings import Settings
+from .uploads import Upload, Uploads
 from .workshop import Workshop
 
 log = logging.getLogger("rcp.service")
 
 
 class Walkthrough(Protocol):
-    """An open walk-through, as the service sees it (``session.Session``): one it can close."""
+    """An open walk-through, as the service sees it (``session.Session``): one it can close, showing a scene."""
+
+    scene: Scene | None
 
     walking: bool  # it has said hello: it holds one of the max_sessions places
 
@@ -41,6 +44,7 @@ class Service:
     infos: dict[str, protocol.SceneInfo]
     workshop: Workshop
     sessions: set[Walkthrough] = field(default_factory=set)
+    uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
 
     @classmethod
     def open(cls, settings: Settings) -> Service:
@@ -56,6 +60,30 @@ class Service:
     def walking(self) -> int:
         """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
         return sum(session.walking for session in self.sessions)
+
+    def scene(self, name: str) -> Scene | None:
+        """The scene a name stands for, the operator's or an uploaded one: the lookup of every route and
+        message that takes a scene name."""
+        found = self.scenes.get(name)
+        if found is None and (upload := self.uploaded(name)) is not None:
+            found = upload.scene
+        return found
+
+    def info(self, name: str) -> protocol.SceneInfo | None:
+        """The description of the scene ``name`` stands for (as :meth:`scene` finds it)."""
+        found = self.infos.get(name)
+        if found is None and (upload := self.uploaded(name)) is not None:
+            found = upload.info
+        return found
+
+    def uploaded(self, name: str) -> Upload | None:
+        """The uploaded scene ``name``, marked as used, after removing the idle ones; None if there is none."""
+        self.sweep_uploads()
+        return self.uploads.get(name)
+
+    def sweep_uploads(self) -> None:
+        """Removes the uploaded scenes nobody has used for ``upload_idle_s`` (shown in a walk-through is used)."""
+        self.uploads.sweep(self.settings.upload_idle_s, (session.scene for session in self.sessions))
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""

@@ -59,7 +59,7 @@ async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
 )
 async def render(body: protocol.RenderRequest, request: Request, service: ServiceDep) -> Response:
     settings = service.settings
-    scene = service.scenes.get(body.scene)
+    scene = service.scene(body.scene)
     if scene is None:
         raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
     try:

@@ -1,0 +1,93 @@
+"""Visitors' own scenes over REST: upload a model (``POST /api/scenes``), describe one by name, delete one.
+
+The app includes this router with its own body limit (``RCP_UPLOAD_MAX_BYTES``), larger than the JSON
+routes' ``RCP_MAX_BODY_BYTES``.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, HTTPException, Path, Response, UploadFile
+from starlette.concurrency import run_in_threadpool
+
+from ...scenefile import SCENE_NAME
+from .. import protocol
+from ..access import require_token
+from ..state import Service, ServiceDep, scene_info
+from ..uploads import Full, Refused, read_scene
+from .rest import NO_TOKEN
+
+router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
+NamePath = Annotated[str, Path(pattern=f"^{SCENE_NAME.pattern}$")]
+MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (each reading takes a core)
+
+
+@router.post(
+    "/scenes",
+    status_code=201,
+    responses={
+        400: {"description": "a body that is not multipart form data"},
+        403: {"description": "uploads are off on this server (RCP_UPLOADS=0)"},
+        413: {"description": "the file is larger than RCP_UPLOAD_MAX_BYTES"},
+        422: {"description": "a file that is not a model this server reads, or one over a limit; the detail says"},
+        503: {"description": "the uploaded scenes fill their count or memory, or other uploads are being read"},
+    },
+    form_limits={"max_files": 1, "max_fields": 16},  # fields beside `file` are ignored; a flood of them is a 400
+)
+async def upload(file: UploadFile, response: Response, service: ServiceDep) -> protocol.SceneInfo:
+    """A model as a new scene: a `.glb`; a `.gltf` with its files in a `.zip`; an `.obj` alone or in a `.zip`
+    with its `.mtl` and textures; a `.ply` or an `.stl`. The answer describes it as `GET /api/scenes` does
+    (`uploaded` true), under a new name that only the uploader knows; use it wherever a scene name goes."""
+    settings, uploads = service.settings, service.uploads
+    if not settings.uploads:
+        raise HTTPException(403, "uploads are off on this server (RCP_UPLOADS=0)")
+    service.sweep_uploads()  # before counting
+    try:
+        uploads.check_room(settings.upload_max_scenes, settings.upload_idle_s)
+        if uploads.queued >= MAX_QUEUED:
+            raise Full("other uploads are being read; try again in a few seconds", 5)
+        uploads.queued += 1
+        try:
+            async with uploads.reading:
+                scene, weight = await run_in_threadpool(
+                    read_scene, file.file, file.filename or "", settings.upload_limits()
+                )
+        finally:
+            uploads.queued -= 1
+        info = scene_info(scene).model_copy(update={"uploaded": True})
+        uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes)
+    except Refused as exc:
+        raise HTTPException(422, str(exc)) from None
+    except Full as full:
+        raise HTTPException(503, str(full), headers={"Retry-After": str(full.retry_after)}) from None
+    response.headers["Location"] = f"/api/scenes/{scene.name}"
+    return info
+
+
+@router.get("/scenes/{name}", responses={404: {"description": "no such scene (an uploaded one may have expired)"}})
+async def describe(name: NamePath, service: ServiceDep) -> protocol.SceneInfo:
+    """One scene's description, the operator's or an uploaded one."""
+    info = service.info(name)
+    if info is None:
+        raise HTTPException(404, _unknown(name, service))
+    return info
+
+
+@router.delete(
+    "/scenes/{name}",
+    status_code=204,
+    responses={403: {"description": "an operator's scene, which cannot be deleted"}, 404: {"description": "no such"}},
+)
+async def delete(name: NamePath, service: ServiceDep) -> Response:
+    """Removes an uploaded scene (walk-throughs showing it keep it until they leave it)."""
+    if name in service.scenes:
+        raise HTTPException(403, f"{name!r} is one of the server's own scenes; only uploaded scenes can be deleted")
+    if service.uploaded(name) is None or not service.uploads.remove(name):
+        raise HTTPException(404, _unknown(name, service))
+    return Response(status_code=204)
+
+
+def _unknown(name: str, service: Service) -> str:
+    minutes = service.settings.upload_idle_s / 60
+    return f"unknown scene {name!r} (uploaded scenes are removed after {minutes:g} minutes unused)"

@@ -1,0 +1,118 @@
+"""Models from strangers, read in a sandbox: a child process with limits on its memory, CPU time and
+wall-clock time (:func:`unpack.job`) does every check and all the parsing, and hands back plain arrays, which
+are checked once more here (shapes, indices in range, finite numbers, the limits) before they become parts.
+Whatever the file does, the caller gets parts or a :class:`Refused` with one line saying why.
+
+Each child is forked from a fork server that has loaded trimesh and Pillow once (multiprocessing's
+``forkserver``): a fresh process per upload, with nothing of the server's in it, in milliseconds rather than
+the second and a half a new interpreter takes to import them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from . import unpack
+from .meshes import Part
+from .unpack import UPLOAD_SUFFIXES, Limits, Refused, check_kind
+
+__all__ = ["UPLOAD_SUFFIXES", "Limits", "Refused", "read_model"]
+
+_lock = threading.Lock()
+_context = None
+
+
+def _forks():
+    """The fork server's context, started on first use (once per process)."""
+    global _context
+    with _lock:
+        if _context is None:
+            _context = multiprocessing.get_context("forkserver")
+            _context.set_forkserver_preload(
+                ["rcp_server.unpack", "rcp_server.meshes", "PIL.Image", "PIL.PngImagePlugin"]
+            )
+        return _context
+
+
+def read_model(work: Path, filename: str, limits: Limits) -> list[Part]:
+    """The parts of the model whose bytes are ``work/upload``; ``filename`` (as the uploader named it) gives
+    its kind. Blocking, for seconds: run it in a worker thread. ``work`` is a folder of its own that the
+    caller removes afterwards (the child unpacks there)."""
+    suffix = Path(filename).suffix.lower()
+    if suffix not in UPLOAD_SUFFIXES:
+        raise Refused(f"{filename[:80]!r} is not a kind of file this server reads ({', '.join(UPLOAD_SUFFIXES)})")
+    check_kind(work / "upload", Path(filename).name[:80])  # first bytes only: an empty file, or a PNG named .glb
+    child = _forks().Process(target=unpack.job, args=(work, filename, limits), name="rcp-upload-reader", daemon=True)
+    child.start()
+    child.join(limits.seconds)
+    if child.is_alive():
+        child.kill()
+        child.join()
+        raise Refused(f"reading the model took longer than the {limits.seconds:g} s it may take")
+    refused = work / "refused"
+    if child.exitcode in (2, 3) and refused.is_file():
+        raise Refused(refused.read_text(encoding="utf-8", errors="replace")[:300])
+    if child.exitcode != 0:
+        how = f"signal {-child.exitcode}" if child.exitcode < 0 else f"status {child.exitcode}"
+        raise Refused(f"the model could not be read: its reader stopped ({how}), most likely over a limit")
+    return parts_from_arrays(work / "parts.npz", limits)
+
+
+def parts_from_arrays(path: Path, limits: Limits) -> list[Part]:
+    """The child's ``.npz`` (:func:`unpack.write_parts`) as parts, every array checked: dtypes, shapes,
+    face indices within the vertices, finite numbers, colors in [0, 1], and the limits."""
+    try:
+        with np.load(path, allow_pickle=False) as arrays:
+            return _parts(dict(arrays.items()), limits)
+    except (OSError, ValueError, KeyError) as exc:
+        raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
+
+
+def _array(arrays: dict, key: str, dtype, shape: tuple) -> np.ndarray:
+    """``arrays[key]`` of ``dtype`` whose shape matches ``shape`` (None: any length)."""
+    a = arrays[key]
+    fits = a.ndim == len(shape) and all(s is None or s == n for s, n in zip(shape, a.shape, strict=True))
+    if a.dtype != dtype or not fits:
+        raise ValueError(f"{key}: {a.dtype}{a.shape}")
+    return a
+
+
+def _parts(arrays: dict, limits: Limits) -> list[Part]:
+    count = int(_array(arrays, "images", np.int64, ()))
+    images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 3)) for j in range(count)]
+    if sum(im.shape[0] * im.shape[1] for im in images) > limits.max_texture_pixels:
+        raise Refused(f"the model's images have more than {limits.max_texture_pixels:,} pixels")
+    textures = [im.astype(np.float32) / 255.0 for im in images]
+    count = int(_array(arrays, "parts", np.int64, ()))
+    if not 1 <= count <= limits.max_meshes:
+        raise Refused(f"the model has {count:,} meshes; from 1 to {limits.max_meshes:,} are taken")
+    parts, triangles = [], 0
+    for k in range(count):
+        vertices = _array(arrays, f"vertices_{k}", np.float64, (None, 3))
+        faces = _array(arrays, f"faces_{k}", np.int64, (None, 3))
+        colors = _array(arrays, f"colors_{k}", np.float32, (len(faces), 3, 3))
+        texture = int(_array(arrays, f"texture_{k}", np.int64, ()))
+        if not np.isfinite(vertices).all():
+            raise Refused("the model has vertices that are not finite numbers (NaN or infinity)")
+        if len(faces) == 0 or faces.min() < 0 or faces.max() >= len(vertices):
+            raise Refused("the model has triangles whose corners are not among its vertices")
+        if not np.isfinite(colors).all():
+            raise Refused("the model has colors that are not finite numbers")
+        uv = None
+        if texture >= 0:
+            if texture >= len(textures):
+                raise ValueError(f"texture_{k}: {texture} of {len(textures)}")
+            uv = _array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2))
+            uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0)
+        triangles += len(faces)
+        colored = bool(_array(arrays, f"colored_{k}", np.bool_, ()))
+        parts.append(
+            Part(vertices, faces, np.clip(colors, 0.0, 1.0), uv, textures[texture] if texture >= 0 else None, colored)
+        )
+    if triangles > limits.max_triangles:
+        raise Refused(f"the model has {triangles:,} triangles; at most {limits.max_triangles:,} are taken")
+    return parts

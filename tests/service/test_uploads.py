@@ -1,0 +1,190 @@
+"""Visitors' own scenes against a real server on loopback: every kind of model uploads and paints over REST and
+the WebSocket, uploads stay apart from the operator's scenes, and every hostile file gets a 422 with one line
+while another visitor's walk-through goes on."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from rcp_server.bench.harness import BackgroundServer
+
+from . import upload_files as files
+from .conftest import decode
+
+LIMITS = dict(upload_max_bytes=1 << 20, upload_max_texture_pixels=1 << 20, upload_max_scenes=4)
+
+
+@pytest.fixture(scope="module")
+def server():
+    """Small upload limits: 1 MiB a file (8 MiB unpacked), a megapixel of textures, four scenes kept."""
+    with BackgroundServer(settle_ms=50, **LIMITS) as server:
+        yield server
+
+
+def upload(server, name: str, data: bytes, **options) -> httpx.Response:
+    return httpx.post(f"{server.url}/api/scenes", files={"file": (name, data)}, timeout=120, **options)
+
+
+def uploaded(server, name: str, data: bytes) -> dict:
+    response = upload(server, name, data)
+    assert response.status_code == 201, response.text
+    return response.json()
+
+
+def render(server, scene: str, **body) -> httpx.Response:
+    return httpx.post(f"{server.url}/api/render", json={"scene": scene, **body}, timeout=120)
+
+
+def delete(server, scene: str) -> httpx.Response:
+    return httpx.delete(f"{server.url}/api/scenes/{scene}", timeout=30)
+
+
+@pytest.mark.parametrize(
+    ("filename", "make", "triangles"),
+    [
+        ("Box.glb", files.glb, 12),
+        ("box.obj", files.obj, 12),
+        ("box.ply", files.ply, 12),
+        ("box.stl", files.stl, 12),
+        ("box-gltf.zip", files.gltf_zip, 12),
+    ],
+)
+def test_each_kind_uploads_framed_from_the_front_and_paints(server, filename, make, triangles):
+    info = uploaded(server, filename, make())
+    assert info["uploaded"] is True and info["triangles"] == triangles
+    assert info["title"] == filename.rsplit(".", 1)[0] and info["name"].startswith("u-") and len(info["name"]) > 20
+    eye, look_at = np.array(info["camera"]["eye"]), np.array(info["camera"]["look_at"])
+    view = eye - look_at
+    assert np.allclose(look_at, 0, atol=1e-6) and view[2] > abs(view[0]) and view[2] > abs(view[1])  # from +z
+    image = decode(render(server, info["name"], width=96, height=64).content)
+    backdrop = image[0, 0].astype(int)
+    box = np.abs(image.astype(int) - backdrop).sum(axis=2) > 30
+    assert box[32, 48] and not box[:, :8].any() and not box[:, -8:].any()  # in the middle, framed with a margin
+    assert delete(server, info["name"]).status_code == 204
+
+
+def test_a_textured_obj_in_a_zip_shows_its_texture(server):
+    info = uploaded(server, "quad.zip", files.textured_obj_zip())
+    image = decode(render(server, info["name"], width=64, height=48).content)
+    red, green, blue = image[24, 32].astype(int)
+    assert red > 2 * green + 30 and red > 2 * blue + 30  # the pure red texture, lit
+    delete(server, info["name"])
+
+
+def test_uploads_are_apart_usable_by_name_over_websocket_and_deletable(server, walk_to):
+    info = uploaded(server, "Box.glb", files.glb())
+    name = info["name"]
+    listed = httpx.get(f"{server.url}/api/scenes").json()
+    assert name not in {scene["name"] for scene in listed} and not any(scene["uploaded"] for scene in listed)
+    assert httpx.get(f"{server.url}/api/scenes/{name}").json() == info
+    walk = walk_to(server)
+    walk.send(type="hello", scene=name, width=64, height=48)
+    ready = walk.next()
+    assert ready["type"] == "ready" and ready["scene"] == info
+    meta, image = walk.until_final()[-1]
+    assert image.shape == (48, 64, 3) and meta["final"]
+    assert delete(server, name).status_code == 204
+    gone = delete(server, name)
+    assert gone.status_code == 404 and "unknown scene" in gone.json()["detail"]
+    assert render(server, name).status_code == 404
+    refused = delete(server, "default")
+    assert refused.status_code == 403 and "own scenes" in refused.json()["detail"]
+    assert httpx.get(f"{server.url}/api/scenes/default").json()["uploaded"] is False
+
+
+def test_the_count_of_uploaded_scenes_is_capped_with_503_and_retry_after(server):
+    names = [uploaded(server, f"b{k}.stl", files.stl())["name"] for k in range(LIMITS["upload_max_scenes"])]
+    full = upload(server, "one-too-many.stl", files.stl())
+    assert full.status_code == 503 and "at most 4 uploaded scenes" in full.json()["detail"]
+    assert int(full.headers["retry-after"]) >= 1
+    for name in names:
+        delete(server, name)
+    assert upload(server, "now.stl", files.stl()).status_code == 201
+
+
+def test_a_file_over_the_upload_size_gets_413_while_json_bodies_keep_their_own_limit(server):
+    assert upload(server, "big.obj", b"#" * (2 << 20)).status_code == 413
+    big_json = {"scene": "default", "x": "y" * 100_000}  # under the upload limit, over max_body_bytes
+    assert httpx.post(f"{server.url}/api/render", json=big_json, timeout=30).status_code == 413
+
+
+HOSTILE = [
+    ("empty.glb", lambda: b"", "is empty"),
+    ("picture.glb", lambda: files.png(4, 4), "is not a GLB model: it looks like a PNG image"),
+    ("picture.obj", lambda: files.png(4, 4), "it looks like a PNG image"),
+    ("words.stl", lambda: b"not a model\n", "is not an STL model"),
+    ("notes.txt", lambda: b"v 0 0 0\n", "not a kind of file this server reads"),
+    ("lying.glb", files.glb_with_a_lying_header, "the GLB header says the file has"),
+    ("nan.obj", files.obj_with_nan, "not finite numbers (NaN or infinity)"),
+    ("bomb.zip", lambda: files.zip_bomb(64), "the zip unpacks to 67,108,864 bytes"),
+    ("liar.zip", files.zip_that_lies, "lies about its size"),
+    ("crowd.zip", lambda: files.many_files(1200), "the zip holds 1201 files"),
+    ("slip.zip", files.zip_slip, "points outside the upload"),
+    ("gltf.zip", files.gltf_reaching_out, "buffer 0: the path '../../../../etc/passwd' points outside the upload"),
+    ("box.obj", files.obj_reaching_out, "mtllib: the path '/etc/passwd' points outside the upload"),
+    ("map.zip", lambda: files.textured_obj_zip(map_path="../../secret.png"), "texture map: the path"),
+    ("texture.zip", lambda: files.textured_obj_zip(files.bomb_png(4096, 4096)), "larger than 1,048,576 pixels"),
+]
+
+
+@pytest.mark.parametrize(("filename", "make", "says"), HOSTILE, ids=[h[0] for h in HOSTILE])
+def test_a_hostile_file_gets_422_with_one_line_saying_what_is_wrong(server, filename, make, says):
+    response = upload(server, filename, make())
+    detail = response.json()["detail"]
+    assert response.status_code == 422 and says in detail and "\n" not in detail, detail
+
+
+def test_another_walk_through_keeps_getting_frames_while_hostile_files_are_read(server, walk_to):
+    walk = walk_to(server)
+    walk.send(type="hello", scene="default", width=160, height=90)
+    assert walk.next()["type"] == "ready"
+    walk.frame()
+    hostile = [
+        ("bomb.zip", files.zip_bomb(64)),
+        ("texture.zip", files.textured_obj_zip(files.bomb_png(4096, 4096))),
+        ("liar.zip", files.zip_that_lies()),
+        ("lying.glb", files.glb_with_a_lying_header()),
+    ]
+    answers: list[int] = []
+    walking = threading.Event()
+    walking.set()
+
+    def upload_while_walking():
+        while walking.is_set() or len(answers) < len(hostile):  # every file at least once
+            filename, data = hostile[len(answers) % len(hostile)]
+            answers.append(upload(server, filename, data).status_code)
+
+    uploader = threading.Thread(target=upload_while_walking)
+    uploader.start()
+    walk.send(type="camera", eye=[0, 2, 12], look_at=[0, 2, 0])
+    walk.frame()
+    read_before, frames = len(answers), 0
+    while len(answers) - read_before < 3 and frames < 400:  # walk on as a held key would, while files are read
+        frames += 1
+        walk.send(type="camera", eye=[0.01 * frames, 2, 12], look_at=[0, 2, 0], id=frames)
+        walk.frame()
+    read_during = len(answers) - read_before  # hostile files answered while the walk got its frames
+    walking.clear()
+    uploader.join(120)
+    assert set(answers) == {422} and read_during >= 3 and frames >= 3, (answers, read_during, frames)
+
+
+def test_uploads_off_token_and_idle_time():
+    with BackgroundServer(uploads=False, scenes="/nonexistent-scenes-folder") as off:
+        refused = upload(off, "box.glb", files.glb())
+        assert refused.status_code == 403 and "RCP_UPLOADS=0" in refused.json()["detail"]
+    with BackgroundServer(token="sesame", upload_idle_s=1.0, scenes="/nonexistent-scenes-folder") as guarded:
+        assert upload(guarded, "box.glb", files.glb()).status_code == 401
+        auth = {"authorization": "Bearer sesame"}
+        made = upload(guarded, "box.glb", files.glb(), headers=auth)
+        assert made.status_code == 201
+        address = f"{guarded.url}/api/scenes/{made.json()['name']}"
+        assert httpx.get(address).status_code == 401
+        time.sleep(1.2)  # longer than the idle time, without using the scene (a lookup uses it): that is the input
+        expired = httpx.get(address, headers=auth)
+        assert expired.status_code == 404 and "removed after" in expired.json()["detail"]
