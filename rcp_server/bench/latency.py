@@ -1,10 +1,12 @@
 """``rcp bench latency``: how the walk-through feels, measured over loopback against a real server.
 
-For each canvas size and mode (temporal, per-frame) a WebSocket client walks the default scene: it
-sends a camera message every 1/60 s along a straight path, as a held key does, and records for every
-frame the time from sending the camera message the frame shows to receiving the frame. Then it rests,
-and moves single steps, timing each step's first frame. Beside that, the same paintings timed alone in
-this process: one iteration from the last frame (temporal) and all of them from the canvas (per-frame).
+A WebSocket client walks the default scene in a 1280x720 window, per frame (the default: every frame the
+painting of its camera) and temporal: it sends a camera message every 1/60 s along a straight path, as a
+held key does, and records for every frame the time from sending the camera message the frame shows to
+receiving the frame, and the frame's size. Then it rests, and moves single steps, timing each step's
+first frame, its first full-size painting and its final (refined) one. Beside that, the same paintings
+timed alone in this process: all iterations from the canvas (per-frame), one from the last frame
+(temporal).
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from ..params import PaintParams
 from ..scenefile import load_scene
 from .harness import BackgroundServer, get_json, request
 
-SIZES = ((320, 180), (640, 360))
+WINDOW = (1280, 720)
 RATE = 60.0  # camera messages per second while walking
 
 
@@ -36,7 +38,10 @@ class WalkFigures:
     latencies_ms: list[float]
     render_ms: list[float]
     scales: list[float]
-    step_ms: list[float]
+    pixels: list[int]  # of each walk frame
+    step_ms: list[float]  # one step from rest -> its first frame
+    full_ms: list[float]  # ... -> its first painting at full size
+    final_ms: list[float]  # ... -> its final, refined painting
 
     @property
     def fps(self) -> float:
@@ -52,7 +57,7 @@ async def _walk(url: str, scene: dict, width: int, height: int, temporal: bool, 
     sent: dict[int, float] = {}
     eye, target = np.array(scene["camera"]["eye"]), np.array(scene["camera"]["look_at"])
     forward = (target - eye) / np.linalg.norm(target - eye)
-    figures = WalkFigures(0, seconds, [], [], [], [])
+    figures = WalkFigures(0, seconds, [], [], [], [], [], [], [])
     async with websockets.connect(url, max_size=None) as ws:
 
         async def frame() -> dict:
@@ -98,6 +103,7 @@ async def _walk(url: str, scene: dict, width: int, height: int, temporal: bool, 
             figures.latencies_ms.append((time.perf_counter() - sent[meta["camera_id"]]) * 1000)
             figures.render_ms.append(meta["render_ms"])
             figures.scales.append(meta["scale"])
+            figures.pixels.append(meta["width"] * meta["height"])
         figures.seconds = time.perf_counter() - clock
         await walker
         await until_final()
@@ -109,7 +115,12 @@ async def _walk(url: str, scene: dict, width: int, height: int, temporal: bool, 
             while (meta := await frame())["camera_id"] != k:
                 pass
             figures.step_ms.append((time.perf_counter() - sent[k]) * 1000)
-            await until_final()
+            while meta["phase"] != "refine":
+                meta = await frame()
+            figures.full_ms.append((time.perf_counter() - sent[k]) * 1000)
+            while not meta["final"]:
+                meta = await frame()
+            figures.final_ms.append((time.perf_counter() - sent[k]) * 1000)
     return figures
 
 
@@ -169,45 +180,51 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
             f"{server.settings.frame_ms:.0f} ms"
         )
         header = (
-            f"{'size':>9} {'mode':>14} | {'alone ms':>8} | {'fps':>5} {'latency p50':>11} {'p95':>6} "
-            f"{'render p50':>10} {'scale':>5} | {'step p50':>8} {'p95':>6}"
+            f"{'mode':>14} | {'alone ms':>8} | {'fps':>5} {'walk size':>9} {'latency p50':>11} {'p95':>6} "
+            f"{'render p50':>10} | {'step p50':>8} {'full p50':>8} {'p95':>6} {'final p50':>9} {'p95':>6}"
         )
         print(header)
         print("-" * len(header))
         rows = []
-        cases = [(w, h, temporal, False) for w, h in SIZES for temporal in (True, False)]
-        cases.append((*SIZES[-1], True, True))  # the same walk while REST renders compete for the cores
-        for width, height, temporal, busy in cases:
-            alone = _alone_ms(scene, width, height, params, temporal)
+        width, height = WINDOW
+        cases = [(False, False), (True, False), (False, True)]  # the last: REST renders compete for the cores
+        for temporal, busy in cases:
+            alone = _alone_ms(scene, width // 2, height // 2, params, temporal)
             with _rest_load(server.url, scene_name, busy) as load:
                 f = asyncio.run(_walk(server.ws_url, info, width, height, temporal, seconds, steps))
+            side = (statistics.median(f.pixels) / (width * height)) ** 0.5 if f.pixels else 0.0
             row = {
                 "width": width,
                 "height": height,
                 "temporal": temporal,
                 "alone_ms": round(alone, 1),
                 "fps": round(f.fps, 1),
+                "walk_size": f"{round(width * side)}x{round(height * side)}",
                 "latency_p50_ms": round(percentile(f.latencies_ms, 50), 1),
                 "latency_p95_ms": round(percentile(f.latencies_ms, 95), 1),
                 "render_p50_ms": round(percentile(f.render_ms, 50), 1),
-                "scale_mean": round(statistics.fmean(f.scales), 2) if f.scales else None,
                 "step_p50_ms": round(percentile(f.step_ms, 50), 1),
-                "step_p95_ms": round(percentile(f.step_ms, 95), 1),
+                "full_p50_ms": round(percentile(f.full_ms, 50), 1),
+                "full_p95_ms": round(percentile(f.full_ms, 95), 1),
+                "final_p50_ms": round(percentile(f.final_ms, 50), 1),
+                "final_p95_ms": round(percentile(f.final_ms, 95), 1),
                 "rest_renders": load.done if busy else 0,
             }
             rows.append(row)
             mode = ("temporal" if temporal else "per-frame") + ("+REST" if busy else "")
             print(
-                f"{f'{width}x{height}':>9} {mode:>14} | {alone:8.1f} | {f.fps:5.1f} {row['latency_p50_ms']:11.1f} "
-                f"{row['latency_p95_ms']:6.1f} {row['render_p50_ms']:10.1f} {row['scale_mean'] or 0:5.2f} | "
-                f"{row['step_p50_ms']:8.1f} {row['step_p95_ms']:6.1f}"
+                f"{mode:>14} | {alone:8.1f} | {f.fps:5.1f} {row['walk_size']:>9} {row['latency_p50_ms']:11.1f} "
+                f"{row['latency_p95_ms']:6.1f} {row['render_p50_ms']:10.1f} | {row['step_p50_ms']:8.1f} "
+                f"{row['full_p50_ms']:8.1f} {row['full_p95_ms']:6.1f} {row['final_p50_ms']:9.1f} "
+                f"{row['final_p95_ms']:6.1f}"
             )
         print(
-            "alone: the painting of one full-size frame in this process (temporal: one iteration from the last "
-            "frame; per-frame: all iterations). latency: camera message sent -> its frame received, while walking. "
-            "render: the server's painting time per walk frame, at the resolution scale it chose. step: one camera "
-            "message from rest -> its first frame. +REST: meanwhile a REST caller keeps asking for "
-            f"{REST_LOAD['width']}x{REST_LOAD['height']} paintings at {REST_LOAD['paint']['spp']} spp, one after "
-            f"another ({sum(r['rest_renders'] for r in rows)} done)."
+            f"window {width}x{height}. alone: one {width // 2}x{height // 2} walk frame's painting in this process "
+            "(per-frame: all iterations; temporal: one from the last frame). walk size: the median walk frame. "
+            "latency: camera message sent -> its frame received, while walking. render: the server's painting "
+            "time per walk frame. step: one camera message from rest -> its first frame; full: -> its painting "
+            f"at {width}x{height}; final: -> the refined one (4 spp or more). +REST: meanwhile a REST caller keeps "
+            f"asking for {REST_LOAD['width']}x{REST_LOAD['height']} paintings at {REST_LOAD['paint']['spp']} spp, "
+            f"one after another ({sum(r['rest_renders'] for r in rows)} done)."
         )
         return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}
