@@ -1,10 +1,13 @@
-"""``rcp bench accuracy``: time per frame against error, for both methods, over samples per pixel and resolution.
+"""``rcp bench accuracy``: time per frame against error, for each way to paint, over samples per pixel and resolution.
 
-Every point paints a shipped scene with its own painting settings (``lambda_e`` set to 0, so both methods
+The curves (:data:`CURVES`): the ray-traced method tracing every ray (``raytrace``), the same with its
+shortcuts (``raytrace fast``, the default) and the image-space method (``image``).
+
+Every point paints a shipped scene with its own painting settings (``lambda_e`` set to 0, so every curve
 paint the same thing), at ``spp`` samples per pixel and at a fraction ``scale`` of the resolution
 (``lambda_p``, which counts pixels, scaled with it so that the painting is the same), upscaled bilinearly
 to full size. Its error is measured against the *converged reference*: the ray-traced painting at full
-resolution with many samples per pixel. It is the ground truth for both methods, so the image method's
+resolution with many samples per pixel, every ray traced. It is the ground truth for all, so the image method's
 error includes its bias (off-screen lookups, bilinear mixing across silhouettes), which no number of
 samples removes. How converged the reference itself is: the same painting with half its samples,
 measured against it (``reference_floor``).
@@ -21,11 +24,15 @@ from pathlib import Path
 import numpy as np
 
 from ..painting import default_threads, paint
-from ..params import METHODS
 from ..scenefile import load_scene
 from .metrics import edge_band, psnr, ssim, upscale
 
 SCENES = ("default", "sea", "sky")
+CURVES = {  # name -> the settings that paint it
+    "raytrace": {"method": "raytrace", "fast": False},
+    "raytrace fast": {"method": "raytrace", "fast": True},
+    "image": {"method": "image"},
+}
 
 
 @dataclass(frozen=True)
@@ -46,7 +53,7 @@ def measure(scene_name: str, sweep: Sweep, threads: int) -> tuple[list[dict], di
     """Every (method, spp, scale) point of one scene, and what its reference is."""
     scene = load_scene(scene_name)
     camera = scene.camera
-    base = replace(scene.paint, lambda_e=0.0, method="raytrace", spp=1)
+    base = replace(scene.paint, lambda_e=0.0, method="raytrace", spp=1, fast=False)
     w, h = sweep.width, sweep.height
     clock = time.perf_counter()
     reference = paint(scene, camera, w, h, replace(base, spp=sweep.reference_spp), threads=threads).image
@@ -55,12 +62,12 @@ def measure(scene_name: str, sweep: Sweep, threads: int) -> tuple[list[dict], di
     band = edge_band(h, w)
     floor = {"psnr": psnr(half, reference), "ssim": ssim(half, reference), "psnr_edge": psnr(half, reference, band)}
     points = []
-    for method in METHODS:
+    for method, settings in CURVES.items():
         for spp in sweep.spps:
             for scale in sweep.scales:
                 sw, sh = max(1, round(w * scale)), max(1, round(h * scale))
                 # lambda_p counts pixels: at a fraction of the resolution the same smudge is fewer pixels
-                params = replace(base, method=method, spp=spp, lambda_p=base.lambda_p * sh / h)
+                params = replace(base, **settings, spp=spp, lambda_p=base.lambda_p * sh / h)
                 paint(scene, camera, sw, sh, params, threads=threads)  # warm: compiled kernels, caches
                 times = []
                 for _ in range(sweep.repeats):
@@ -102,7 +109,7 @@ def pareto(points: list[dict], error: str) -> list[dict]:
     return front
 
 
-COLORS = {"raytrace": "tab:blue", "image": "tab:orange"}
+COLORS = {"raytrace": "tab:blue", "raytrace fast": "tab:green", "image": "tab:orange"}
 SHAPES = {1.0: "o", 0.5: "s", 0.25: "^"}
 PANELS = (("psnr", "PSNR, whole image (dB)"), ("ssim", "SSIM, whole image"), ("psnr_edge", "PSNR, edge band (dB)"))
 
@@ -120,7 +127,7 @@ def chart(points: list[dict], abouts: list[dict], path: Path, title: str) -> Non
         mine = [p for p in points if p["scene"] == about["scene"]]
         for col, (key, label) in enumerate(PANELS):
             ax = axes[row, col]
-            for method in METHODS:
+            for method in CURVES:
                 of = [p for p in mine if p["method"] == method]
                 for scale, marker in SHAPES.items():
                     at = [p for p in of if p["scale"] == scale]
@@ -143,7 +150,7 @@ def chart(points: list[dict], abouts: list[dict], path: Path, title: str) -> Non
                 facecolors="none",
                 edgecolors="black",
                 lw=1.2,
-                label="Pareto front (both methods)" if row == col == 0 else None,
+                label="Pareto front (all)" if row == col == 0 else None,
             )
             for p in both:
                 ax.annotate(f"{p['spp']}", (p["ms"], p[key]), textcoords="offset points", xytext=(5, -10), fontsize=7)
@@ -179,10 +186,10 @@ def run(out: Path, quick: bool = False, threads: int | None = None, scenes=SCENE
             f"{name}: reference {sweep.reference_spp} spp in {about['reference_ms'] / 1e3:.1f} s; "
             f"half its samples against it: PSNR {about['reference_floor']['psnr']:.1f} dB"
         )
-        print(f"  {'method':9s} {'spp':>4s} {'scale':>5s} {'ms':>8s} {'PSNR':>6s} {'SSIM':>6s} {'edge PSNR':>9s}")
+        print(f"  {'method':13s} {'spp':>4s} {'scale':>5s} {'ms':>8s} {'PSNR':>6s} {'SSIM':>6s} {'edge PSNR':>9s}")
         for p in mine:
             print(
-                f"  {p['method']:9s} {p['spp']:4d} {p['scale']:5.2f} {p['ms']:8.1f} {p['psnr']:6.2f} "
+                f"  {p['method']:13s} {p['spp']:4d} {p['scale']:5.2f} {p['ms']:8.1f} {p['psnr']:6.2f} "
                 f"{p['ssim']:6.3f} {p['psnr_edge']:9.2f}"
             )
     report = {

@@ -46,6 +46,12 @@ def _speed(args: argparse.Namespace) -> None:
     speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
 
 
+def _levels(args: argparse.Namespace) -> None:
+    from .levels import levels
+
+    levels(args.width, args.height)
+
+
 def _latency(args: argparse.Namespace) -> None:
     require("latency", WEBSOCKETS)
     from .latency import latency
@@ -106,6 +112,11 @@ def add_bench_commands(subparsers) -> None:
     )
     p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
     p.set_defaults(run_bench=_speed)
+
+    p = command("levels", "fast's colors compared in 8 display levels, against a change of seed")
+    p.add_argument("--width", type=positive_int, default=640, help="pixels (default 640)")
+    p.add_argument("--height", type=positive_int, default=360, help="pixels (default 360)")
+    p.set_defaults(run_bench=_levels)
 
     p = command("latency", "the walk-through's latency and frame rate, against a real server")
     p.add_argument("--scene", default="default", help="a scene the server serves (default: default)")
