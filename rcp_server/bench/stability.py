@@ -308,7 +308,7 @@ def temporal_section(scene: Scene, width: int, height: int, params: PaintParams,
     cameras = [pan(scene.camera, degrees * k) for k in range(frames)]
     plains = [paint(scene, c, width, height, replace(params, iterations=1)).image for c in cameras]
     lag = max(1, frames - 1)
-    runs = {}
+    runs, painted = {}, {}
     for method in ("raytrace", "image"):
         for mode in ("per-frame", "temporal"):
             p = replace(params, method=method)
@@ -318,6 +318,7 @@ def temporal_section(scene: Scene, width: int, height: int, params: PaintParams,
                 result = paint(scene, c, width, height, q, previous=state if mode == "temporal" else None)
                 state = result.state
                 images.append(result.image)
+            painted[method, mode] = images
             smudges = [a - b for a, b in zip(images, plains, strict=True)]
             scene_corr, screen_corr = smudge_correlations(smudges, cameras, lag)
             runs[f"{method} {mode}"] = {
@@ -325,6 +326,11 @@ def temporal_section(scene: Scene, width: int, height: int, params: PaintParams,
                 "smudge_with_scene": scene_corr,
                 "smudge_with_screen": screen_corr,
             }
+    # temporal drift: how far each temporal frame is from the painting of its own camera (what per-frame
+    # shows, and Save gives), against the plain render's distance from it
+    per_frame = painted["raytrace", "per-frame"]
+    drift = [psnr(t, f) for t, f in zip(painted["raytrace", "temporal"], per_frame, strict=True)]
+    plain_drift = [psnr(p, f) for p, f in zip(plains, per_frame, strict=True)]
     # the control: a smudge pattern fixed on the screen, as a filter over the plain render would make
     rng = np.random.default_rng(0)
     fixed = rng.normal(0.0, 0.05, (height, width, 3))
@@ -338,6 +344,8 @@ def temporal_section(scene: Scene, width: int, height: int, params: PaintParams,
         "lag": lag,
         "plain_change": [mean_change(plains[k + 1], plains[k]) for k in range(frames - 1)],
         "runs": runs,
+        "temporal_psnr_to_per_frame": drift,
+        "plain_psnr_to_per_frame": plain_drift,
     }
 
 
@@ -512,3 +520,7 @@ def summary(report: dict) -> None:
     for name, r in t["runs"].items():
         mean_flicker = f"{np.mean(r['flicker']):+.4f}" if r["flicker"] else "   -   "
         print(f"  {name:22s} {r['smudge_with_scene']:.3f} / {r['smudge_with_screen']:.3f}   flicker {mean_flicker}")
+    drift = ", ".join(f"{v:.1f}" for v in t["temporal_psnr_to_per_frame"])
+    print(f"temporal drift: PSNR (dB) of each ray-traced temporal frame to its camera's painting: {drift}")
+    plain = ", ".join(f"{v:.1f}" for v in t["plain_psnr_to_per_frame"])
+    print(f"  (the plain render's, for scale: {plain})")
