@@ -125,15 +125,19 @@ def parse_path(source: str | bytes | dict) -> PathSpec:
         raise PathError(one_line(exc)) from None
 
 
-def load_path(file, scene_camera: Camera) -> CameraPath:
-    """A path file, resolved against the scene's camera; every fault is a :class:`PathError` naming the file."""
+def load_path(file, scene_camera: Camera, fps: float | None = None) -> CameraPath:
+    """A path file, resolved against the scene's camera (``fps``, when given, in place of the file's); every
+    fault is a :class:`PathError` naming the file."""
     try:
         with open(file, "rb") as handle:
             text = handle.read(MAX_KEYFRAMES * 1024)
     except OSError as exc:
         raise PathError(f"{file}: {exc.strerror or exc}") from None
     try:
-        return parse_path(text).resolve(scene_camera)
+        spec = parse_path(text)
+        if fps is not None:
+            spec = parse_path({**spec.model_dump(), "fps": fps})
+        return spec.resolve(scene_camera)
     except PathError as exc:
         raise PathError(f"{file}: {exc}") from None
 
