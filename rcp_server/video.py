@@ -77,6 +77,13 @@ class Mp4Writer:
         except self._av.FFmpegError as exc:  # a full disk, mostly
             raise OSError(f"{self.out}: cannot write the video: {exc}") from None
 
+    def size(self) -> int:
+        """Bytes written so far (none until the encoder's first packets: the file opens with them)."""
+        for file in (self._partial, self.out):
+            if file.exists():
+                return file.stat().st_size
+        return 0
+
     def close(self) -> None:
         try:
             self._mux(self._stream.encode(None))  # flush the encoder's delayed frames

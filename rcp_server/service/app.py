@@ -13,7 +13,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
-from .routes import rest, walk
+from .routes import rest, videos, walk
 from .settings import Settings
 from .state import Service
 
@@ -41,12 +41,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.add_middleware(
             CORSMiddleware,
             allow_origins=settings.cors_origins,
-            allow_methods=["GET", "POST"],
+            allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
     app.add_exception_handler(RequestValidationError, _invalid)
     app.include_router(rest.public)
     app.include_router(rest.router)
+    app.include_router(videos.router)
     app.include_router(walk.router)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))

@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, TypeAdapter, create_model
 
+from ..camerapath import PathSpec
 from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
 from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
@@ -63,6 +64,35 @@ class RenderRequest(_Model):
     time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] = 0.0
     format: Literal["png", "jpeg"] = "png"
     quality: Quality = 92
+
+
+class VideoRequest(_Model):
+    """``POST /api/videos``: a camera path (the format of ``camerapath.py``) painted into an MP4; the size and
+    painting settings as for a still; ``temporal``: after the first frame, each frame runs this many
+    iterations from the previous frame's painting (absent: every frame starts again from grey)."""
+
+    scene: SceneName
+    path: PathSpec
+    width: Size = 640
+    height: Size = 360
+    paint: PaintModel = PaintModel()
+    temporal: Annotated[int, Field(ge=1, le=256)] | None = None
+    format: Literal["mp4"] = "mp4"
+
+
+class VideoCreated(BaseModel):
+    id: str
+    frames: int
+
+
+class VideoStatus(BaseModel):
+    """A video job: ``queued``, ``running``, then ``done`` (its file ready), ``failed`` or ``cancelled``."""
+
+    id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    frames: int
+    done_frames: int
+    message: str
 
 
 class SceneInfo(BaseModel):

@@ -41,6 +41,13 @@ class Settings(BaseSettings):
     max_body_bytes: int = Field(64 * 1024, ge=1024)  # an HTTP request body
     max_message_bytes: int = Field(16 * 1024, ge=256)  # a WebSocket text message; longer ones get an error
     send_timeout_s: float = Field(30.0, gt=0)  # a client that takes no data for this long is disconnected
+    # ---- videos (POST /api/videos) ----
+    max_videos: int = Field(1, ge=1)  # video jobs painting at once (their tiles take turns with the walks')
+    max_videos_waiting: int = Field(4, ge=0)  # video jobs that may wait for a turn; more get 503 and Retry-After
+    max_video_work: int = Field(1 << 34, ge=1)  # pixels x samples x iterations over every frame of one video
+    video_disk_bytes: int = Field(2 << 30, ge=1)  # disk the finished videos may use together
+    video_keep_s: float = Field(3600.0, gt=0)  # a finished video is kept this long, then deleted
+    video_dir: Path | None = None  # where videos are written (default: a temporary folder, removed at stop)
     # ---- walking ----
     frame_ms: float = Field(60.0, gt=0)  # while walking, aim for frames at least this fast
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message

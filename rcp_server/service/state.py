@@ -18,6 +18,7 @@ from ..scene import Scene
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol
 from .settings import Settings
+from .videos import Videos
 from .workshop import Workshop
 
 log = logging.getLogger("rcp.service")
@@ -38,6 +39,7 @@ class Service:
     scenes: dict[str, Scene]
     infos: dict[str, protocol.SceneInfo]
     workshop: Workshop
+    videos: Videos
     sessions: set[Walkthrough] = field(default_factory=set)
 
     @classmethod
@@ -49,12 +51,14 @@ class Service:
         log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
         workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
-        return cls(settings, scenes, infos, workshop)
+        return cls(settings, scenes, infos, workshop, Videos(settings, workshop))
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""
         for session in list(self.sessions):
             session.close()
+        self.workshop.stop()  # the video jobs' paintings stop at their next tile
+        self.videos.close()
         self.workshop.close()
 
 
