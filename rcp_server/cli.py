@@ -17,6 +17,7 @@ from .argtypes import finite, positive_int
 from .bench.cli import MissingExtra, add_bench_commands
 from .camera import Camera, CameraError
 from .camerapath import PathError, PathFrame, load_path
+from .cluster import ClusterError
 from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
@@ -81,7 +82,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--exposure", type=finite, default=0.0, help="stops of exposure for a .hdr environment")
     r.add_argument("--save-iterations", type=Path, metavar="DIR", help="also write every iteration to DIR")
-    r.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    r.add_argument("--threads", type=positive_int, help="worker threads (default: all cores; on Ray: per worker, 1)")
+    r.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+        help="paint on Ray (the cluster extra): a local Ray runtime, or the cluster at ADDRESS (or RAY_ADDRESS)",
+    )
     r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100", help="JPEG quality")
     s = r.add_argument_group("sequences")
     s.add_argument("--frames", type=positive_int, default=1, help="number of frames")
@@ -172,7 +180,7 @@ def _render(args: argparse.Namespace) -> None:
         scene.environment = load_environment(args.environment, args.exposure)
     params = paint_params(scene.paint, args)
     base = _camera(scene.camera, args)
-    if sequence:
+    if sequence or args.ray is not None:
         _render_sequence(args, scene, params, base)
         return
     result = paint(
@@ -195,6 +203,8 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
     """Paint a camera path or an orbit and walk, into a video, a folder of PNGs or numbered images."""
     from tqdm import tqdm
 
+    if args.save_iterations is not None and args.ray is not None:
+        raise UsageError("--save-iterations paints here: leave out --ray")
     if args.path is not None:
         path = load_path(args.path, base, args.fps)
         fps, count = path.fps, path.frame_count
@@ -202,10 +212,12 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
     else:
         fps, count = args.fps or 24.0, args.frames
         shots = (
-            PathFrame(k, k / fps, camera_path(base, k / (count - 1), args.orbit, args.walk), args.time + k / fps)
+            PathFrame(k, k / fps, camera_path(base, k / max(count - 1, 1), args.orbit, args.walk), args.time + k / fps)
             for k in range(count)
         )
-    if video.is_video(args.out) or video.is_folder(args.out):
+    if count == 1 and args.path is None:  # a still, painted on Ray
+        writer = video.ImageFrames(lambda index: args.out, args.quality)
+    elif video.is_video(args.out) or video.is_folder(args.out):
         writer = video.open_writer(args.out, args.width, args.height, fps, count)
     else:
         writer = video.ImageFrames(lambda index: _frame_path(args.out, index), args.quality)
@@ -222,14 +234,26 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
             threads=args.threads,
         )
 
+    painter = None
     try:
+        if args.ray is None:
+            paintings = paint_sequence(paint_frame, shots, params, args.temporal)
+        else:
+            from .cluster import RayPainter
+
+            painter = RayPainter(None if args.ray == "local" else args.ray, threads=args.threads or 1)
+            painter.start()
+            paintings = painter.images(scene, shots, args.width, args.height, params, args.temporal)
         with tqdm(total=count, desc="painting", unit="frame", disable=args.quiet) as bar:
-            for image in paint_sequence(paint_frame, shots, params, args.temporal):
+            for image in paintings:
                 writer.write(image)
                 bar.update()
     except BaseException:
         writer.abort()
         raise
+    finally:
+        if painter is not None:
+            painter.close()
     writer.close()
 
 
@@ -286,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             _serve(args)
         elif args.command == "bench":
             args.run_bench(args)
-    except (UsageError, MissingExtra, SceneError, CameraError, PathError, ValueError) as exc:
+    except (UsageError, MissingExtra, SceneError, CameraError, PathError, ClusterError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
     except MemoryError:

@@ -48,6 +48,7 @@ class Settings(BaseSettings):
     video_disk_bytes: int = Field(2 << 30, ge=1)  # disk the finished videos may use together
     video_keep_s: float = Field(3600.0, gt=0)  # a finished video is kept this long, then deleted
     video_dir: Path | None = None  # where videos are written (default: a temporary folder, removed at stop)
+    ray_address: str | None = None  # paint videos on Ray: "local" (a runtime here), "auto", host:port, ray://...
     # ---- walking ----
     frame_ms: float = Field(60.0, gt=0)  # while walking, aim for frames at least this fast
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message

@@ -51,7 +51,12 @@ class Service:
         log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
         workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
-        return cls(settings, scenes, infos, workshop, Videos(settings, workshop))
+        painter = None
+        if settings.ray_address is not None:  # Ray joins with the first video: a server starts without waiting
+            from ..cluster import RayPainter
+
+            painter = RayPainter(settings.ray_address)
+        return cls(settings, scenes, infos, workshop, Videos(settings, workshop, painter))
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""

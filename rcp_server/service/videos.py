@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Literal
 
 from ..camerapath import CameraPath
+from ..cluster import ClusterError
 from ..painting import Abandoned, PaintState
 from ..params import PaintParams
 from ..scene import Scene
@@ -176,6 +177,8 @@ class Videos:
             job.finish("failed" if self.workshop.stopping else "cancelled", message)
         except OSError as exc:  # the disk: full, or over the budget
             job.finish("failed", f"cannot write the video: {exc.strerror or exc}")
+        except ClusterError as exc:  # Ray: no answer at its address, a worker lost
+            job.finish("failed", str(exc))
         except Exception as exc:
             if job.cancelled.is_set():
                 job.finish("cancelled", "cancelled")
@@ -231,6 +234,8 @@ class Videos:
         for job in list(self._jobs.values()):
             job.cancelled.set()
         self._runners.shutdown(wait=True, cancel_futures=True)
+        if self.painter is not None:
+            self.painter.close()
         if self._own_folder:
             shutil.rmtree(self.folder, ignore_errors=True)
 
