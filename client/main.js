@@ -12,6 +12,7 @@ import { Connection } from "./connection.js";
 import { FrameView } from "./frames.js";
 import { Overlay } from "./overlay.js";
 import { paintPanel } from "./panel.js";
+import { pathPanel } from "./pathpanel.js";
 import { WalkController } from "./walk.js";
 
 const $ = (id) => document.getElementById(id);
@@ -346,5 +347,20 @@ async function start() {
   requestAnimationFrame(tick);
 }
 
-window.rcp = { state, sent, overlay, walk, connection, panel, canvas, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+// ---- the camera path: keyframes from the walk, played back, rendered into a video ----
+
+const path = pathPanel($("path"), {
+  camera: () => walkCamera.toCamera(walk.walk),
+  place: (camera) => walk.place(camera),
+  scene: () => state.scene,
+  request: () => {
+    const paint = MESSAGES.paint({ ...state.paint });
+    delete paint.type;
+    return { paint, width: state.size[0], height: state.size[1] };
+  },
+  authorization,
+  notice,
+});
+
+window.rcp = { state, sent, overlay, walk, connection, panel, path, canvas, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

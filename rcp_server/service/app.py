@@ -48,6 +48,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(rest.public)
     app.include_router(rest.router)
     app.include_router(videos.router)
+    app.include_router(videos.paths)
     app.include_router(walk.router)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))

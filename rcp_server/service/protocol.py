@@ -95,6 +95,23 @@ class VideoStatus(BaseModel):
     message: str
 
 
+class PathRequest(_Model):
+    """``POST /api/paths``: the cameras of a path's frames, for a client to play the path back as it will render."""
+
+    scene: SceneName
+    path: PathSpec
+
+
+class PathCameras(BaseModel):
+    """Every ``step``-th frame of a path (at most ``PREVIEW_FRAMES`` of them): ``fps`` is theirs."""
+
+    fps: float
+    step: int
+    frames: int  # of the whole path
+    cameras: list[CameraModel]
+    scene_times: list[float]
+
+
 class SceneInfo(BaseModel):
     name: str
     title: str

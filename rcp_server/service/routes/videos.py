@@ -54,6 +54,39 @@ def _job(service, video_id: str) -> VideoJob:
     return job
 
 
+paths = APIRouter(prefix="/api/paths", dependencies=[Depends(require_token)], responses=NO_TOKEN, tags=["videos"])
+PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 fps; longer paths are stepped)
+
+
+@paths.post(
+    "",
+    responses={
+        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
+        404: {"description": "no such scene"},
+        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        422: {"description": "a path the painting cannot take"},
+    },
+)
+async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> protocol.PathCameras:
+    """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path)."""
+    scene = service.scenes.get(body.scene)
+    if scene is None:
+        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+    try:
+        path = body.path.resolve(scene.camera)
+    except PathError as exc:
+        raise HTTPException(422, str(exc)) from None
+    step = -(-path.frame_count // PREVIEW_FRAMES)
+    cameras, scene_times = path.at(path.frame_times()[::step])
+    return protocol.PathCameras(
+        fps=path.fps / step,
+        step=step,
+        frames=path.frame_count,
+        cameras=[protocol.CameraModel(eye=c.eye, look_at=c.look_at, up=c.up, fov=c.fov) for c in cameras],
+        scene_times=scene_times,
+    )
+
+
 @router.post(
     "",
     status_code=202,
