@@ -1,21 +1,27 @@
 # rcp serve in a container: the walk-through client at /, REST renders under /api, the WebSocket at /ws.
 #   docker build -t rcp . && docker run --rm -p 8000:8000 rcp
 # Settings are RCP_* environment variables (rcp_server/service/settings.py), e.g. -e RCP_THREADS=4.
+# With Ray (the cluster extra; deploy/raycluster.yaml runs it on KubeRay): docker build --build-arg EXTRAS=cluster -t rcp:ray .
 
 # ---- builder: the project and its dependencies in a venv (no test extras) ----
 FROM python:3.11-slim AS builder
+ARG EXTRAS=""
 ENV PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1
 RUN python -m venv /opt/venv
 ENV PATH=/opt/venv/bin:$PATH
 WORKDIR /src
 COPY pyproject.toml README.md ./
 COPY rcp_server/ rcp_server/
-RUN pip install --upgrade pip && pip install . \
+RUN pip install --upgrade pip && pip install ".${EXTRAS:+[$EXTRAS]}" \
  && pip uninstall -y pip setuptools  # the runtime installs nothing
 WORKDIR /
 
 # ---- runtime: the venv, the scenes and the client, run by a user without privileges ----
 FROM python:3.11-slim
+ARG EXTRAS=""
+# KubeRay's probes of a Ray pod call wget: only an image with Ray gets it
+RUN if [ -n "$EXTRAS" ]; then apt-get update && apt-get install -y --no-install-recommends wget \
+    && rm -rf /var/lib/apt/lists/*; fi
 RUN groupadd --system rcp && useradd --system --gid rcp --create-home --home-dir /home/rcp rcp \
  && mkdir -p /var/cache/rcp/numba && chown -R rcp:rcp /var/cache/rcp
 COPY --from=builder /opt/venv /opt/venv

@@ -13,6 +13,7 @@ import { FrameView } from "./frames.js";
 import { Overlay } from "./overlay.js";
 import { paintPanel } from "./panel.js";
 import { stylesPanel } from "./styles.js";
+import { pathPanel } from "./pathpanel.js";
 import { WalkController } from "./walk.js";
 import { Uploader } from "./upload.js";
 
@@ -386,5 +387,20 @@ async function start() {
 
 const uploads = new Uploader($("scene"), authorization, { chosen: switchScene, notice });
 
-window.rcp = { state, sent, overlay, walk, connection, panel, canvas, uploads, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+// ---- the camera path: keyframes from the walk, played back, rendered into a video ----
+
+const path = pathPanel($("path"), {
+  camera: () => walkCamera.toCamera(walk.walk),
+  place: (camera) => walk.place(camera),
+  scene: () => state.scene,
+  request: () => {
+    const paint = MESSAGES.paint({ ...state.paint });
+    delete paint.type;
+    return { paint, width: state.size[0], height: state.size[1] };
+  },
+  authorization,
+  notice,
+});
+
+window.rcp = { state, sent, overlay, walk, connection, panel, path, canvas, uploads, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

@@ -7,18 +7,20 @@ import logging
 import math
 import signal
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from . import images
+from . import images, video
 from .argtypes import finite, positive_int
 from .bench.cli import MissingExtra, add_bench_commands
 from .camera import Camera, CameraError
+from .camerapath import PathError, PathFrame, load_path
+from .cluster import ClusterError
 from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
+from .sequence import paint_sequence
 from .styles import STYLE, STYLES, with_style
 
 log = logging.getLogger("rcp")
@@ -73,7 +75,8 @@ def _parser() -> argparse.ArgumentParser:
         "--out",
         required=True,
         type=Path,
-        help="image file (.png, .jpg); with --frames, frames go to OUT's stem _0000, _0001, ...",
+        help="image file (.png, .jpg); for a sequence (--path, --frames): an .mp4 video (H.264), a folder of "
+        "numbered PNGs (frames/), or an image name whose stem gets _0000, _0001, ...",
     )
     r.add_argument("--width", type=positive_int, default=640)
     r.add_argument("--height", type=positive_int, default=360)
@@ -88,11 +91,24 @@ def _parser() -> argparse.ArgumentParser:
     )
     r.add_argument("--exposure", type=finite, default=0.0, help="stops of exposure for a .hdr environment")
     r.add_argument("--save-iterations", type=Path, metavar="DIR", help="also write every iteration to DIR")
-    r.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    r.add_argument("--threads", type=positive_int, help="worker threads (default: all cores; on Ray: per worker, 1)")
+    r.add_argument(
+        "--ray",
+        nargs="?",
+        const="local",
+        metavar="ADDRESS",
+        help="paint on Ray (the cluster extra): a local Ray runtime, or the cluster at ADDRESS (or RAY_ADDRESS)",
+    )
     r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100", help="JPEG quality")
     s = r.add_argument_group("sequences")
     s.add_argument("--frames", type=positive_int, default=1, help="number of frames")
-    s.add_argument("--fps", type=finite, default=24.0, help="frames per second of scene time")
+    s.add_argument(
+        "--path",
+        type=Path,
+        metavar="JSON",
+        help="a camera path (keyframes; the client saves them): one frame every 1/fps along it",
+    )
+    s.add_argument("--fps", type=finite, help="frames per second of scene time (default 24, or the path's)")
     s.add_argument(
         "--orbit",
         type=finite,
@@ -159,49 +175,95 @@ def _frame_path(out: Path, index: int) -> Path:
 
 
 def _render(args: argparse.Namespace) -> None:
-    images.image_format(args.out)  # refuse an unknown image type before painting anything
+    sequence = args.path is not None or args.frames > 1
+    if args.path is not None and (args.frames > 1 or args.orbit or args.walk):
+        raise UsageError("--path gives the frames and the cameras: leave out --frames, --orbit and --walk")
+    if args.fps is not None and args.fps <= 0:
+        raise UsageError(f"--fps must be positive, got {args.fps:g}")
+    if not sequence or not (video.is_video(args.out) or video.is_folder(args.out)):
+        images.image_format(args.out)  # refuse an unknown image type before painting anything
+    elif video.is_video(args.out):
+        video.check_video_size(args.width, args.height)
     scene = load_scene(args.scene)
     if args.environment is not None:
         scene.environment = load_environment(args.environment, args.exposure)
     params = paint_params(scene.paint, args)
     base = _camera(scene.camera, args)
-    if args.frames == 1:
-        result = paint(
-            scene,
-            base,
-            args.width,
-            args.height,
-            params,
-            time=args.time,
-            threads=args.threads,
-            keep_iterations=args.save_iterations is not None,
-        )
-        images.save(args.out, result.image, args.quality)
-        if args.save_iterations is not None:
-            for k, image in enumerate(result.iterations, start=1):
-                images.save(args.save_iterations / f"iteration_{k}.png", image)
+    if sequence or args.ray is not None:
+        _render_sequence(args, scene, params, base)
         return
+    result = paint(
+        scene,
+        base,
+        args.width,
+        args.height,
+        params,
+        time=args.time,
+        threads=args.threads,
+        keep_iterations=args.save_iterations is not None,
+    )
+    images.save(args.out, result.image, args.quality)
+    if args.save_iterations is not None:
+        for k, image in enumerate(result.iterations, start=1):
+            images.save(args.save_iterations / f"iteration_{k}.png", image)
+
+
+def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base: Camera) -> None:
+    """Paint a camera path or an orbit and walk, into a video, a folder of PNGs or numbered images."""
     from tqdm import tqdm
 
-    previous: PaintState | None = None
-    for index in tqdm(range(args.frames), desc="painting", unit="frame", disable=args.quiet):
-        fraction = index / (args.frames - 1)
-        camera = camera_path(base, fraction, args.orbit, args.walk)
-        frame_params = params
-        if args.temporal and previous is not None:
-            frame_params = replace(params, iterations=args.temporal)
-        result = paint(
+    if args.save_iterations is not None and args.ray is not None:
+        raise UsageError("--save-iterations paints here: leave out --ray")
+    if args.path is not None:
+        path = load_path(args.path, base, args.fps)
+        fps, count = path.fps, path.frame_count
+        shots = (frame._replace(scene_time=frame.scene_time + args.time) for frame in path.frames())
+    else:
+        fps, count = args.fps or 24.0, args.frames
+        shots = (
+            PathFrame(k, k / fps, camera_path(base, k / max(count - 1, 1), args.orbit, args.walk), args.time + k / fps)
+            for k in range(count)
+        )
+    if count == 1 and args.path is None:  # a still, painted on Ray
+        writer = video.ImageFrames(lambda index: args.out, args.quality)
+    elif video.is_video(args.out) or video.is_folder(args.out):
+        writer = video.open_writer(args.out, args.width, args.height, fps, count)
+    else:
+        writer = video.ImageFrames(lambda index: _frame_path(args.out, index), args.quality)
+
+    def paint_frame(camera: Camera, scene_time: float, frame_params: PaintParams, previous: PaintState | None):
+        return paint(
             scene,
             camera,
             args.width,
             args.height,
             frame_params,
-            time=args.time + index / args.fps,
-            previous=previous if args.temporal else None,
+            time=scene_time,
+            previous=previous,
             threads=args.threads,
         )
-        previous = result.state
-        images.save(_frame_path(args.out, index), result.image, args.quality)
+
+    painter = None
+    try:
+        if args.ray is None:
+            paintings = paint_sequence(paint_frame, shots, params, args.temporal)
+        else:
+            from .cluster import RayPainter
+
+            painter = RayPainter(None if args.ray == "local" else args.ray, threads=args.threads or 1)
+            painter.start()
+            paintings = painter.images(scene, shots, args.width, args.height, params, args.temporal)
+        with tqdm(total=count, desc="painting", unit="frame", disable=args.quiet) as bar:
+            for image in paintings:
+                writer.write(image)
+                bar.update()
+    except BaseException:
+        writer.abort()
+        raise
+    finally:
+        if painter is not None:
+            painter.close()
+    writer.close()
 
 
 def _scenes() -> None:
@@ -257,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
             _serve(args)
         elif args.command == "bench":
             args.run_bench(args)
-    except (UsageError, MissingExtra, SceneError, CameraError, ValueError) as exc:
+    except (UsageError, MissingExtra, SceneError, CameraError, PathError, ClusterError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
     except MemoryError:

@@ -12,7 +12,10 @@ FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
 
 
 def to_uint8(image: np.ndarray) -> np.ndarray:
-    """(h, w, 3) float in [0, 1] -> (h, w, 3) uint8, rounding to nearest."""
+    """(h, w, 3) float in [0, 1] -> (h, w, 3) uint8, rounding to nearest; uint8 (encoded already, as frames
+    from Ray are) passes unchanged."""
+    if image.dtype == np.uint8:
+        return image
     return (np.clip(np.nan_to_num(image, nan=0.0), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
 
 

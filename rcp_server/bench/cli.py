@@ -80,6 +80,14 @@ def _stability(args: argparse.Namespace) -> None:
     run(args.out, quick=args.quick)
 
 
+def _cluster(args: argparse.Namespace) -> None:
+    if not _findable("ray"):
+        raise MissingExtra("rcp bench cluster needs Ray, which the cluster extra installs: pip install '.[cluster]'")
+    from .cluster import bench_cluster
+
+    bench_cluster(args.scene, args.width, args.height, args.frames, args.ray, args.gbps, args.cores)
+
+
 # ---- the subcommands ----
 
 
@@ -150,3 +158,13 @@ def add_bench_commands(subparsers) -> None:
     p = command("stability", "where each method breaks (needs the bench extra)")
     _out_and_quick(p)
     p.set_defaults(run_bench=_stability)
+
+    p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
+    p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")
+    p.add_argument("--width", type=positive_int, default=320, help="pixels (default 320)")
+    p.add_argument("--height", type=positive_int, default=180, help="pixels (default 180)")
+    p.add_argument("--frames", type=positive_int, default=24, help="frames of the path (default 24)")
+    p.add_argument("--ray", metavar="ADDRESS", help="a Ray cluster (default: a local Ray runtime on this machine)")
+    p.add_argument("--gbps", type=finite, default=10.0, help="the model's network to the encoder, Gbit/s (default 10)")
+    p.add_argument("--cores", type=positive_int, default=32, help="the model's cores per machine (default 32)")
+    p.set_defaults(run_bench=_cluster)

@@ -16,7 +16,7 @@ from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
 from .guard import Capacity
-from .routes import rest, scenes, styles, walk
+from .routes import rest, scenes, styles, videos, walk
 from .settings import Settings
 from .state import Service
 
@@ -45,7 +45,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         app.add_middleware(
             CORSMiddleware,
             allow_origins=settings.cors_origins,
-            allow_methods=["GET", "POST"],
+            allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
     app.add_exception_handler(RequestValidationError, _invalid)
@@ -53,6 +53,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(rest.public)
     app.include_router(rest.router)
     app.include_router(styles.router)
+    app.include_router(videos.router)
+    app.include_router(videos.paths)
     app.include_router(walk.router)
     app.include_router(scenes.router, max_body_size=settings.upload_max_bytes)  # uploads: their own body limit
     if settings.client.is_dir():

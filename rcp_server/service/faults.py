@@ -34,15 +34,22 @@ class InternalErrors:
         if scope["type"] != "http":
             return await self.app(scope, receive, send)
         started = False
+        outer = False  # the exception came from the layers outside, through their send: theirs to handle
 
         async def watched(message: Message) -> None:
-            nonlocal started
+            nonlocal started, outer
             started = started or message["type"] == "http.response.start"
-            await send(message)
+            try:
+                await send(message)
+            except BaseException:
+                outer = True  # e.g. the body limit, telling its own layer it has answered 413 itself
+                raise
 
         try:
             await self.app(scope, receive, watched)
         except Exception:
+            if outer:
+                raise
             error_id = report_fault(f"{scope['method']} {scope['path']}")
             if not started:
                 await JSONResponse({"detail": fault_message(error_id)}, 500)(scope, receive, send)

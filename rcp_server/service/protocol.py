@@ -14,6 +14,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
+from ..camerapath import PathSpec
 from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
 from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
@@ -73,6 +74,52 @@ class RenderRequest(_Model):
     time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] = 0.0
     format: Literal["png", "jpeg"] = "png"
     quality: Quality = 92
+
+
+class VideoRequest(_Model):
+    """``POST /api/videos``: a camera path (the format of ``camerapath.py``) painted into an MP4; the size and
+    painting settings as for a still; ``temporal``: after the first frame, each frame runs this many
+    iterations from the previous frame's painting (absent: every frame starts again from grey)."""
+
+    scene: SceneName
+    path: PathSpec
+    width: Size = 640
+    height: Size = 360
+    paint: PaintModel = PaintModel()
+    temporal: Annotated[int, Field(ge=1, le=256)] | None = None
+    format: Literal["mp4"] = "mp4"
+
+
+class VideoCreated(BaseModel):
+    id: str
+    frames: int
+
+
+class VideoStatus(BaseModel):
+    """A video job: ``queued``, ``running``, then ``done`` (its file ready), ``failed`` or ``cancelled``."""
+
+    id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    frames: int
+    done_frames: int
+    message: str
+
+
+class PathRequest(_Model):
+    """``POST /api/paths``: the cameras of a path's frames, for a client to play the path back as it will render."""
+
+    scene: SceneName
+    path: PathSpec
+
+
+class PathCameras(BaseModel):
+    """Every ``step``-th frame of a path (at most ``PREVIEW_FRAMES`` of them): ``fps`` is theirs."""
+
+    fps: float
+    step: int
+    frames: int  # of the whole path
+    cameras: list[CameraModel]
+    scene_times: list[float]
 
 
 class SceneInfo(BaseModel):

@@ -19,6 +19,7 @@ from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol
 from .settings import Settings
 from .uploads import Upload, Uploads
+from .videos import Videos
 from .workshop import Workshop
 
 log = logging.getLogger("rcp.service")
@@ -43,6 +44,7 @@ class Service:
     scenes: dict[str, Scene]
     infos: dict[str, protocol.SceneInfo]
     workshop: Workshop
+    videos: Videos
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
 
@@ -55,7 +57,12 @@ class Service:
         log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
         workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
-        return cls(settings, scenes, infos, workshop)
+        painter = None
+        if settings.ray_address is not None:  # Ray joins with the first video: a server starts without waiting
+            from ..cluster import RayPainter
+
+            painter = RayPainter(settings.ray_address)
+        return cls(settings, scenes, infos, workshop, Videos(settings, workshop, painter))
 
     def walking(self) -> int:
         """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
@@ -89,6 +96,8 @@ class Service:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""
         for session in list(self.sessions):
             session.close()
+        self.workshop.stop()  # the video jobs' paintings stop at their next tile
+        self.videos.close()
         self.workshop.close()
 
 

@@ -1,0 +1,288 @@
+// The camera path: keyframes taken from the walk (one at a time, or recorded while walking), moved to the
+// current view or deleted, played back as the video will show them, saved and loaded as the JSON that
+// `rcp render --path` and POST /api/videos read, and rendered to an MP4 by the server with a progress bar.
+//
+// Playback asks the server for the cameras of every frame (POST /api/paths): the spline is declared once,
+// in rcp_server/camerapath.py, so what plays here is what the video paints.
+
+const RECORD_EVERY_S = 0.5; // a keyframe this often while recording: the spline smooths between them
+const POLL_MS = 500;
+
+const round = (x) => Math.round(x * 1e4) / 1e4;
+
+/**
+ * The path panel in `root`. `hooks`: camera() -> the current view ({eye, look_at, up, fov}); place(camera)
+ * moves the walk there; scene() -> the SceneInfo shown (or null); request() -> {paint, width, height} of a
+ * render; authorization (headers); notice(text, kind).
+ */
+export function pathPanel(root, hooks) {
+  const path = { fps: 24, loop: false, keyframes: [] };
+  const $ = (name) => root.querySelector(`[data-path="${name}"]`);
+  let recording = null; // {start: ms, timer}
+  let playing = null; // {cameras, fps, start, frame}
+  let job = null; // {id, frames, timer}
+
+  // ---- keyframes ----
+
+  function snapshot() {
+    const { eye, look_at, up, fov } = hooks.camera();
+    return { eye: eye.map(round), look_at: look_at.map(round), up: [...up], fov: round(fov) };
+  }
+
+  function add(t) {
+    const last = path.keyframes.at(-1);
+    const when = t ?? (last ? round(last.t + 1) : 0);
+    path.keyframes.push({ t: when, ...snapshot() });
+    show();
+  }
+
+  function show() {
+    const list = $("list");
+    list.replaceChildren();
+    path.keyframes.forEach((key, index) => {
+      const row = document.createElement("li");
+      row.dataset.index = index;
+      const time = document.createElement("input");
+      Object.assign(time, { type: "number", min: 0, step: 0.1, value: key.t, title: "seconds along the path" });
+      time.addEventListener("change", () => {
+        key.t = Math.max(0, Number(time.value) || 0);
+        path.keyframes.sort((a, b) => a.t - b.t);
+        show();
+      });
+      row.append(time, button("view", "Look from this keyframe", () => hooks.place(key)));
+      row.append(button("set", "Move this keyframe to the current view", () => {
+        Object.assign(key, snapshot());
+        show();
+      }));
+      row.append(button("×", "Delete this keyframe", () => {
+        path.keyframes.splice(index, 1);
+        show();
+      }));
+      list.append(row);
+    });
+    const count = path.keyframes.length;
+    const end = count ? path.keyframes.at(-1).t : 0;
+    $("summary").textContent = count ? `${count} keyframes · ${end.toFixed(1)} s` : "no keyframes yet";
+    for (const name of ["play", "save", "render"]) $(name).disabled = count < 2 || Boolean(job && name === "render");
+    $("clear").disabled = count === 0;
+  }
+
+  function button(text, title, action) {
+    const b = document.createElement("button");
+    Object.assign(b, { type: "button", textContent: text, title });
+    b.addEventListener("click", (event) => {
+      event.target.blur(); // keys walk again
+      action();
+    });
+    return b;
+  }
+
+  // ---- recording ----
+
+  function record() {
+    if (recording) return stopRecording();
+    stopPlaying();
+    path.keyframes = [];
+    recording = { start: performance.now() };
+    add(0);
+    recording.timer = setInterval(() => add(round((performance.now() - recording.start) / 1000)), RECORD_EVERY_S * 1000);
+    $("record").textContent = "Stop recording";
+    $("record").setAttribute("aria-pressed", "true");
+  }
+
+  function stopRecording() {
+    if (!recording) return;
+    clearInterval(recording.timer);
+    add(round((performance.now() - recording.start) / 1000));
+    recording = null;
+    $("record").textContent = "Record";
+    $("record").setAttribute("aria-pressed", "false");
+  }
+
+  // ---- playback ----
+
+  function spec() {
+    return { fps: Number($("fps").value) || 24, loop: $("loop").checked, keyframes: path.keyframes };
+  }
+
+  async function play() {
+    if (playing) return stopPlaying();
+    stopRecording();
+    const scene = hooks.scene();
+    if (!scene) return;
+    try {
+      const answer = await call("api/paths", "POST", { scene: scene.name, path: spec() });
+      playing = { cameras: answer.cameras, fps: answer.fps, start: performance.now(), frame: -1 };
+      $("play").textContent = "Stop";
+      requestAnimationFrame(step);
+    } catch (error) {
+      hooks.notice(`Cannot play the path: ${error.message}`);
+    }
+  }
+
+  function step(now) {
+    if (!playing) return;
+    let frame = Math.floor(((now - playing.start) / 1000) * playing.fps);
+    if (frame >= playing.cameras.length) {
+      if (!$("loop").checked) return stopPlaying();
+      frame %= playing.cameras.length;
+    }
+    if (frame !== playing.frame) {
+      playing.frame = frame;
+      hooks.place(playing.cameras[frame]);
+    }
+    requestAnimationFrame(step);
+  }
+
+  function stopPlaying() {
+    playing = null;
+    $("play").textContent = "Play";
+  }
+
+  // ---- save and load ----
+
+  function save() {
+    const link = document.createElement("a");
+    link.href = URL.createObjectURL(new Blob([JSON.stringify(spec(), null, 1)], { type: "application/json" }));
+    link.download = `rcp-path-${hooks.scene()?.name ?? "scene"}.json`;
+    link.click();
+    setTimeout(() => URL.revokeObjectURL(link.href), 30000);
+  }
+
+  async function load(file) {
+    try {
+      const loaded = JSON.parse(await file.text());
+      if (!Array.isArray(loaded?.keyframes)) throw new Error("no keyframes in it");
+      path.keyframes = loaded.keyframes.map((k) => ({ ...k }));
+      $("fps").value = loaded.fps ?? 24;
+      $("loop").checked = Boolean(loaded.loop);
+      show();
+      hooks.notice(`Loaded ${path.keyframes.length} keyframes`, "info");
+    } catch (error) {
+      hooks.notice(`Cannot load ${file.name}: ${error.message}`);
+    }
+  }
+
+  // ---- rendering ----
+
+  async function render() {
+    const scene = hooks.scene();
+    if (!scene || job) return;
+    stopRecording();
+    const { paint, width, height } = hooks.request();
+    const body = {
+      scene: scene.name,
+      path: spec(),
+      width: width - (width % 2), // H.264 in yuv420p takes even sizes
+      height: height - (height % 2),
+      paint,
+      format: "mp4",
+    };
+    if ($("temporal").checked) body.temporal = 1;
+    try {
+      const created = await call("api/videos", "POST", body);
+      job = { id: created.id, frames: created.frames };
+      $("progress").max = created.frames;
+      $("progress").value = 0;
+      $("job").hidden = false;
+      $("download").hidden = true;
+      $("cancel").hidden = false;
+      $("status").textContent = `queued · ${created.frames} frames`;
+      show();
+      job.timer = setInterval(poll, POLL_MS);
+    } catch (error) {
+      hooks.notice(`Cannot render the path: ${error.message}`);
+    }
+  }
+
+  async function poll() {
+    if (!job) return;
+    let status;
+    try {
+      status = await call(`api/videos/${job.id}`, "GET");
+    } catch (error) {
+      return finish(`failed: ${error.message}`);
+    }
+    $("progress").value = status.done_frames;
+    $("status").textContent = `${status.state} · ${status.done_frames} / ${status.frames} frames`;
+    if (status.state === "done") {
+      const response = await fetch(`api/videos/${job.id}/file`, { headers: hooks.authorization });
+      const link = $("download");
+      link.href = URL.createObjectURL(await response.blob());
+      link.download = `rcp-${hooks.scene()?.name ?? "path"}.mp4`;
+      link.hidden = false;
+      finish("done");
+    } else if (status.state === "failed" || status.state === "cancelled") {
+      finish(`${status.state}${status.message ? `: ${status.message}` : ""}`);
+    }
+  }
+
+  function finish(text) {
+    clearInterval(job.timer);
+    $("cancel").hidden = true;
+    $("status").textContent = text;
+    job = null;
+    show();
+  }
+
+  async function cancel() {
+    if (!job) return;
+    try {
+      await call(`api/videos/${job.id}`, "DELETE");
+    } catch (error) {
+      hooks.notice(`Cannot cancel: ${error.message}`);
+    }
+    poll();
+  }
+
+  async function call(url, method, body) {
+    const response = await fetch(url, {
+      method,
+      headers: { "content-type": "application/json", ...hooks.authorization },
+      body: body === undefined ? undefined : JSON.stringify(body),
+    });
+    const answer = await response.json().catch(() => ({}));
+    if (!response.ok) {
+      const detail = answer.detail;
+      const where = Array.isArray(detail) ? `${detail[0]?.loc?.slice(1).join(".")}: ${detail[0]?.msg}` : detail;
+      throw new Error(where ?? `HTTP ${response.status}`);
+    }
+    return answer;
+  }
+
+  // ---- wiring ----
+
+  const on = (name, action) =>
+    $(name).addEventListener("click", (event) => {
+      event.target.blur();
+      action();
+    });
+  on("add", () => add());
+  on("record", record);
+  on("play", play);
+  on("clear", () => {
+    stopPlaying();
+    path.keyframes = [];
+    show();
+  });
+  on("save", save);
+  on("open", () => $("file").click());
+  on("render", render);
+  on("cancel", cancel);
+  $("file").addEventListener("change", (event) => {
+    if (event.target.files[0]) load(event.target.files[0]);
+    event.target.value = "";
+  });
+  show();
+  return {
+    path,
+    spec,
+    add,
+    get playing() {
+      return playing;
+    },
+    get job() {
+      return job;
+    },
+  };
+}

@@ -1,0 +1,150 @@
+"""REST: video jobs (``/api/videos``): a camera path painted into an MP4 in the background."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from fastapi import APIRouter, Depends, HTTPException, Response
+from fastapi.responses import FileResponse, JSONResponse
+from fastapi.routing import APIRoute
+from starlette.types import Receive, Scope, Send
+
+from ...camera import CameraError
+from ...camerapath import PathError
+from .. import protocol
+from ..access import require_token
+from ..state import ServiceDep
+from ..videos import VideoJob, VideoRefused
+from ..workshop import Busy
+
+
+class _SharedPath(APIRoute):
+    """A route whose 405 lists every method of its path in ``Allow`` (GET and DELETE share ``/{video_id}``;
+    Starlette would list only the first route's)."""
+
+    async def handle(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "http" and scope["method"] not in self.methods:
+            allowed = {m for r in router.routes if isinstance(r, APIRoute) and r.path == self.path for m in r.methods}
+            answer = JSONResponse({"detail": "Method Not Allowed"}, 405, headers={"Allow": ", ".join(sorted(allowed))})
+            return await answer(scope, receive, send)
+        return await super().handle(scope, receive, send)
+
+
+NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
+router = APIRouter(
+    prefix="/api/videos",
+    dependencies=[Depends(require_token)],
+    responses=NO_TOKEN,
+    tags=["videos"],
+    route_class=_SharedPath,
+)
+UNKNOWN = {404: {"description": "no such video (never made, deleted, or expired)"}}
+
+
+def _status(job: VideoJob) -> protocol.VideoStatus:
+    return protocol.VideoStatus(
+        id=job.id, state=job.state, frames=job.frames, done_frames=job.done_frames, message=job.message
+    )
+
+
+def _job(service, video_id: str) -> VideoJob:
+    job = service.videos.get(video_id)
+    if job is None:
+        raise HTTPException(404, f"no video {video_id!r}: never made, deleted, or expired")
+    return job
+
+
+paths = APIRouter(prefix="/api/paths", dependencies=[Depends(require_token)], responses=NO_TOKEN, tags=["videos"])
+PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 fps; longer paths are stepped)
+
+
+@paths.post(
+    "",
+    responses={
+        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
+        404: {"description": "no such scene"},
+        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        422: {"description": "a path the painting cannot take"},
+    },
+)
+async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> protocol.PathCameras:
+    """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path)."""
+    scene = service.scenes.get(body.scene)
+    if scene is None:
+        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+    try:
+        path = body.path.resolve(scene.camera)
+    except PathError as exc:
+        raise HTTPException(422, str(exc)) from None
+    step = -(-path.frame_count // PREVIEW_FRAMES)
+    cameras, scene_times = path.at(path.frame_times()[::step])
+    return protocol.PathCameras(
+        fps=path.fps / step,
+        step=step,
+        frames=path.frame_count,
+        cameras=[protocol.CameraModel(eye=c.eye, look_at=c.look_at, up=c.up, fov=c.fov) for c in cameras],
+        scene_times=scene_times,
+    )
+
+
+@router.post(
+    "",
+    status_code=202,
+    responses={
+        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
+        404: {"description": "no such scene"},
+        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        422: {"description": "a path or setting the painting cannot take, or one over a limit"},
+        503: {"description": "every place in the video queue is taken; see Retry-After"},
+        507: {"description": "the stored videos use all the disk allowed to them (RCP_VIDEO_DISK_BYTES)"},
+    },
+)
+async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.VideoCreated:
+    """Queue a video of ``path``; watch it at ``GET /api/videos/{id}``, fetch it from ``.../file``."""
+    scene = service.scenes.get(body.scene)
+    if scene is None:
+        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+    try:
+        path = body.path.resolve(scene.camera)
+        params = replace(scene.paint, **body.paint.given())
+        if body.width % 2 or body.height % 2:
+            raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {body.width}x{body.height}")
+        job = service.videos.submit(scene, path, body.width, body.height, params, body.temporal)
+    except VideoRefused as exc:
+        raise HTTPException(exc.status, str(exc)) from None
+    except (PathError, CameraError, ValueError) as exc:
+        raise HTTPException(422, str(exc)) from None
+    except Busy as busy:
+        raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
+    return protocol.VideoCreated(id=job.id, frames=job.frames)
+
+
+@router.get("/{video_id}", responses=UNKNOWN)
+async def status(video_id: str, service: ServiceDep) -> protocol.VideoStatus:
+    """How far the video is."""
+    return _status(_job(service, video_id))
+
+
+@router.delete("/{video_id}", responses=UNKNOWN)
+async def delete(video_id: str, service: ServiceDep) -> protocol.VideoStatus:
+    """Cancel a video in progress (it stops within a tile); a finished one is forgotten and its file deleted."""
+    job = service.videos.delete(video_id)
+    if job is None:
+        raise HTTPException(404, f"no video {video_id!r}: never made, deleted, or expired")
+    return _status(job)
+
+
+@router.get(
+    "/{video_id}/file",
+    response_class=FileResponse,
+    responses={
+        200: {"content": {"video/mp4": {}}, "description": "the video"},
+        409: {"description": "the video is not done (yet, or ever)"},
+        **UNKNOWN,
+    },
+)
+async def file(video_id: str, service: ServiceDep) -> Response:
+    job = _job(service, video_id)
+    if job.state != "done":
+        raise HTTPException(409, f"video {video_id} is {job.state}, not done: {job.message or 'wait for it'}")
+    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene.name}-{job.id}.mp4")

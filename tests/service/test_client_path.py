@@ -1,0 +1,109 @@
+"""The client's camera path in a real headless Chromium against a real server: keyframes added, moved and
+deleted at the current view, recorded while walking, played back as the server interpolates them, saved and
+loaded as JSON, and rendered to an MP4 with a progress bar and a download."""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+
+import av
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
+WAIT_MS = 60_000
+
+pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+
+SIDE = {"eye": [0, 1.6, 0], "look_at": [3, 1.6, -3], "up": [0, 1, 0], "fov": 50}
+
+
+@pytest.fixture
+def page(live_server, tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        context = browser.new_context(viewport={"width": 1024, "height": 900}, accept_downloads=True)
+        page = context.new_page()
+        problems = []
+        page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
+        page.on("pageerror", lambda e: problems.append(str(e)))
+        page.goto(f"{live_server.url}/?scene=sky&width=64&height=48")
+        page.wait_for_function("rcp.state.scene !== null && rcp.overlay.frame", timeout=WAIT_MS)
+        yield page
+        page.screenshot(path=str(tmp_path / "path.png"))
+        context.close()
+        browser.close()
+    assert problems == [], f"console errors: {problems}"
+
+
+def keyframes(page) -> list[dict]:
+    return page.evaluate("rcp.path.path.keyframes")
+
+
+def test_keyframes_play_save_load_and_render(page, tmp_path):
+    button = page.locator("#path [data-path=add]")
+    button.click()
+    page.evaluate(f"rcp.walk.place({json.dumps(SIDE)})")
+    button.click()
+    button.click()
+    assert [k["t"] for k in keyframes(page)] == [0, 1, 2]
+    first, second = keyframes(page)[:2]
+    assert second["eye"] == SIDE["eye"] and second["fov"] == SIDE["fov"]
+    assert abs(second["look_at"][0] - second["look_at"][2] * -1) < 1e-3  # looking along (1, 0, -1)
+    # delete the third, move the first to the current view and back to where it was
+    page.locator("#path li[data-index='2'] button[title^=Delete]").click()
+    page.locator("#path li[data-index='0'] button[title^=Move]").click()
+    assert keyframes(page)[0]["eye"] == SIDE["eye"]
+    page.evaluate(f"rcp.walk.place({json.dumps({k: first[k] for k in ('eye', 'look_at', 'up', 'fov')})})")
+    page.locator("#path li[data-index='0'] button[title^=Move]").click()
+    assert keyframes(page) == [first, second]
+    assert "2 keyframes · 1.0 s" in page.text_content("#path")
+
+    # play: the walk follows the server's cameras to the last keyframe, then stops
+    page.locator("#path [data-path=play]").click()
+    page.wait_for_function("rcp.path.playing !== null", timeout=WAIT_MS)
+    page.wait_for_function("rcp.path.playing === null", timeout=WAIT_MS)
+    shown = page.evaluate("rcp.state.lastCamera")
+    assert shown["eye"] == pytest.approx(SIDE["eye"], abs=1e-3)
+    assert page.evaluate("rcp.sent.filter((m) => m.type === 'camera').length") >= 10  # frames in between
+
+    # save, then load it back into an empty path
+    with page.expect_download() as saved:
+        page.locator("#path [data-path=save]").click()
+    file = tmp_path / "walk.json"
+    saved.value.save_as(file)
+    assert json.loads(file.read_text()) == {"fps": 24, "loop": False, "keyframes": [first, second]}
+    page.locator("#path [data-path=clear]").click()
+    assert keyframes(page) == []
+    page.locator("#path [data-path=file]").set_input_files(str(file))
+    page.wait_for_function("rcp.path.path.keyframes.length === 2", timeout=WAIT_MS)
+    assert keyframes(page) == [first, second]
+
+    # render: a progress bar, then the MP4 to download
+    page.locator("#path-fps").fill("8")
+    page.locator("#path [data-path=render]").click()
+    page.wait_for_selector("#path progress", state="visible", timeout=WAIT_MS)
+    link = page.wait_for_selector("#path [data-path=download]:not([hidden])", timeout=WAIT_MS)
+    assert page.evaluate("document.querySelector('#path progress').value") == 9
+    assert page.text_content("#path [data-path=status]") == "done"
+    with page.expect_download() as video:
+        link.click()
+    data = Path(video.value.path()).read_bytes()
+    with av.open(io.BytesIO(data)) as container:
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    assert len(frames) == 9 and frames[0].shape == (48, 64, 3)
+
+
+def test_recording_takes_keyframes_while_walking(page):
+    page.locator("#path [data-path=record]").click()
+    page.evaluate(f"rcp.walk.place({json.dumps(SIDE)})")
+    page.wait_for_function("rcp.path.path.keyframes.length >= 3", timeout=WAIT_MS)
+    page.locator("#path [data-path=record]").click()
+    times = [k["t"] for k in keyframes(page)]
+    assert times[0] == 0 and all(b > a for a, b in zip(times, times[1:], strict=False))
+    assert keyframes(page)[-1]["eye"] == SIDE["eye"]
+    assert page.get_attribute("#path [data-path=record]", "aria-pressed") == "false"

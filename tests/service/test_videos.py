@@ -1,0 +1,160 @@
+"""``/api/videos`` on a real server: a path becomes an MP4 of the engine's paintings; jobs are watched,
+cancelled mid-painting, refused over their limits, and expire; bad input is a 4xx in one line."""
+
+from __future__ import annotations
+
+import io
+import time
+
+import av
+import httpx
+import numpy as np
+import pytest
+
+from rcp_server import images
+from rcp_server.bench.harness import BackgroundServer
+from rcp_server.camerapath import parse_path
+from rcp_server.painting import paint
+from rcp_server.scenefile import load_scene
+
+TINY = """
+title = "tiny"
+[camera]
+eye = [0, 1, 4]
+look_at = [0, 0.5, 0]
+[environment]
+color = [0.2, 0.5, 0.9]
+[light]
+direction = [-0.3, -1, -0.4]
+[[objects]]
+primitive = { type = "box", extents = [1, 1, 1] }
+color = [0.9, 0.2, 0.1]
+spin = { degrees_per_second = 90 }
+"""
+PATH = {
+    "fps": 6,
+    "keyframes": [
+        {"t": 0, "eye": [0, 1, 4], "look_at": [0, 0.5, 0]},
+        {"t": 1, "eye": [3, 1.5, 2], "look_at": [0, 0.5, 0], "fov": 45},
+    ],
+}
+LONG = {**PATH, "fps": 60, "keyframes": [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 60}]}
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scenes")
+    (folder / "tiny.toml").write_text(TINY)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def server(scenes):
+    with BackgroundServer(scenes=scenes, max_video_work=1 << 26, max_videos=1, max_videos_waiting=1) as live:
+        with httpx.Client(base_url=live.url, timeout=30) as client:
+            yield client
+
+
+def wait_until(client, video_id, states=("done", "failed", "cancelled"), timeout=60.0) -> dict:
+    deadline = time.monotonic() + timeout
+    while (status := client.get(f"/api/videos/{video_id}").json())["state"] not in states:
+        assert time.monotonic() < deadline, status
+        time.sleep(0.05)
+    return status
+
+
+def one_line(answer: httpx.Response, status: int) -> str:
+    assert answer.status_code == status, answer.text
+    detail = answer.json()["detail"]
+    assert isinstance(detail, str) and "\n" not in detail
+    return detail
+
+
+def test_a_path_becomes_an_mp4_of_its_paintings(server, scenes):
+    answer = server.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 64, "height": 48})
+    assert answer.status_code == 202, answer.text
+    created = answer.json()
+    assert created["frames"] == 7
+    status = wait_until(server, created["id"])
+    assert status | {"message": ""} == {**created, "state": "done", "done_frames": 7, "message": ""}, status
+    video = server.get(f"/api/videos/{created['id']}/file")
+    assert video.status_code == 200 and video.headers["content-type"] == "video/mp4"
+    with av.open(io.BytesIO(video.content)) as container:
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    assert len(frames) == 7 and frames[0].shape == (48, 64, 3)
+    scene = load_scene("tiny", scenes)
+    for frame, shot in zip(frames, parse_path(PATH).resolve(scene.camera).frames(), strict=True):
+        expected = images.to_uint8(paint(scene, shot.camera, 64, 48, scene.paint, time=shot.scene_time).image)
+        played = av.VideoFrame.from_ndarray(expected, format="rgb24").reformat(format="yuv420p")
+        mse = np.mean((frame.astype(float) - played.reformat(format="rgb24").to_ndarray()) ** 2)
+        assert 10 * np.log10(255**2 / mse) > 35  # the frame is the painting, up to the codec's loss
+    # deleted: gone, file and all
+    assert server.delete(f"/api/videos/{created['id']}").json()["state"] == "done"
+    assert server.get(f"/api/videos/{created['id']}").status_code == 404
+    assert server.get(f"/api/videos/{created['id']}/file").status_code == 404
+
+
+def test_cancelling_stops_the_painting_and_the_server_goes_on(server):
+    created = server.post("/api/videos", json={"scene": "tiny", "path": LONG, "width": 64, "height": 48}).json()
+    wait_until(server, created["id"], states=("running",))
+    # one job paints and one waits: the next one is told to come back later
+    waiting = server.post("/api/videos", json={"scene": "tiny", "path": LONG, "width": 64, "height": 48})
+    assert waiting.status_code == 202
+    full = server.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 64, "height": 48})
+    assert "busy" in one_line(full, 503) and int(full.headers["retry-after"]) > 0
+    assert server.delete(f"/api/videos/{waiting.json()['id']}").json()["state"] == "cancelled"
+    assert server.get(f"/api/videos/{created['id']}/file").status_code == 409  # not done
+    assert server.delete(f"/api/videos/{created['id']}").status_code == 200
+    status = wait_until(server, created["id"], timeout=10)
+    assert status["state"] == "cancelled" and status["done_frames"] < status["frames"] == 3601
+    deadline = time.monotonic() + 10
+    while server.get("/api/health").json()["painting"]:
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert server.post("/api/render", json={"scene": "tiny", "width": 32, "height": 32}).status_code == 200
+
+
+@pytest.mark.parametrize(
+    ("body", "status", "says"),
+    [
+        ({"scene": "nowhere"}, 404, "unknown scene 'nowhere'"),
+        ({"width": 63}, 422, "even width and height, got 63x48"),
+        ({"path": {**PATH, "keyframes": PATH["keyframes"][::-1]}}, 422, "keyframes.1.t: must be greater"),
+        (
+            {"path": {**PATH, "keyframes": [PATH["keyframes"][0], {"t": 1, "eye": [0, 1, 4], "look_at": [0, 1, 4]}]}},
+            422,
+            "keyframes.1: eye and look_at coincide",
+        ),
+        (
+            {"path": {**PATH, "fps": 240, "keyframes": [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 3600}]}},
+            422,
+            "more than the 100,000 a path may have",
+        ),
+        ({"path": LONG, "paint": {"spp": 64}}, 422, "more than the 67,108,864 one video may take"),
+    ],
+)
+def test_bad_jobs_are_refused_in_one_line(server, body, status, says):
+    answer = server.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 64, "height": 48, **body})
+    assert says in one_line(answer, status)
+
+
+def test_bad_bodies_and_unknown_ids_are_4xx(server):
+    assert server.post("/api/videos", json={"scene": "tiny"}).status_code == 422  # no path
+    text = '{"scene": "tiny", "path": {"keyframes": [{"t": NaN, "eye": [0,0,0], "look_at": [0,0,1]}]}}'
+    assert server.post("/api/videos", content=text, headers={"content-type": "application/json"}).status_code == 422
+    assert server.post("/api/videos", json={"scene": "tiny", "path": PATH, "format": "gif"}).status_code == 422
+    assert "no video 'nothing'" in one_line(server.get("/api/videos/nothing"), 404)
+    assert server.get("/api/videos/nothing/file").status_code == 404
+    assert server.delete("/api/videos/nothing").status_code == 404
+
+
+def test_a_full_disk_budget_fails_the_job_and_finished_jobs_expire(scenes, tmp_path):
+    settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "video_dir": tmp_path}
+    with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
+        created = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 32, "height": 32}).json()
+        status = wait_until(client, created["id"])
+        assert status["state"] == "failed"
+        assert status["message"] == "cannot write the video: the videos would use more than the 1 bytes allowed"
+        assert list(tmp_path.iterdir()) == []  # the partial video is gone
+        time.sleep(1.2)
+        assert client.get(f"/api/videos/{created['id']}").status_code == 404  # expired

@@ -1,0 +1,158 @@
+"""Painting on a real local Ray runtime: the same frames as the threads, pixel for pixel, per frame and
+temporal (bands for the ray-traced method, whole frames for the image method); a worker lost mid-job and an
+address that does not answer are one-line errors in bounded time."""
+
+from __future__ import annotations
+
+import io
+import socket
+import time
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from PIL import Image
+
+ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs it
+
+from rcp_server import images  # noqa: E402
+from rcp_server.camerapath import parse_path  # noqa: E402
+from rcp_server.cli import main  # noqa: E402
+from rcp_server.cluster import ClusterError, RayPainter, check_address, connect  # noqa: E402
+from rcp_server.painting import paint  # noqa: E402
+from rcp_server.params import PaintParams  # noqa: E402
+from rcp_server.sequence import paint_sequence  # noqa: E402
+
+W, H = 40, 30
+PATH = {
+    "fps": 4,
+    "keyframes": [
+        {"t": 0, "eye": [0, 0, 0], "look_at": [0, 0, -1]},
+        {"t": 1, "eye": [0.5, 0.3, -0.5], "look_at": [-0.2, 0, -4.5], "fov": 50},
+    ],
+}
+
+TINY = """
+[camera]
+eye = [0, 1, 4]
+look_at = [0, 0.5, 0]
+[environment]
+color = [0.2, 0.5, 0.9]
+[[objects]]
+primitive = { type = "box", extents = [1, 1, 1] }
+color = [0.9, 0.2, 0.1]
+spin = { degrees_per_second = 90 }
+"""
+
+
+@pytest.fixture(scope="module")
+def painter():
+    """One small local Ray runtime for the module (two CPUs, no dashboard), shut down after it."""
+    started = connect(None, num_cpus=2, object_store_memory=128 << 20)
+    painter = RayPainter()
+    yield painter
+    painter.close()
+    if started:
+        ray.shutdown()
+
+
+def shots(scene, path=PATH):
+    return list(parse_path(path).resolve(scene.camera).frames())
+
+
+def threaded(scene, params, temporal=None, path=PATH) -> list[np.ndarray]:
+    def paint_frame(camera, scene_time, frame_params, previous):
+        return paint(scene, camera, W, H, frame_params, time=scene_time, previous=previous, threads=2)
+
+    return [images.to_uint8(i) for i in paint_sequence(paint_frame, shots(scene, path), params, temporal)]
+
+
+@pytest.mark.parametrize(
+    ("settings", "temporal"),
+    [
+        ({"spp": 2, "lambda_p": 6.0}, None),  # per frame: frames go round the actors
+        ({"spp": 2, "lambda_p": 6.0, "lambda_e": 0.05}, 2),  # temporal, traced: bands through every frame
+        ({"mapping": "depth", "lambda_p": 6.0, "method": "image"}, 1),  # temporal, image method: whole frames
+    ],
+)
+def test_ray_paints_the_threads_frames_pixel_for_pixel(painter, busy_scene, settings, temporal):
+    params = replace(PaintParams(iterations=3), **settings)
+    expected = threaded(busy_scene, params, temporal)
+    got = list(painter.images(busy_scene, shots(busy_scene), W, H, params, temporal))
+    assert len(got) == len(expected) == 5
+    for frame, painting in zip(got, expected, strict=True):
+        assert frame.dtype == np.uint8
+        np.testing.assert_array_equal(frame, painting)
+    assert not np.array_equal(got[0], got[-1])
+
+
+def test_rcp_render_ray_writes_the_same_frames(painter, tmp_path):
+    scene = tmp_path / "tiny.toml"
+    scene.write_text(TINY)
+    argv = ["-q", "render", str(scene), "--width", "32", "--height", "24", "--frames", "3", "--temporal", "1"]
+    painter.close()  # its actors hold the runtime's two CPUs; the command's would wait for them
+    assert main([*argv, "--out", str(tmp_path / "here")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "ray"), "--ray"]) == 0
+    for k in range(3):
+        here = np.asarray(Image.open(tmp_path / "here" / f"frame_{k:04d}.png"))
+        np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "ray" / f"frame_{k:04d}.png")), here)
+    assert ray.is_initialized()  # the command used the runtime it found and left it running
+
+
+def test_a_lost_worker_fails_the_job_and_the_next_job_gets_new_workers(painter, busy_scene):
+    params = PaintParams(iterations=2)
+    long = {**PATH, "fps": 30, "keyframes": [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 20}]}
+    frames = painter.images(busy_scene, shots(busy_scene, long), W, H, params)
+    next(frames)
+    for actor in painter.crew(busy_scene):
+        ray.kill(actor)
+    with pytest.raises(ClusterError, match="a Ray worker was lost mid-job"):
+        for _ in frames:
+            pass
+    again = list(painter.images(busy_scene, shots(busy_scene), W, H, params))
+    np.testing.assert_array_equal(again[2], threaded(busy_scene, params)[2])
+
+
+def test_an_address_that_does_not_answer_is_one_line_in_bounded_time(capsys, tmp_path):
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    clock = time.monotonic()
+    with pytest.raises(ClusterError, match=f"Ray address 127.0.0.1:{port} does not answer"):
+        check_address(f"127.0.0.1:{port}", timeout_s=2.0)
+    with pytest.raises(ClusterError, match="is not host:port"):
+        check_address("nowhere")
+    argv = ["render", "sky", "--width", "16", "--height", "16", "--out", str(tmp_path / "s.png")]
+    assert main([*argv, "--ray", f"ray://127.0.0.1:{port}"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"rcp: error: Ray address ray://127.0.0.1:{port} does not answer (Connection refused)"]
+    assert time.monotonic() - clock < 15
+
+
+def test_the_server_paints_videos_on_ray_when_told_to(painter, tmp_path):
+    """``RCP_RAY_ADDRESS``: the same video as the server's own threads paint, decoded frame for frame."""
+    import av
+    import httpx
+
+    from rcp_server.bench.harness import BackgroundServer
+
+    (tmp_path / "tiny.toml").write_text(TINY)
+    body = {"scene": "tiny", "path": PATH, "width": 32, "height": 24, "temporal": 1, "paint": {"spp": 2}}
+    painter.close()  # the server's actors need the runtime's CPUs
+
+    def video(**settings) -> list[np.ndarray]:
+        with BackgroundServer(scenes=tmp_path, **settings) as live, httpx.Client(base_url=live.url) as client:
+            job = client.post("/api/videos", json=body).json()
+            deadline = time.monotonic() + 60
+            while (status := client.get(f"/api/videos/{job['id']}").json())["state"] in ("queued", "running"):
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+            assert status["state"] == "done", status
+            data = client.get(f"/api/videos/{job['id']}/file").content
+        with av.open(io.BytesIO(data)) as container:
+            return [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+
+    on_ray, here = video(ray_address="local"), video()
+    assert len(on_ray) == len(here) == 5
+    for a, b in zip(on_ray, here, strict=True):
+        np.testing.assert_array_equal(a, b)

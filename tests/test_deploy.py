@@ -1,0 +1,87 @@
+"""deploy/raycluster.yaml against the image it runs (no live cluster): the commands are the image's entry
+points, every RCP_* variable is a setting with a value it takes, the Ray address reaches the head's GCS port,
+the probe and port are the server's, and the image gets Ray through its build argument."""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from pathlib import Path
+
+import pytest
+import yaml
+
+from rcp_server.cli import main
+from rcp_server.service.app import create_app
+from rcp_server.service.settings import Settings
+
+ROOT = Path(__file__).resolve().parent.parent
+MANIFEST = ROOT / "deploy" / "raycluster.yaml"
+
+
+@pytest.fixture(scope="module")
+def documents() -> list[dict]:
+    return list(yaml.safe_load_all(MANIFEST.read_text()))
+
+
+def cluster(documents) -> dict:
+    (found,) = [d for d in documents if d["kind"] == "RayCluster"]
+    assert found["apiVersion"] == "ray.io/v1"
+    return found
+
+
+def pods(documents) -> list[dict]:
+    spec = cluster(documents)["spec"]
+    return [spec["headGroupSpec"]["template"]["spec"]] + [g["template"]["spec"] for g in spec["workerGroupSpecs"]]
+
+
+def test_every_container_runs_the_image_built_with_ray(documents):
+    images = {c["image"] for pod in pods(documents) for c in pod["containers"]}
+    assert images == {"rcp:ray"}
+    dockerfile = (ROOT / "Dockerfile").read_text()
+    assert "docker build --build-arg EXTRAS=cluster -t rcp:ray ." in MANIFEST.read_text()
+    assert 'pip install ".${EXTRAS:+[$EXTRAS]}"' in dockerfile  # the build argument reaches pip
+    assert dockerfile.count('ARG EXTRAS=""') == 2  # both stages: the default image stays lean
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    (ray,) = [r for r in extras["cluster"] if r.startswith("ray")]
+    lowest = tuple(int(n) for n in re.search(r">=([\d.]+)", ray).group(1).split("."))
+    version = tuple(int(n) for n in cluster(documents)["spec"]["rayVersion"].split("."))
+    assert version >= lowest
+
+
+def test_the_service_container_runs_rcp_serve_with_settings_it_takes(documents, capsys):
+    head = pods(documents)[0]
+    (service,) = [c for c in head["containers"] if c.get("command")]
+    command = service["command"]
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert command[0] in scripts and scripts[command[0]] == "rcp_server.cli:main"
+    with pytest.raises(SystemExit) as done:
+        main([*command[1:], "--help"])
+    assert done.value.code == 0 and "serve" in capsys.readouterr().out
+    env = {e["name"]: e["value"] for e in service["env"]}
+    assert all(name.startswith("RCP_") for name in env)
+    given = {name.removeprefix("RCP_").lower(): value for name, value in env.items()}
+    assert set(given) <= set(Settings.model_fields), set(given) - set(Settings.model_fields)
+    settings = Settings(**given)  # every value is one the setting takes
+    assert settings.ray_address == "127.0.0.1:6379"
+    assert service["ports"][0]["containerPort"] == settings.port
+    assert service["readinessProbe"]["httpGet"] == {"path": "/api/health", "port": settings.port}
+    paths = set(create_app(settings).openapi()["paths"])
+    assert "/api/health" in paths and "/api/videos" in paths
+    mounts = {m["mountPath"] for m in service["volumeMounts"]}
+    assert str(settings.video_dir) in mounts
+
+
+def test_the_ray_address_is_the_heads_gcs_and_the_head_paints_no_frames(documents):
+    spec = cluster(documents)["spec"]
+    head = spec["headGroupSpec"]
+    gcs = int(head["rayStartParams"].get("port", 6379))
+    ports = {p["containerPort"] for c in head["template"]["spec"]["containers"] for p in c.get("ports", [])}
+    assert gcs in ports
+    (service,) = [c for c in head["template"]["spec"]["containers"] if c.get("command")]
+    env = {e["name"]: e["value"] for e in service["env"]}
+    assert env["RCP_RAY_ADDRESS"] == f"127.0.0.1:{gcs}"  # the same pod: the head's network namespace
+    assert head["rayStartParams"]["num-cpus"] == "0"
+    (http,) = [d for d in documents if d["kind"] == "Service"]
+    assert http["spec"]["selector"] == {"ray.io/cluster": "rcp", "ray.io/node-type": "head"}
+    assert http["spec"]["ports"][0]["targetPort"] == int(env["RCP_PORT"])
