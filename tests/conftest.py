@@ -14,6 +14,22 @@ from rcp_server.mappings import register_mapping
 from rcp_server.meshes import Part, primitive
 from rcp_server.scene import Environment, Light, Scene, SceneObject
 
+SPINNING_BOX = """
+title = "tiny"
+[camera]
+eye = [0, 1, 4]
+look_at = [0, 0.5, 0]
+[environment]
+color = [0.2, 0.5, 0.9]
+[light]
+direction = [-0.3, -1, -0.4]
+[[objects]]
+primitive = { type = "box", extents = [1, 1, 1] }
+color = [0.9, 0.2, 0.1]
+spin = { degrees_per_second = 90 }
+"""
+"""A scene file: a lit red box that spins, under a blue sky (for the command line, videos and animation)."""
+
 CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0)
 SKY = (0.2, 0.35, 0.6)
 

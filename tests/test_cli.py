@@ -5,6 +5,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import SPINNING_BOX
 from PIL import Image
 
 from rcp_server.camera import Camera
@@ -16,22 +17,7 @@ SMALL = ["--width", "48", "--height", "32"]
 
 def _scene_file(tmp_path):
     path = tmp_path / "tiny.toml"
-    path.write_text(
-        """
-title = "tiny"
-[camera]
-eye = [0, 1, 4]
-look_at = [0, 0.5, 0]
-[environment]
-color = [0.2, 0.5, 0.9]
-[light]
-direction = [-0.3, -1, -0.4]
-[[objects]]
-primitive = { type = "box", extents = [1, 1, 1] }
-color = [0.9, 0.2, 0.1]
-spin = { degrees_per_second = 90 }
-"""
-    )
+    path.write_text(SPINNING_BOX)
     return path
 
 

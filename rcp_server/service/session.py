@@ -161,7 +161,7 @@ class Session:
             raise ValueError(busy_message(self.settings.max_sessions))
         scene = self.service.scene(msg.scene)
         if scene is None:
-            raise ValueError(f"unknown scene {msg.scene!r}; known: {', '.join(sorted(self.service.scenes))}")
+            raise ValueError(self.service.unknown_scene(msg.scene))
         self._check(scene, msg.width, msg.height, {})
         self.scene = scene
         self.camera, self.camera_id = self.scene.camera, None

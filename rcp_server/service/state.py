@@ -76,6 +76,11 @@ class Service:
             found = upload.scene
         return found
 
+    def unknown_scene(self, name: str) -> str:
+        """What a caller is told for a name :meth:`scene` does not know (the operator's names only: an uploaded
+        scene's name is its holder's secret)."""
+        return f"unknown scene {name!r}; known: {', '.join(sorted(self.scenes))}"
+
     def info(self, name: str) -> protocol.SceneInfo | None:
         """The description of the scene ``name`` stands for (as :meth:`scene` finds it)."""
         found = self.infos.get(name)

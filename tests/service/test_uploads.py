@@ -188,3 +188,30 @@ def test_uploads_off_token_and_idle_time():
         time.sleep(1.2)  # longer than the idle time, without using the scene (a lookup uses it): that is the input
         expired = httpx.get(address, headers=auth)
         assert expired.status_code == 404 and "removed after" in expired.json()["detail"]
+
+
+def test_an_uploaded_scene_makes_a_video(server):
+    """Uploaded names work wherever a scene name does: a video job of one paints and finishes."""
+    name = uploaded(server, "Box.glb", files.glb())["name"]
+    path = {
+        "fps": 4,
+        "keyframes": [
+            {"t": 0, "eye": [0, 0.5, 3], "look_at": [0, 0, 0]},
+            {"t": 0.5, "eye": [0.5, 0.5, 3], "look_at": [0, 0, 0]},
+        ],
+    }
+    answer = httpx.post(
+        f"{server.url}/api/videos", json={"scene": name, "path": path, "width": 32, "height": 24}, timeout=30
+    )
+    assert answer.status_code == 202, answer.text
+    video = answer.json()["id"]
+    deadline = time.monotonic() + 60
+    while (status := httpx.get(f"{server.url}/api/videos/{video}", timeout=30).json())["state"] in (
+        "queued",
+        "running",
+    ):
+        assert time.monotonic() < deadline, status
+        time.sleep(0.1)
+    assert status["state"] == "done" and status["done_frames"] == 3, status
+    assert httpx.get(f"{server.url}/api/videos/{video}/file", timeout=30).content[4:8] == b"ftyp"  # an MP4
+    assert delete(server, name).status_code == 204

@@ -10,6 +10,7 @@ import av
 import httpx
 import numpy as np
 import pytest
+from conftest import SPINNING_BOX
 
 from rcp_server import images
 from rcp_server.bench.harness import BackgroundServer
@@ -17,20 +18,6 @@ from rcp_server.camerapath import parse_path
 from rcp_server.painting import paint
 from rcp_server.scenefile import load_scene
 
-TINY = """
-title = "tiny"
-[camera]
-eye = [0, 1, 4]
-look_at = [0, 0.5, 0]
-[environment]
-color = [0.2, 0.5, 0.9]
-[light]
-direction = [-0.3, -1, -0.4]
-[[objects]]
-primitive = { type = "box", extents = [1, 1, 1] }
-color = [0.9, 0.2, 0.1]
-spin = { degrees_per_second = 90 }
-"""
 PATH = {
     "fps": 6,
     "keyframes": [
@@ -44,7 +31,7 @@ LONG = {**PATH, "fps": 60, "keyframes": [PATH["keyframes"][0], {**PATH["keyframe
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
     folder = tmp_path_factory.mktemp("scenes")
-    (folder / "tiny.toml").write_text(TINY)
+    (folder / "tiny.toml").write_text(SPINNING_BOX)
     return folder
 
 

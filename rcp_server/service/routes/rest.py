@@ -61,7 +61,7 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
     settings = service.settings
     scene = service.scene(body.scene)
     if scene is None:
-        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+        raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         camera = scene.camera if body.camera is None else Camera(**body.camera.model_dump())
         params = with_style(scene.paint, body.paint.given())

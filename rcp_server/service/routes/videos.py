@@ -69,9 +69,9 @@ PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 f
 )
 async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> protocol.PathCameras:
     """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path)."""
-    scene = service.scenes.get(body.scene)
+    scene = service.scene(body.scene)  # the operator's, or an uploaded one
     if scene is None:
-        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+        raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         path = body.path.resolve(scene.camera)
     except PathError as exc:
@@ -101,9 +101,9 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
 )
 async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.VideoCreated:
     """Queue a video of ``path``; watch it at ``GET /api/videos/{id}``, fetch it from ``.../file``."""
-    scene = service.scenes.get(body.scene)
+    scene = service.scene(body.scene)  # the operator's, or an uploaded one
     if scene is None:
-        raise HTTPException(404, f"unknown scene {body.scene!r}; known: {', '.join(sorted(service.scenes))}")
+        raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         path = body.path.resolve(scene.camera)
         params = replace(scene.paint, **body.paint.given())
