@@ -202,6 +202,7 @@ def tile_iteration(
     triangles = geometry.triangles
     n = setup.region.pixel_count
     rays = Rays.allocate(n, params.spp)
+    every_ray = np.arange(n * params.spp)  # the rays an iteration casts are the first of these, in order
     if tracer is None:
         seen = None
     if seen is not None:  # the hits of the rays decided without Embree, and the rays left to it
@@ -237,7 +238,7 @@ def tile_iteration(
         if seen is None or canvas:
             hits = tracer.intersect(rays.origins[:count], rays.directions[:count], checked=checked)
             kernels.place_hits(
-                origins=rays.origins, directions=rays.directions, rays=np.arange(count), triangles=triangles, hits=hits
+                origins=rays.origins, directions=rays.directions, rays=every_ray[:count], triangles=triangles, hits=hits
             )
             return hits
         left = kernels.resolve_seen(

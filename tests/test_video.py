@@ -9,6 +9,7 @@ from dataclasses import replace
 import av
 import numpy as np
 import pytest
+from conftest import SPINNING_BOX
 from PIL import Image
 
 from rcp_server import images
@@ -19,26 +20,18 @@ from rcp_server.scenefile import load_scene
 from rcp_server.video import Mp4Writer
 
 SIZE = ["--width", "48", "--height", "32"]
-SCENE = """
-title = "tiny"
-[camera]
-eye = [0, 1, 4]
-look_at = [0, 0.5, 0]
-[environment]
-color = [0.2, 0.5, 0.9]
-[light]
-direction = [-0.3, -1, -0.4]
-[paint]
-lambda_p = 4
-[[objects]]
-primitive = { type = "box", extents = [1, 1, 1] }
-color = [0.9, 0.2, 0.1]
-spin = { degrees_per_second = 90 }
+# the spinning box, painted with a small smudge, beside a sphere
+SCENE = (
+    SPINNING_BOX
+    + """
 [[objects]]
 primitive = { type = "sphere", radius = 0.4 }
 color = [0.1, 0.8, 0.3]
 translate = [1.2, 0.4, 0]
+[paint]
+lambda_p = 4
 """
+)
 PATH = {
     "fps": 8,
     "keyframes": [
