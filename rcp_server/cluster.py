@@ -1,7 +1,7 @@
-"""Painting sequences on Ray: the same frames as the threads of one machine, pixel for pixel, on many.
+"""Painting on Ray: the same frames and paintings as the threads of one machine, pixel for pixel, on many.
 
-Workers are Ray actors, each holding a warm scene: the scene's arrays are put in the object store once per
-scene, and each actor builds its BVH itself (an Embree handle cannot travel). What a frame needs (camera,
+Workers are Ray actors that hold the scenes they paint warm: a scene's arrays are put in the object store
+once, and each actor builds its BVH itself (an Embree handle cannot travel). What a frame needs (camera,
 time, settings) is a few hundred bytes; what comes back is the frame as uint8, 3 bytes a pixel, through
 the object store, in order, with a bounded number of frames in flight.
 
@@ -10,18 +10,21 @@ What the method allows decides how the work splits (``sequence.py`` has the per-
 * per frame: frames are independent, so they go round the actors;
 * temporal, ray-traced: a pixel reads only its own previous value, so a band of rows runs through every
   iteration *and every frame* on one actor, keeping its own previous state: no exchange between bands;
-* temporal, image method: its lookups reach the whole screen, so whole frames run in order on one actor.
+* temporal, image method: its lookups reach the whole screen, so whole frames run in order on one actor;
+* one large painting (a REST render): a band of rows per actor, through every iteration (the image
+  method's on one actor).
 
-Ray is the ``cluster`` extra; nothing else imports this module unless asked for Ray.
+Ray is the ``cluster`` extra: this module imports it only once asked to paint on Ray.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import os
 import socket
 import threading
-from collections import deque
+from collections import OrderedDict, deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, fields
 from typing import Any
@@ -42,6 +45,9 @@ CONNECT_TIMEOUT_S = 10.0
 """How long an address may take to answer at all before we say it does not (``ray.init`` itself retries a
 silent address for minutes)."""
 IN_FLIGHT_PER_ACTOR = 2  # frames (or bands) queued on each actor: one painting, one ready to start
+WARM_SCENES = 4  # scenes each actor keeps built (and the driver keeps in the object store)
+RESTARTS = 3  # times Ray restarts a dead worker and retries its calls before a job fails
+STOP_POLL_S = 0.1  # how often a wait on Ray checks whether the painting is still wanted
 
 
 class ClusterError(RuntimeError):
@@ -109,32 +115,66 @@ def portable(scene: Scene) -> dict:
     return {f.name: getattr(scene, f.name) for f in fields(scene) if not f.name.startswith("_")}
 
 
-class Painter:
-    """One Ray actor's work: paints frames, or one band of rows through every frame, of a warm scene.
+@dataclass(frozen=True)
+class Held:
+    """A scene in the object store: ``key`` names it to the actors, ``ref`` (in a list, so that Ray hands it
+    over unread) is fetched only by an actor that does not hold the scene warm yet."""
 
+    key: str
+    ref: list
+
+
+class LostState(RuntimeError):
+    """A temporal band's previous frame is gone: its actor died and Ray restarted it empty."""
+
+
+class Painter:
+    """One Ray actor's work: paints frames, or bands of rows, of the scenes it holds warm.
+
+    Scenes are built here (BVH included) on first use and kept for the next call, the last ``WARM_SCENES``;
     ``previous`` keeps the last painting of each temporal band this actor paints (by job), so a band's
     recursion continues here, frame after frame, with nothing sent back and forth but the band's pixels."""
 
-    def __init__(self, scene: dict, threads: int):
-        self.scene = Scene(**scene)
-        self.scene.geometry(0.0)  # the BVH, built here once, before the first frame waits for it
+    def __init__(self, threads: int):
         self.threads = threads
+        self.scenes: OrderedDict[str, Scene] = OrderedDict()
         self.previous: dict[tuple[str, Region], PaintState] = {}
 
-    def frame(self, shot: tuple[Camera, float], width: int, height: int, params: PaintParams) -> np.ndarray:
+    def _scene(self, held: Held) -> Scene:
+        scene = self.scenes.get(held.key)
+        if scene is None:
+            scene = Scene(**_ray().get(held.ref[0]))
+            scene.geometry(0.0)
+            self.scenes[held.key] = scene
+            while len(self.scenes) > WARM_SCENES:
+                self.scenes.popitem(last=False)
+        self.scenes.move_to_end(held.key)
+        return scene
+
+    def warm(self, held: Held) -> bool:
+        """Build ``held``'s scene now, before the first frame waits for it."""
+        self._scene(held)
+        return True
+
+    def frame(self, held: Held, shot: tuple[Camera, float], width: int, height: int, params: PaintParams):
         """A whole frame from ``I_0``: (height, width, 3) uint8."""
         camera, time = shot
-        return images.to_uint8(paint(self.scene, camera, width, height, params, time=time, threads=self.threads).image)
+        result = paint(self._scene(held), camera, width, height, params, time=time, threads=self.threads)
+        return images.to_uint8(result.image)
 
     def band(
-        self, job: str, region: Region, shot: tuple[Camera, float], params: PaintParams, first: bool
+        self, held: Held, job: str | None, region: Region, shot: tuple[Camera, float], params: PaintParams, first: bool
     ) -> np.ndarray:
-        """The rows of ``region`` of the next frame of ``job``, continuing from this band's previous frame
-        (from ``I_0`` when ``first``): (rows, width, 3) uint8. The image method takes the whole frame."""
+        """The rows of ``region``, from ``I_0`` when ``first``, else continuing from this band's painting of
+        ``job``'s previous frame (kept when ``job`` is given): (rows, width, 3) uint8."""
         camera, time = shot
-        previous = None if first else self.previous.get((job, region))
+        previous = None
+        if not first:
+            previous = self.previous.get((job, region))
+            if previous is None:
+                raise LostState("a Ray worker was lost mid-job, and with it a band's previous frame")
         result = paint(
-            self.scene,
+            self._scene(held),
             camera,
             region.full_width,
             region.full_height,
@@ -144,29 +184,25 @@ class Painter:
             region=region,
             threads=self.threads,
         )
-        self.previous[(job, region)] = result.state
+        if job is not None:
+            self.previous[(job, region)] = result.state
         return images.to_uint8(result.image)
 
     def forget(self, job: str) -> None:
         self.previous = {key: state for key, state in self.previous.items() if key[0] != job}
 
-    def ready(self) -> bool:
-        return True
-
-
-@dataclass
-class _Crew:
-    """The actors of one scene, and the scene they hold."""
-
-    scene: Scene
-    actors: list
+    def pid(self) -> int:
+        return os.getpid()
 
 
 class RayPainter:
-    """Paints sequences on Ray actors (``threads`` CPUs each; as many actors as the cluster has CPUs for),
-    one sequence at a time, the scene's actors kept warm for the next sequence of the same scene (a new
-    scene replaces them: actors hold their CPUs, and a second crew would wait for them forever).
-    ``address``: as :func:`connect`."""
+    """Paints on Ray actors (``threads`` CPUs each; as many actors as the cluster has CPUs for, or ``actors``):
+    sequences (:meth:`images`) and single large paintings (:meth:`render`), of any scene, several at once.
+
+    One crew of actors serves every scene (actors hold their CPUs: a crew per scene would wait forever for
+    another's); each actor keeps the scenes it paints warm. A worker that dies is restarted by Ray and its
+    calls retried (``RESTARTS`` times), which repaints a frame exactly; a temporal band cannot be repainted
+    (its previous frame died with it), so that job fails in one line. ``address``: as :func:`connect`."""
 
     def __init__(self, address: str | None = None, threads: int = 1, actors: int | None = None, num_cpus=None):
         self.address = address
@@ -175,13 +211,13 @@ class RayPainter:
         self._num_cpus = num_cpus
         self._started = False
         self._connected = False
-        self._crews: dict[int, _Crew] = {}
+        self._actors: list = []
+        self._held: OrderedDict[int, tuple[Scene, Held]] = OrderedDict()
         self._lock = threading.Lock()
-        self._one_at_a_time = threading.Lock()
-        self._jobs = 0
+        self._jobs = itertools.count(1)
 
     def start(self) -> None:
-        """Join (or start) Ray now, rather than with the first sequence; raises :class:`ClusterError`."""
+        """Join (or start) Ray now, rather than with the first painting; raises :class:`ClusterError`."""
         with self._lock:
             self._start()
 
@@ -190,23 +226,57 @@ class RayPainter:
             self._started = connect(self.address, self._num_cpus)
             self._connected = True
 
-    def crew(self, scene: Scene) -> list:
-        """The actors holding ``scene``, started (and the scene put in the object store) on first use."""
+    def actors(self) -> list:
+        """The crew, started on first use."""
         with self._lock:
             self._start()
-            ray = _ray()
-            crew = self._crews.get(id(scene))
-            if crew is None or crew.scene is not scene:
-                for old in self._crews.values():
-                    for actor in old.actors:
-                        ray.kill(actor)
-                self._crews.clear()
+            if not self._actors:
+                ray = _ray()
                 count = self._wanted or max(1, int(ray.cluster_resources().get("CPU", 1) // self.threads))
-                remote = ray.remote(num_cpus=self.threads, max_restarts=0)(Painter)
-                held = ray.put(portable(scene))  # once: every actor reads the same arrays
-                actors = [remote.remote(held, self.threads) for _ in range(count)]
-                crew = self._crews[id(scene)] = _Crew(scene, actors)
-            return crew.actors
+                remote = ray.remote(num_cpus=self.threads, max_restarts=RESTARTS, max_task_retries=RESTARTS)(Painter)
+                self._actors = [remote.remote(self.threads) for _ in range(count)]
+            return list(self._actors)
+
+    def hold(self, scene: Scene) -> Held:
+        """``scene`` in the object store, put there once (the last ``WARM_SCENES`` scenes stay)."""
+        with self._lock:
+            entry = self._held.get(id(scene))
+            if entry is None or entry[0] is not scene:
+                held = Held(f"scene-{next(self._jobs)}", [_ray().put(portable(scene))])
+                entry = self._held[id(scene)] = (scene, held)
+                while len(self._held) > WARM_SCENES:
+                    self._held.popitem(last=False)
+            self._held.move_to_end(id(scene))
+            return entry[1]
+
+    def warm(self, scene: Scene) -> list:
+        """The crew, each actor holding ``scene`` warm (its BVH built): for timing the start apart."""
+        actors = self.actors()
+        held = self.hold(scene)
+        self._get([actor.warm.remote(held) for actor in actors], None)
+        return actors
+
+    def render(
+        self,
+        scene: Scene,
+        camera: Camera,
+        width: int,
+        height: int,
+        params: PaintParams,
+        time: float = 0.0,
+        should_stop: Callable[[], bool] | None = None,
+    ) -> np.ndarray:
+        """One painting from ``I_0``, (height, width, 3) uint8: exactly ``painting.paint``'s. The ray-traced
+        method splits it into a band of rows per actor; the image method's lookups reach the whole screen, so
+        it paints on one actor. Raises :class:`ClusterError`, or :class:`~.paintstate.Abandoned` once
+        ``should_stop`` says so."""
+        actors = self.actors()
+        held = self.hold(scene)
+        refs = [
+            actor.band.remote(held, None, band, (camera, time), params, True)
+            for actor, band in _split(actors, width, height, params)
+        ]
+        return np.concatenate(self._get(refs, should_stop), axis=0)
 
     def images(
         self,
@@ -219,84 +289,91 @@ class RayPainter:
         should_stop: Callable[[], bool] | None = None,
     ) -> Iterator[np.ndarray]:
         """The paintings of ``shots``, in order, each (height, width, 3) uint8: exactly the frames
-        ``sequence.paint_sequence`` paints with threads. Raises :class:`ClusterError` when a worker is lost,
-        :class:`~.paintstate.Abandoned` once ``should_stop`` says so."""
-        ray = _ray()
-        with self._one_at_a_time:
-            yield from self._images(ray, scene, shots, width, height, params, temporal, should_stop)
-
-    def _images(self, ray, scene, shots, width, height, params, temporal, should_stop) -> Iterator[np.ndarray]:
-        actors = self.crew(scene)
-        with self._lock:
-            self._jobs += 1
-            job = f"job-{self._jobs}"
-        pending: deque = deque()  # (refs of one frame, in order)
-        if temporal and params.method == "raytrace":
-            rows = -(-height // len(actors))
-            bands = Region(width, height).tiles(rows)
-            workers = list(zip(actors, bands, strict=False))
-        elif temporal:
-            workers = [(actors[0], Region(width, height))]
-        else:
-            workers = []
-        limit = IN_FLIGHT_PER_ACTOR * (len(actors) if not temporal else 1)
+        ``sequence.paint_sequence`` paints with threads. Per frame, frames go round the actors; temporal and
+        ray-traced, each actor paints one band of rows through every frame; temporal with the image method,
+        one actor paints whole frames. Raises :class:`ClusterError`, or :class:`~.paintstate.Abandoned` once
+        ``should_stop`` says so."""
+        actors = self.actors()
+        held = self.hold(scene)
+        job = f"job-{next(self._jobs)}"
+        workers = _split(actors, width, height, params) if temporal else []
+        limit = IN_FLIGHT_PER_ACTOR * (1 if temporal else len(actors))
+        pending: deque = deque()  # the refs of each frame in flight, in order
 
         def submit(index: int, shot: Shot) -> list:
             p = frame_params(params, temporal, index)
             when = (shot.camera, shot.scene_time)
             if not temporal:
-                return [actors[index % len(actors)].frame.remote(when, width, height, p)]
-            return [actor.band.remote(job, band, when, p, index == 0) for actor, band in workers]
+                return [actors[index % len(actors)].frame.remote(held, when, width, height, p)]
+            return [actor.band.remote(held, job, band, when, p, index == 0) for actor, band in workers]
 
         def take() -> np.ndarray:
-            refs = pending.popleft()
-            try:
-                parts = ray.get(refs)
-            except ray.exceptions.RayActorError as exc:
-                self._drop(scene)
-                raise ClusterError(f"a Ray worker was lost mid-job: {_first_line(exc)}") from None
-            except ray.exceptions.RayTaskError as exc:
-                raise ClusterError(f"a frame failed on Ray: {_first_line(exc)}") from None
+            parts = self._get(pending.popleft(), should_stop)
             return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=0)
 
         try:
             for index, shot in enumerate(shots):
-                if should_stop is not None and should_stop():
-                    raise Abandoned
                 pending.append(submit(index, shot))
                 if len(pending) >= limit:
                     yield take()
             while pending:
-                if should_stop is not None and should_stop():
-                    raise Abandoned
                 yield take()
         finally:
             for refs in pending:  # abandoned or failed: what is still queued is not painted
-                for ref in refs:
-                    try:
-                        ray.cancel(ref)
-                    except Exception:  # finished meanwhile, or its actor is gone: nothing left to stop
-                        pass
+                _cancel(refs)
             if temporal:
                 for actor, _ in workers:
                     actor.forget.remote(job)
 
-    def _drop(self, scene: Scene) -> None:
-        """Forget a crew that lost an actor: the next sequence starts a new one."""
+    def _get(self, refs: list, should_stop: Callable[[], bool] | None) -> list:
+        """The values of ``refs``, waiting in short turns so that ``should_stop`` is heard; Ray's faults become
+        a :class:`ClusterError` (a crew whose worker is gone for good is replaced with the next painting)."""
+        ray = _ray()
+        try:
+            while ray.wait(refs, num_returns=len(refs), timeout=STOP_POLL_S)[1]:
+                if should_stop is not None and should_stop():
+                    _cancel(refs)
+                    raise Abandoned
+            return ray.get(refs)
+        except ray.exceptions.RayActorError as exc:
+            self._drop()
+            raise ClusterError(f"a Ray worker was lost mid-job: {_first_line(exc)}") from None
+        except ray.exceptions.RayTaskError as exc:
+            if isinstance(exc.cause, LostState):
+                raise ClusterError(str(exc.cause)) from None
+            raise ClusterError(f"a painting failed on Ray: {_first_line(exc)}") from None
+
+    def _drop(self) -> None:
+        """Forget a crew that lost an actor for good: the next painting starts a new one."""
         with self._lock:
-            crew = self._crews.pop(id(scene), None)
-        if crew is not None:
-            for actor in crew.actors:
-                _ray().kill(actor)
+            actors, self._actors = self._actors, []
+        for actor in actors:
+            _ray().kill(actor)
 
     def close(self) -> None:
         """Stop the actors, and Ray itself if this painter started it."""
         if not self._connected:
             return
-        ray = _ray()
-        for scene_id in list(self._crews):
-            for actor in self._crews.pop(scene_id).actors:
-                ray.kill(actor)
+        self._drop()
+        self._held.clear()
         if self._started:
-            ray.shutdown()
+            _ray().shutdown()
         self._connected = False
+
+
+def _split(actors: list, width: int, height: int, params: PaintParams) -> list[tuple[Any, Region]]:
+    """Who paints which rows of a ``width x height`` painting: a band each (fewer bands when there are fewer
+    rows than actors) for the ray-traced method, where a pixel reads only its own previous value; the whole
+    image on the first actor for the image method, whose lookups reach the whole screen."""
+    if params.method != "raytrace":
+        return [(actors[0], Region(width, height))]
+    bands = Region(width, height).tiles(-(-height // len(actors)))
+    return list(zip(actors, bands, strict=False))
+
+
+def _cancel(refs: list) -> None:
+    for ref in refs:
+        try:
+            _ray().cancel(ref)
+        except Exception:  # finished meanwhile, or its actor is gone: nothing left to stop
+            pass

@@ -5,6 +5,8 @@ address that does not answer are one-line errors in bounded time."""
 from __future__ import annotations
 
 import io
+import os
+import signal
 import socket
 import time
 from dataclasses import replace
@@ -19,7 +21,7 @@ from rcp_server import images  # noqa: E402
 from rcp_server.camerapath import parse_path  # noqa: E402
 from rcp_server.cli import main  # noqa: E402
 from rcp_server.cluster import ClusterError, RayPainter, check_address, connect  # noqa: E402
-from rcp_server.painting import paint  # noqa: E402
+from rcp_server.painting import Abandoned, paint  # noqa: E402
 from rcp_server.params import PaintParams  # noqa: E402
 from rcp_server.sequence import paint_sequence  # noqa: E402
 
@@ -99,18 +101,85 @@ def test_rcp_render_ray_writes_the_same_frames(painter, tmp_path):
     assert ray.is_initialized()  # the command used the runtime it found and left it running
 
 
-def test_a_lost_worker_fails_the_job_and_the_next_job_gets_new_workers(painter, busy_scene):
+def long_path(seconds: float) -> dict:
+    return {**PATH, "fps": 30, "keyframes": [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": seconds}]}
+
+
+def test_one_large_painting_in_bands_is_the_threads_painting(painter, busy_scene):
+    """A REST render on Ray: a band of rows per actor (the image method's whole on one), the fast path on."""
+    camera = shots(busy_scene)[2].camera
+    for params in (PaintParams(iterations=4, spp=2), PaintParams(iterations=3, method="image", lambda_p=6.0)):
+        expected = images.to_uint8(paint(busy_scene, camera, W, H, params, time=0.25, threads=2).image)
+        got = painter.render(busy_scene, camera, W, H, params, time=0.25)
+        assert got.dtype == np.uint8
+        np.testing.assert_array_equal(got, expected)
+
+
+def test_paintings_of_two_scenes_share_the_workers_at_once(painter, busy_scene, gradient_scene):
+    """A sequence of one scene and a painting of another, interleaved on the same actors."""
     params = PaintParams(iterations=2)
-    long = {**PATH, "fps": 30, "keyframes": [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 20}]}
-    frames = painter.images(busy_scene, shots(busy_scene, long), W, H, params)
+    frames = painter.images(busy_scene, shots(busy_scene), W, H, params)
+    first = next(frames)
+    other = painter.render(gradient_scene, gradient_scene.camera, W, H, params)
+    rest = list(frames)
+    expected = threaded(busy_scene, params)
+    for frame, painting in zip([first, *rest], expected, strict=True):
+        np.testing.assert_array_equal(frame, painting)
+    np.testing.assert_array_equal(
+        other, images.to_uint8(paint(gradient_scene, gradient_scene.camera, W, H, params, threads=2).image)
+    )
+
+
+def crash(actors) -> None:
+    """Kill the workers' processes, as a machine that goes down would: Ray restarts them (not ``ray.kill``)."""
+    for pid in ray.get([actor.pid.remote() for actor in actors]):
+        os.kill(pid, signal.SIGKILL)
+
+
+def test_a_worker_that_dies_is_restarted_and_its_frames_painted_again(painter, busy_scene):
+    params = PaintParams(iterations=2)
+    path = long_path(0.5)
+    frames = painter.images(busy_scene, shots(busy_scene, path), W, H, params)
+    got = [next(frames)]
+    crash(painter.actors())
+    got += list(frames)
+    expected = threaded(busy_scene, params, path=path)
+    assert len(got) == len(expected) == 16
+    for frame, painting in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(frame, painting)
+
+
+def test_a_temporal_band_lost_with_its_worker_fails_the_job_in_one_line(painter, busy_scene):
+    params = PaintParams(iterations=2)
+    frames = painter.images(busy_scene, shots(busy_scene, long_path(20)), W, H, params, temporal=1)
     next(frames)
-    for actor in painter.crew(busy_scene):
-        ray.kill(actor)
+    crash(painter.actors())
+    with pytest.raises(ClusterError, match="^a Ray worker was lost mid-job, and with it a band's previous frame$"):
+        for _ in frames:
+            pass
+    again = list(painter.images(busy_scene, shots(busy_scene), W, H, params, temporal=1))
+    np.testing.assert_array_equal(again[2], threaded(busy_scene, params, temporal=1)[2])
+
+
+def test_a_worker_gone_for_good_fails_the_job_and_the_next_job_gets_new_workers(painter, busy_scene):
+    params = PaintParams(iterations=2)
+    frames = painter.images(busy_scene, shots(busy_scene, long_path(20)), W, H, params)
+    next(frames)
+    for actor in painter.actors():
+        ray.kill(actor)  # no restart
     with pytest.raises(ClusterError, match="a Ray worker was lost mid-job"):
         for _ in frames:
             pass
     again = list(painter.images(busy_scene, shots(busy_scene), W, H, params))
     np.testing.assert_array_equal(again[2], threaded(busy_scene, params)[2])
+
+
+def test_a_painting_no_longer_wanted_stops_waiting(painter, busy_scene):
+    params = PaintParams(iterations=6, spp=4)
+    clock = time.monotonic()
+    with pytest.raises(Abandoned):
+        painter.render(busy_scene, busy_scene.camera, 640, 480, params, should_stop=lambda: True)
+    assert time.monotonic() - clock < 5
 
 
 def test_an_address_that_does_not_answer_is_one_line_in_bounded_time(capsys, tmp_path):
@@ -129,8 +198,8 @@ def test_an_address_that_does_not_answer_is_one_line_in_bounded_time(capsys, tmp
     assert time.monotonic() - clock < 15
 
 
-def test_the_server_paints_videos_on_ray_when_told_to(painter, tmp_path):
-    """``RCP_RAY_ADDRESS``: the same video as the server's own threads paint, decoded frame for frame."""
+def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter, tmp_path):
+    """``RCP_RAY_ADDRESS``: the same video and the same PNG as the server's own threads paint."""
     import av
     import httpx
 
@@ -138,10 +207,13 @@ def test_the_server_paints_videos_on_ray_when_told_to(painter, tmp_path):
 
     (tmp_path / "tiny.toml").write_text(TINY)
     body = {"scene": "tiny", "path": PATH, "width": 32, "height": 24, "temporal": 1, "paint": {"spp": 2}}
+    render = {"scene": "tiny", "width": 48, "height": 36, "time": 0.5, "paint": {"spp": 2}}
     painter.close()  # the server's actors need the runtime's CPUs
 
-    def video(**settings) -> list[np.ndarray]:
+    def served(**settings) -> tuple[list[np.ndarray], bytes]:
         with BackgroundServer(scenes=tmp_path, **settings) as live, httpx.Client(base_url=live.url) as client:
+            png = client.post("/api/render", json=render, timeout=60)
+            assert png.status_code == 200, png.text
             job = client.post("/api/videos", json=body).json()
             deadline = time.monotonic() + 60
             while (status := client.get(f"/api/videos/{job['id']}").json())["state"] in ("queued", "running"):
@@ -150,9 +222,43 @@ def test_the_server_paints_videos_on_ray_when_told_to(painter, tmp_path):
             assert status["state"] == "done", status
             data = client.get(f"/api/videos/{job['id']}/file").content
         with av.open(io.BytesIO(data)) as container:
-            return [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+            return [f.to_ndarray(format="rgb24") for f in container.decode(video=0)], png.content
 
-    on_ray, here = video(ray_address="local"), video()
+    (on_ray, ray_png), (here, here_png) = served(ray_address="local", ray_min_work=1), served()
     assert len(on_ray) == len(here) == 5
     for a, b in zip(on_ray, here, strict=True):
         np.testing.assert_array_equal(a, b)
+    assert ray_png == here_png
+
+
+def test_a_server_whose_ray_does_not_answer_says_so_and_serves_the_rest(tmp_path):
+    import httpx
+
+    from rcp_server.bench.harness import BackgroundServer
+
+    with socket.socket() as probe:  # a port nobody listens on
+        probe.bind(("127.0.0.1", 0))
+        address = f"127.0.0.1:{probe.getsockname()[1]}"
+    (tmp_path / "tiny.toml").write_text(TINY)
+    large = {"scene": "tiny", "width": 64, "height": 48, "paint": {"spp": 2, "iterations": 2}}
+    with BackgroundServer(scenes=tmp_path, ray_address=address, ray_min_work=64 * 48 * 2 * 2) as live:
+        with httpx.Client(base_url=live.url, timeout=30) as client:
+            refused = client.post("/api/render", json=large)
+            assert refused.status_code == 503
+            assert refused.headers["retry-after"] == "30"
+            assert refused.json() == {"detail": f"Ray address {address} does not answer (Connection refused)"}
+            small = client.post("/api/render", json={**large, "width": 32})
+            assert small.status_code == 200 and small.headers["content-type"] == "image/png"
+            job = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 16, "height": 16}).json()
+            deadline = time.monotonic() + 30
+            while (status := client.get(f"/api/videos/{job['id']}").json())["state"] in ("queued", "running"):
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+            assert status == {
+                "id": job["id"],
+                "state": "failed",
+                "frames": 5,
+                "done_frames": 0,
+                "message": f"Ray address {address} does not answer (Connection refused)",
+            }
+            assert client.get("/api/health").json()["status"] == "ok"

@@ -72,10 +72,9 @@ def bench_cluster(
     painter = RayPainter(address)
     try:
         clock = time.perf_counter()
-        actors = painter.crew(scene)
+        actors = painter.warm(scene)
         import ray
 
-        ray.get([a.ready.remote() for a in actors])
         warm = time.perf_counter() - clock
         clock = time.perf_counter()
         first = next(painter.images(scene, shots[:1], width, height, params))
@@ -83,7 +82,7 @@ def bench_cluster(
         trips = []
         for _ in range(50):
             clock = time.perf_counter()
-            ray.get(actors[0].ready.remote())
+            ray.get(actors[0].pid.remote())
             trips.append(time.perf_counter() - clock)
         trip = float(np.median(trips))
         request = len(pickle.dumps((shots[1].camera, shots[1].scene_time, frame_params(params, None, 1))))

@@ -47,14 +47,15 @@ class Settings(BaseSettings):
     hello_timeout_s: float = Field(10.0, gt=0)  # a WebSocket that has not said hello by then is closed (1008)
     max_connections: int = Field(1024, ge=1)  # open at once; past it the one idle longest is closed
     max_requests: int = Field(128, ge=1)  # HTTP requests in progress at once; more get 503 and Retry-After
-    # ---- videos (POST /api/videos) ----
+    # ---- videos (POST /api/videos), and Ray for them and for large REST renders ----
     max_videos: int = Field(1, ge=1)  # video jobs painting at once (their tiles take turns with the walks')
     max_videos_waiting: int = Field(4, ge=0)  # video jobs that may wait for a turn; more get 503 and Retry-After
     max_video_work: int = Field(1 << 34, ge=1)  # pixels x samples x iterations over every frame of one video
     video_disk_bytes: int = Field(2 << 30, ge=1)  # disk the finished videos may use together
     video_keep_s: float = Field(3600.0, gt=0)  # a finished video is kept this long, then deleted
     video_dir: Path | None = None  # where videos are written (default: a temporary folder, removed at stop)
-    ray_address: str | None = None  # paint videos on Ray: "local" (a runtime here), "auto", host:port, ray://...
+    ray_address: str | None = None  # paint on Ray: "local" (a runtime here), "auto", host:port, ray://... (below)
+    ray_min_work: int = Field(1 << 24, ge=1)  # with ray_address, REST renders of this many rays or more go to Ray
     # ---- walking ----
     frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message

@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated, Protocol
+from typing import TYPE_CHECKING, Annotated, Protocol
 
 from fastapi import Depends
 from starlette.applications import Starlette
@@ -21,6 +21,9 @@ from .settings import Settings
 from .uploads import Upload, Uploads
 from .videos import Videos
 from .workshop import Workshop
+
+if TYPE_CHECKING:  # Ray is an extra: the cluster module is imported only when a server is told to use it
+    from ..cluster import RayPainter
 
 log = logging.getLogger("rcp.service")
 
@@ -45,6 +48,7 @@ class Service:
     infos: dict[str, protocol.SceneInfo]
     workshop: Workshop
     videos: Videos
+    cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
 
@@ -57,12 +61,12 @@ class Service:
         log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
         infos = {name: scene_info(scene) for name, scene in scenes.items()}
         workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
-        painter = None
-        if settings.ray_address is not None:  # Ray joins with the first video: a server starts without waiting
+        cluster = None
+        if settings.ray_address is not None:  # Ray joins with its first painting: a server starts without waiting
             from ..cluster import RayPainter
 
-            painter = RayPainter(settings.ray_address)
-        return cls(settings, scenes, infos, workshop, Videos(settings, workshop, painter))
+            cluster = RayPainter(settings.ray_address)
+        return cls(settings, scenes, infos, workshop, Videos(settings, workshop, cluster), cluster)
 
     def walking(self) -> int:
         """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
@@ -103,7 +107,14 @@ class Service:
             session.close()
         self.workshop.stop()  # the video jobs' paintings stop at their next tile
         self.videos.close()
+        if self.cluster is not None:
+            self.cluster.close()
         self.workshop.close()
+
+    def on_cluster(self, width: int, height: int, params: PaintParams) -> bool:
+        """Whether a REST render of this size goes to Ray: with a cluster, from ``ray_min_work`` rays on."""
+        work = width * height * params.spp * params.iterations
+        return self.cluster is not None and work >= self.settings.ray_min_work
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:

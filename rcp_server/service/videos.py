@@ -89,7 +89,7 @@ class Videos:
     def __init__(self, settings: Settings, workshop: Workshop, painter=None):
         self.settings = settings
         self.workshop = workshop
-        self.painter = painter  # a cluster.RayPainter, or None: the workshop's shared pool
+        self.painter = painter  # a cluster.RayPainter (the service closes it), or None: the workshop's shared pool
         own = settings.video_dir is None
         self.folder = Path(tempfile.mkdtemp(prefix="rcp-videos-")) if own else Path(settings.video_dir)
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -234,8 +234,6 @@ class Videos:
         for job in list(self._jobs.values()):
             job.cancelled.set()
         self._runners.shutdown(wait=True, cancel_futures=True)
-        if self.painter is not None:
-            self.painter.close()
         if self._own_folder:
             shutil.rmtree(self.folder, ignore_errors=True)
 

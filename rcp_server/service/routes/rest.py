@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 import time
 
@@ -10,6 +11,7 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from ... import images
 from ...camera import Camera, CameraError
+from ...cluster import ClusterError
 from ...painting import Abandoned
 from ...styles import with_style
 from .. import protocol
@@ -22,7 +24,9 @@ NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the req
 router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
 
 MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
-BUSY = {"description": "every render place is taken, or the render ran out of time; see Retry-After"}
+BUSY = {"description": "every render place is taken, the render ran out of time, or Ray failed; see Retry-After"}
+CLUSTER_RETRY_S = 30  # Ray that does not answer is mended by its operator, in minutes rather than seconds
+log = logging.getLogger("rcp.service")
 
 
 @public.get("/health")
@@ -73,17 +77,16 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
     deadline = time.monotonic() + settings.render_timeout_s  # waiting for a turn counts too
     gone = threading.Event()  # the caller hung up: paint no further
 
+    def stop() -> bool:
+        return gone.is_set() or time.monotonic() > deadline or workshop.stopping
+
     def job() -> bytes:
-        result = workshop.paint(
-            scene,
-            camera,
-            body.width,
-            body.height,
-            params,
-            time=body.time,
-            should_stop=lambda: gone.is_set() or time.monotonic() > deadline,
-        )
-        return images.encode(result.image, fmt, body.quality)
+        size = (body.width, body.height)
+        if service.on_cluster(*size, params):  # a large render: Ray paints it, the cores here stay with the walks
+            image = service.cluster.render(scene, camera, *size, params, body.time, stop)
+        else:
+            image = workshop.paint(scene, camera, *size, params, time=body.time, should_stop=stop).image
+        return images.encode(image, fmt, body.quality)
 
     try:
         with workshop.admission():
@@ -94,6 +97,9 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
                 watcher.cancel()
     except Busy as busy:
         raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
+    except ClusterError as exc:  # Ray does not answer, or lost a worker: the operator's to mend, the caller waits
+        log.error("a render on Ray failed: %s", exc)
+        raise HTTPException(503, str(exc), headers={"Retry-After": str(CLUSTER_RETRY_S)}) from None
     except Abandoned:
         if gone.is_set():
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
