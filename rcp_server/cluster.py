@@ -32,9 +32,9 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from . import images
+from . import images, kernels
 from .camera import Camera, Region
-from .painting import Abandoned, PaintState, paint
+from .painting import Abandoned, PaintState, paint, see, seen_grid
 from .params import PaintParams
 from .scene import Scene
 from .sequence import Shot, frame_params
@@ -162,11 +162,31 @@ class Painter:
         result = paint(self._scene(held), camera, width, height, params, time=time, threads=self.threads)
         return images.to_uint8(result.image)
 
+    def see(self, held: Held, shot: tuple[Camera, float], band: Region, params: PaintParams) -> kernels.Seen | None:
+        """What the pixel centres of ``band``'s rows of a painting's ``painting.seen_grid`` see: found once
+        a frame, a part a band, and shared by every band of the frame, rather than found whole by each band;
+        None when the painting traces every ray."""
+        camera, time = shot
+        scene = self._scene(held)
+        grid = seen_grid(scene, time, band.full_width, band.full_height, params)
+        if grid is None:
+            return None
+        fine = grid.height // band.full_height
+        return see(scene, time, camera, Region(grid.width, grid.height, 0, fine * band.y0, -1, fine * band.height))
+
     def band(
-        self, held: Held, job: str | None, region: Region, shot: tuple[Camera, float], params: PaintParams, first: bool
+        self,
+        held: Held,
+        job: str | None,
+        region: Region,
+        shot: tuple[Camera, float],
+        params: PaintParams,
+        first: bool,
+        *seen: kernels.Seen | None,
     ) -> np.ndarray:
         """The rows of ``region``, from ``I_0`` when ``first``, else continuing from this band's painting of
-        ``job``'s previous frame (kept when ``job`` is given): (rows, width, 3) uint8."""
+        ``job``'s previous frame (kept when ``job`` is given): (rows, width, 3) uint8. ``seen``: the parts
+        of :meth:`see` (Ray hands them over once they are found), none for a band that is the whole image."""
         camera, time = shot
         previous = None
         if not first:
@@ -183,6 +203,7 @@ class Painter:
             previous=previous,
             region=region,
             threads=self.threads,
+            seen=kernels.Seen.joined(seen) if seen and seen[0] is not None else None,
         )
         if job is not None:
             self.previous[(job, region)] = result.state
@@ -270,12 +291,8 @@ class RayPainter:
         method splits it into a band of rows per actor; the image method's lookups reach the whole screen, so
         it paints on one actor. Raises :class:`ClusterError`, or :class:`~.paintstate.Abandoned` once
         ``should_stop`` says so."""
-        actors = self.actors()
-        held = self.hold(scene)
-        refs = [
-            actor.band.remote(held, None, band, (camera, time), params, True)
-            for actor, band in _split(actors, width, height, params)
-        ]
+        workers = _split(self.actors(), width, height, params)
+        refs = _paint_bands(workers, self.hold(scene), None, (camera, time), params, True)
         return np.concatenate(self._get(refs, should_stop), axis=0)
 
     def images(
@@ -305,7 +322,7 @@ class RayPainter:
             when = (shot.camera, shot.scene_time)
             if not temporal:
                 return [actors[index % len(actors)].frame.remote(held, when, width, height, p)]
-            return [actor.band.remote(held, job, band, when, p, index == 0) for actor, band in workers]
+            return _paint_bands(workers, held, job, when, p, index == 0)
 
         def take() -> np.ndarray:
             parts = self._get(pending.popleft(), should_stop)
@@ -369,6 +386,23 @@ def _split(actors: list, width: int, height: int, params: PaintParams) -> list[t
         return [(actors[0], Region(width, height))]
     bands = Region(width, height).tiles(-(-height // len(actors)))
     return list(zip(actors, bands, strict=False))
+
+
+def _paint_bands(
+    workers: list[tuple[Any, Region]],
+    held: Held,
+    job: str | None,
+    shot: tuple[Camera, float],
+    params: PaintParams,
+    first: bool,
+) -> list:
+    """The refs of one frame's bands. Several bands first find, a part each, what the frame's pixel centres
+    see (``fast``), and each band reads all the parts (Ray waits for them, the driver does not): the whole
+    image is seen once a frame, not once a band, and each band paints exactly its crop of the painting."""
+    seen = []
+    if len(workers) > 1:
+        seen = [actor.see.remote(held, shot, band, params) for actor, band in workers]
+    return [actor.band.remote(held, job, band, shot, params, first, *seen) for actor, band in workers]
 
 
 def _cancel(refs: list) -> None:

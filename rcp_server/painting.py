@@ -26,7 +26,18 @@ from .raytrace import setup_tile
 from .scene import Scene
 from .stopwatch import STAGES, Stopwatch, total
 
-__all__ = ["STAGES", "Abandoned", "PaintResult", "PaintState", "TILE_WORK", "default_threads", "paint", "tile_rows"]
+__all__ = [
+    "STAGES",
+    "Abandoned",
+    "PaintResult",
+    "PaintState",
+    "TILE_WORK",
+    "default_threads",
+    "paint",
+    "see",
+    "seen_grid",
+    "tile_rows",
+]
 
 
 @dataclass
@@ -91,6 +102,7 @@ def paint(
     keep_iterations: bool = False,
     pool: Executor | None = None,
     should_stop: Callable[[], bool] | None = None,
+    seen: kernels.Seen | None = None,
 ) -> PaintResult:
     """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera``.
 
@@ -101,6 +113,10 @@ def paint(
     Tiles run on ``pool`` when given (a server shares one pool between all its paintings, so their tiles
     queue for the same cores; pass its size as ``threads``), else on a pool of this call's own. ``should_stop`` is
     asked before every iteration of every tile; once it says yes the painting raises :class:`Abandoned`.
+
+    ``seen``: what the pixel centres of the whole :func:`seen_grid` see (:func:`see`), found already, for a
+    region painted apart from the rest of its image (on Ray, a band an actor): else the painting finds it
+    itself, over the whole image, whatever its region.
     """
     region = region or Region(width, height)
     if (region.full_width, region.full_height) != (width, height):
@@ -133,13 +149,14 @@ def paint(
         return [(state, total([first[n][1], seconds])) for n, (state, seconds) in enumerate(rest)]
 
     full = Region(width, height)
-    # where the pixel centres look: at several samples a grid twice as fine, which sees the thin geometry
-    # that the samples antialias
-    fine = 1 if params.spp == 1 else 2
-    grid = Region(fine * width, fine * height)
-    seen = kernels.Seen.empty(grid.width, grid.height) if _sees_first(scene, time, params) else None
+    grid = seen_grid(scene, time, width, height, params)
+    given = seen is not None
+    if given and (grid is None or (seen.width, seen.height) != (grid.width, grid.height)):
+        raise ValueError("seen does not cover this painting's grid of pixel centres (seen_grid)")
+    if not given and grid is not None:
+        seen = kernels.Seen.empty(grid.width, grid.height)
     # a one-sample painting's first iteration casts the plain render's rays: what they hit comes free
-    free = previous.blank and params.spp == 1 and region == full
+    free = previous.blank and params.spp == 1 and region == full and not given
     extra: list[dict[str, float]] = []  # seconds outside the tiles' iterations
 
     def traced(settings: PaintParams, record: bool = False) -> Callable[[Region], TileIteration]:
@@ -163,7 +180,7 @@ def paint(
             kept = keep[1:] if keep is not None else None
             parts = then(first, run(traced(params), start, params.iterations - 1, kept))
     elif params.method == "raytrace":
-        if seen is not None:  # what the pixel centres see, in a pass of its own
+        if seen is not None and not given:  # what the pixel centres see, in a pass of its own
             visible = grid.tiles(tile_rows(grid, threads))
             extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), visible)
         parts = run(traced(params), previous, params.iterations, keep)
@@ -186,6 +203,24 @@ def paint(
         parts = then(plain_parts, looked)
     state = PaintState.joined([p[0] for p in parts], region)
     return PaintResult(state, total([p[1] for p in parts] + extra), keep or [])
+
+
+def seen_grid(scene: Scene, time: float, width: int, height: int, params: PaintParams) -> Region | None:
+    """The image whose pixel centres decide most rays of a ``width x height`` painting (``fast``: see
+    :func:`_sees_first`), None when every ray is traced. At several samples it is twice as fine: it sees the
+    thin geometry that the samples antialias."""
+    if not _sees_first(scene, time, params):
+        return None
+    fine = 1 if params.spp == 1 else 2
+    return Region(fine * width, fine * height)
+
+
+def see(scene: Scene, time: float, camera: Camera, rows: Region) -> kernels.Seen:
+    """What the pixel centres of ``rows`` (full-width rows of a :func:`seen_grid`) see: that part of a
+    painting's ``seen``, found apart (``kernels.Seen.joined`` puts the parts together)."""
+    part = kernels.Seen.empty(rows.width, rows.height)
+    raytrace.visible_faces(scene, time, camera, rows, part)
+    return part
 
 
 def _sees_first(scene: Scene, time: float, params: PaintParams) -> bool:

@@ -7,6 +7,7 @@ arguments of the same type cannot swap without an error: positionally, a swap ga
 from __future__ import annotations
 
 from collections import namedtuple
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -83,6 +84,13 @@ class Seen(NamedTuple):
     @classmethod
     def empty(cls, width: int, height: int) -> Seen:
         return cls(np.empty(width * height, np.int32), np.empty(width * height, np.float32), width, height)
+
+    @classmethod
+    def joined(cls, parts: Sequence[Seen]) -> Seen:
+        """Parts of full-width rows, top to bottom, as one."""
+        face = np.concatenate([p.face for p in parts])
+        distance = np.concatenate([p.distance for p in parts])
+        return cls(face, distance, parts[0].width, sum(p.height for p in parts))
 
     def rows(self, tile: Region) -> Seen:
         """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""

@@ -15,7 +15,7 @@ from rcp_server import kernels
 from rcp_server.camera import Camera, Region
 from rcp_server.mappings import BUILT_IN
 from rcp_server.meshes import primitive
-from rcp_server.painting import paint
+from rcp_server.painting import paint, see, seen_grid
 from rcp_server.paintstate import PaintState
 from rcp_server.params import PaintParams
 from rcp_server.raytrace import Rays, assign_cameras, setup_tile, visible_faces
@@ -118,6 +118,26 @@ def test_a_tile_equals_its_crop_with_fast_on(hard_scene):
         np.testing.assert_array_equal(tile.image(), full.image()[7:37, 10:60])
         if full.depth is not None:
             np.testing.assert_array_equal(tile.depth, full.depth.reshape(H, W)[7:37, 10:60].ravel())
+
+
+def test_bands_given_what_the_image_sees_in_parts_are_its_crops(hard_scene):
+    """How Ray paints one painting in bands: the parts of ``seen`` found apart, joined, handed to each band."""
+    for params in (PaintParams(lambda_p=12.0), PaintParams(lambda_p=12.0, spp=4, noise=0.3)):
+        full = paint(hard_scene, CAMERA, W, H, params).image
+        grid = seen_grid(hard_scene, 0.0, W, H, params)
+        fine = grid.height // H
+        bands = Region(W, H).tiles(17)
+        parts = [
+            see(hard_scene, 0.0, CAMERA, Region(grid.width, grid.height, 0, fine * b.y0, -1, fine * b.height))
+            for b in bands
+        ]
+        seen = kernels.Seen.joined(parts)
+        for band in bands:
+            got = paint(hard_scene, CAMERA, W, H, params, region=band, seen=seen).image
+            np.testing.assert_array_equal(got, full[band.y0 : band.y0 + band.height])
+        with pytest.raises(ValueError, match="seen does not cover"):
+            paint(hard_scene, CAMERA, W, H, params, region=bands[0], seen=kernels.Seen.joined(parts[:1]))
+    assert seen_grid(hard_scene, 0.0, W, H, PaintParams(fast=False)) is None
 
 
 def test_the_visibility_pass_sees_what_the_plain_render_hits(hard_scene):
