@@ -34,7 +34,7 @@ import numpy as np
 
 from . import images, kernels
 from .camera import Camera, Region
-from .painting import Abandoned, PaintState, paint, see, seen_grid
+from .painting import Abandoned, PaintState, paint, see, seen_grid, uses_seen
 from .params import PaintParams
 from .scene import Scene
 from .sequence import Shot, frame_params
@@ -400,7 +400,7 @@ def _paint_bands(
     see (``fast``), and each band reads all the parts (Ray waits for them, the driver does not): the whole
     image is seen once a frame, not once a band, and each band paints exactly its crop of the painting."""
     seen = []
-    if len(workers) > 1:
+    if len(workers) > 1 and uses_seen(params):
         seen = [actor.see.remote(held, shot, band, params) for actor, band in workers]
     return [actor.band.remote(held, job, band, shot, params, first, *seen) for actor, band in workers]
 

@@ -36,6 +36,7 @@ __all__ = [
     "paint",
     "see",
     "seen_grid",
+    "uses_seen",
     "tile_rows",
 ]
 
@@ -206,8 +207,8 @@ def paint(
 
 
 def seen_grid(scene: Scene, time: float, width: int, height: int, params: PaintParams) -> Region | None:
-    """The image whose pixel centres decide most rays of a ``width x height`` painting (``fast``: see
-    :func:`_sees_first`), None when every ray is traced. At several samples it is twice as fine: it sees the
+    """The image whose pixel centres decide most rays of a ``width x height`` painting (:func:`uses_seen`),
+    None when every ray is traced. At several samples it is twice as fine: it sees the
     thin geometry that the samples antialias."""
     if not _sees_first(scene, time, params):
         return None
@@ -223,13 +224,17 @@ def see(scene: Scene, time: float, camera: Camera, rows: Region) -> kernels.Seen
     return part
 
 
-def _sees_first(scene: Scene, time: float, params: PaintParams) -> bool:
-    """Whether this painting decides rays by what the pixel centres see (``kernels.resolve_seen``): with
-    ``fast``, traced, eyes at rest (every ray starts at the eye) and targets that move (else every
-    iteration casts the first one's rays, and the exact painting costs nothing more), a scene with
-    triangles, and more than one ray a pixel. Not the region's size: a tile must be a crop."""
+def uses_seen(params: PaintParams) -> bool:
+    """Whether paintings with these settings decide rays by what the pixel centres see
+    (``kernels.resolve_seen``), in a scene with triangles: with ``fast``, traced, eyes at rest (every ray
+    starts at the eye) and targets that move (else every iteration casts the first one's rays, and the exact
+    painting costs nothing more), and more than one ray a pixel. Not the region's size: a tile must be a crop."""
     fast = params.fast and params.method == "raytrace" and params.lambda_e == 0.0 and params.lambda_p != 0.0
-    return fast and params.iterations * params.spp > 1 and scene.geometry(time)[1] is not None
+    return fast and params.iterations * params.spp > 1
+
+
+def _sees_first(scene: Scene, time: float, params: PaintParams) -> bool:
+    return uses_seen(params) and scene.geometry(time)[1] is not None
 
 
 def _visible(scene: Scene, time: float, camera: Camera, tile: Region, seen: kernels.Seen) -> dict[str, float]:
