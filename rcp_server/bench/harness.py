@@ -46,13 +46,14 @@ class Answer:
     body: bytes
 
 
-def request(url: str, body: dict | None = None, timeout: float = TIMEOUT) -> Answer:
-    """GET ``url``, or POST ``body`` as JSON, waiting at most ``timeout`` s; an error status is an answer too.
-    Raises OSError when there is no answer (refused, reset, timed out)."""
+def request(url: str, body: dict | None = None, timeout: float = TIMEOUT, method: str | None = None) -> Answer:
+    """GET ``url``, or POST ``body`` as JSON (or ``method``, such as DELETE), waiting at most ``timeout`` s; an
+    error status is an answer too. Raises OSError when there is no answer (refused, reset, timed out)."""
     data = None if body is None else json.dumps(body).encode()
     headers = {} if data is None else {"content-type": "application/json"}
+    asked = urllib.request.Request(url, data, headers, method=method)
     try:
-        with urllib.request.urlopen(urllib.request.Request(url, data, headers), timeout=timeout) as response:
+        with urllib.request.urlopen(asked, timeout=timeout) as response:
             return Answer(response.status, response.headers.get("content-type", ""), response.read())
     except urllib.error.HTTPError as exc:
         with exc:

@@ -6,7 +6,9 @@ held key does, and records for every frame the time from sending the camera mess
 receiving the frame, and the frame's size. Then it rests, and moves single steps, timing each step's
 first frame, its first full-size painting and its final (refined) one. Beside that, the same paintings
 timed alone in this process: all iterations from the canvas (per-frame), one from the last frame
-(temporal).
+(temporal). Last, the per-frame walk again under load: while a REST caller asks for large paintings back to
+back (+REST), and while a video job paints on the same tile pool (+video; its frames a second before and
+during the walk are printed beside it).
 """
 
 from __future__ import annotations
@@ -168,6 +170,68 @@ def _rest_load(url: str, scene_name: str, on: bool):
             caller.join()
 
 
+VIDEO_LOAD = {"width": 640, "height": 360, "fps": 24, "seconds": 300}  # 7201 frames: longer than any walk
+
+
+@dataclass
+class VideoLoad:
+    """A video job's pace: frames a second alone (before the walk) and while the walk runs (NaN when off)."""
+
+    alone_fps: float = float("nan")
+    walking_fps: float = float("nan")
+
+
+def _video_path(scene: dict) -> dict:
+    """A path from the scene's camera 10 units towards its target, over ``VIDEO_LOAD["seconds"]``."""
+    eye, target = np.array(scene["camera"]["eye"]), np.array(scene["camera"]["look_at"])
+    end = eye + 10 * (target - eye) / np.linalg.norm(target - eye)
+    return {
+        "fps": VIDEO_LOAD["fps"],
+        "keyframes": [
+            {"t": 0, "eye": list(eye), "look_at": list(target)},
+            {"t": VIDEO_LOAD["seconds"], "eye": list(end), "look_at": list(target)},
+        ],
+    }
+
+
+@contextlib.contextmanager
+def _video_load(url: str, scene: dict, on: bool, seconds: float):
+    """A video job painting on the server while the walk runs (when ``on``): submitted over ``POST /api/videos``,
+    timed ``seconds`` alone once it paints, timed again over the walk, cancelled at the end."""
+    load = VideoLoad()
+    if not on:
+        yield load
+        return
+    body = {"scene": scene["name"], "width": VIDEO_LOAD["width"], "height": VIDEO_LOAD["height"]}
+    answer = request(f"{url}/api/videos", {**body, "path": _video_path(scene)})
+    if answer.status != 202:
+        raise RuntimeError(f"video load: {answer.status} {answer.body[:200].decode(errors='replace')}")
+    status_url = f"{url}/api/videos/{json.loads(answer.body)['id']}"
+
+    def progress() -> tuple[float, int]:
+        status = get_json(status_url)
+        if status["state"] != "running":
+            raise RuntimeError(f"video load: {status['state']} ({status['message']})")
+        return time.perf_counter(), status["done_frames"]
+
+    deadline = time.monotonic() + 120
+    while (start := progress())[1] == 0:  # its first frame painted: the kernels and the BVH are warm
+        if time.monotonic() > deadline:
+            raise RuntimeError("video load: no frame painted in 120 s")
+        time.sleep(0.05)
+    time.sleep(seconds)
+    before = progress()
+    load.alone_fps = (before[1] - start[1]) / (before[0] - start[0])
+    try:
+        yield load
+        after = progress()
+        load.walking_fps = (after[1] - before[1]) / (after[0] - before[0])
+    finally:
+        request(status_url, method="DELETE")
+        while get_json(status_url)["state"] == "running":  # stopped within a tile
+            time.sleep(0.05)
+
+
 def latency(scene_name: str, seconds: float, steps: int) -> dict:
     with BackgroundServer() as server:
         # the server's scenes folder, loaded again here for the paintings timed alone
@@ -180,17 +244,21 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
             f"{server.settings.frame_ms:.0f} ms"
         )
         header = (
-            f"{'mode':>14} | {'alone ms':>8} | {'fps':>5} {'walk size':>9} {'latency p50':>11} {'p95':>6} "
+            f"{'mode':>15} | {'alone ms':>8} | {'fps':>5} {'walk size':>9} {'latency p50':>11} {'p95':>6} "
             f"{'render p50':>10} | {'step p50':>8} {'full p50':>8} {'p95':>6} {'final p50':>9} {'p95':>6}"
         )
         print(header)
         print("-" * len(header))
         rows = []
         width, height = WINDOW
-        cases = [(False, False), (True, False), (False, True)]  # the last: REST renders compete for the cores
+        # the last two: REST renders, then a video job, compete for the cores
+        cases = [(False, None), (True, None), (False, "REST"), (False, "video")]
         for temporal, busy in cases:
             alone = _alone_ms(scene, width // 2, height // 2, params, temporal)
-            with _rest_load(server.url, scene_name, busy) as load:
+            with (
+                _rest_load(server.url, scene_name, busy == "REST") as load,
+                _video_load(server.url, info, busy == "video", seconds) as video,
+            ):
                 f = asyncio.run(_walk(server.ws_url, info, width, height, temporal, seconds, steps))
             side = (statistics.median(f.pixels) / (width * height)) ** 0.5 if f.pixels else 0.0
             row = {
@@ -208,12 +276,14 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
                 "full_p95_ms": round(percentile(f.full_ms, 95), 1),
                 "final_p50_ms": round(percentile(f.final_ms, 50), 1),
                 "final_p95_ms": round(percentile(f.final_ms, 95), 1),
-                "rest_renders": load.done if busy else 0,
+                "rest_renders": load.done if busy == "REST" else 0,
+                "video_alone_fps": round(video.alone_fps, 2),
+                "video_walking_fps": round(video.walking_fps, 2),
             }
             rows.append(row)
-            mode = ("temporal" if temporal else "per-frame") + ("+REST" if busy else "")
+            mode = ("temporal" if temporal else "per-frame") + (f"+{busy}" if busy else "")
             print(
-                f"{mode:>14} | {alone:8.1f} | {f.fps:5.1f} {row['walk_size']:>9} {row['latency_p50_ms']:11.1f} "
+                f"{mode:>15} | {alone:8.1f} | {f.fps:5.1f} {row['walk_size']:>9} {row['latency_p50_ms']:11.1f} "
                 f"{row['latency_p95_ms']:6.1f} {row['render_p50_ms']:10.1f} | {row['step_p50_ms']:8.1f} "
                 f"{row['full_p50_ms']:8.1f} {row['full_p95_ms']:6.1f} {row['final_p50_ms']:9.1f} "
                 f"{row['final_p95_ms']:6.1f}"
@@ -226,5 +296,12 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
             f"at {width}x{height}; final: -> the refined one (4 spp or more). +REST: meanwhile a REST caller keeps "
             f"asking for {REST_LOAD['width']}x{REST_LOAD['height']} paintings at {REST_LOAD['paint']['spp']} spp, "
             f"one after another ({sum(r['rest_renders'] for r in rows)} done)."
+        )
+        video = rows[-1]
+        print(
+            f"+video: meanwhile a video job (POST /api/videos, {VIDEO_LOAD['width']}x{VIDEO_LOAD['height']}, the "
+            f"scene's painting, every frame from the canvas) paints on the same tile pool: "
+            f"{video['video_alone_fps']:.2f} frames/s alone ({seconds:.0f} s before the walk), "
+            f"{video['video_walking_fps']:.2f} frames/s during the walk and its steps; then it is cancelled."
         )
         return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}
