@@ -1,8 +1,9 @@
 """Video jobs: a camera path painted into an MP4 in the background, watched, fetched and cancelled over REST.
 
 A job paints its frames in order on a thread of its own (at most ``max_videos`` at once; more wait in a
-bounded queue), and every frame's tiles go to the workshop's shared :class:`~.workshop.FairPool`, where they
-take turns with the walk-throughs' tiles: a video never starves a walk. With ``RCP_RAY_ADDRESS`` set, frames
+bounded queue), and every frame's tiles go to the background lane of the workshop's shared
+:class:`~.workshop.FairPool`: they take the cores the walk-throughs and REST renders leave, so a video never
+starves a walk (a walk's tile waits at most for the video tiles in progress). With ``RCP_RAY_ADDRESS`` set, frames
 are painted on Ray instead (``cluster.py``) and the local cores stay with the walk-throughs.
 
 Limits (``settings.py``): the work of one job (pixels x samples x iterations, summed over its frames), the
@@ -200,7 +201,15 @@ class Videos:
 
         def paint_frame(camera, scene_time: float, params: PaintParams, previous: PaintState | None):
             return self.workshop.paint(
-                job.scene, camera, job.width, job.height, params, should_stop=stop, time=scene_time, previous=previous
+                job.scene,
+                camera,
+                job.width,
+                job.height,
+                params,
+                should_stop=stop,
+                background=True,
+                time=scene_time,
+                previous=previous,
             )
 
         yield from paint_sequence(paint_frame, job.path.frames(), job.params, job.temporal)

@@ -4,7 +4,9 @@ The engine paints; this module only queues and admits its work. A painting block
 each one waits on a thread of its own (at most ``max_renders`` at once); its tiles go to the shared
 :class:`FairPool`. The pool serves tiles by their position in their painting, so paintings in progress take
 turns tile by tile: a small walk-through frame is not stuck behind every tile of a large render that came
-first. REST renders are admitted at the door (:meth:`Workshop.admission`) or turned away (:class:`Busy`).
+first. A video's tiles go in the pool's background lane: they take only the cores that walks and REST
+renders leave, and a walk's tile waits at most for the video tiles already in progress. REST renders are
+admitted at the door (:meth:`Workshop.admission`) or turned away (:class:`Busy`).
 """
 
 from __future__ import annotations
@@ -28,36 +30,33 @@ from ..scene import Scene
 T = TypeVar("T")
 
 
+FOREGROUND, BACKGROUND = 0, 1  # a FairPool's lanes: what someone is watching, and what can wait (videos)
+
+
 class FairPool(Executor):
-    """Worker threads that take the task with the lowest (position in its batch, arrival) first."""
+    """Worker threads that take the task with the lowest (lane, position in its batch, arrival) first: a
+    background task starts only while no foreground task waits (one in progress keeps its thread)."""
 
     def __init__(self, workers: int, name: str = "rcp-tile"):
         self._tasks: queue.PriorityQueue = queue.PriorityQueue()
         self._arrival = itertools.count()
         self._threads = [threading.Thread(target=self._work, name=f"{name}-{k}", daemon=True) for k in range(workers)]
+        self._foreground = Lane(self, FOREGROUND)
+        self.background = Lane(self, BACKGROUND)  # the same threads, for work nobody is waiting to see
         for thread in self._threads:
             thread.start()
 
-    def _put(self, position: int, fn: Callable, args: tuple) -> Future:
+    def put(self, lane: int, position: int, fn: Callable, args: tuple) -> Future:
+        """Queue ``fn(*args)`` in ``lane`` at ``position`` of its batch."""
         future: Future = Future()
-        self._tasks.put((position, next(self._arrival), future, fn, args))
+        self._tasks.put(((lane, position), next(self._arrival), future, fn, args))
         return future
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
-        return self._put(0, partial(fn, **kwargs), args)
+        return self._foreground.submit(fn, *args, **kwargs)
 
     def map(self, fn: Callable[..., T], *iterables: Iterable, timeout=None, chunksize=1) -> Iterator[T]:
-        futures = [self._put(k, fn, args) for k, args in enumerate(zip(*iterables, strict=True))]
-
-        def results() -> Iterator[T]:
-            try:
-                for future in futures:
-                    yield future.result(timeout)
-            finally:  # a failed or abandoned painting takes its queued tiles with it
-                for future in futures:
-                    future.cancel()
-
-        return results()
+        return self._foreground.map(fn, *iterables, timeout=timeout)
 
     def _work(self) -> None:
         while True:
@@ -73,10 +72,35 @@ class FairPool(Executor):
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
         for _ in self._threads:
-            self._tasks.put((1 << 62, next(self._arrival), None, None, None))
+            self._tasks.put(((BACKGROUND + 1, 0), next(self._arrival), None, None, None))
         if wait:
             for thread in self._threads:
                 thread.join()
+
+
+class Lane(Executor):
+    """A lane of a :class:`FairPool`, as an executor to paint on (``painting.paint``); the pool itself is its
+    foreground lane."""
+
+    def __init__(self, pool: FairPool, lane: int):
+        self._pool = pool
+        self._lane = lane
+
+    def submit(self, fn, /, *args, **kwargs) -> Future:
+        return self._pool.put(self._lane, 0, partial(fn, **kwargs), args)
+
+    def map(self, fn: Callable[..., T], *iterables: Iterable, timeout=None, chunksize=1) -> Iterator[T]:
+        futures = [self._pool.put(self._lane, k, fn, args) for k, args in enumerate(zip(*iterables, strict=True))]
+
+        def results() -> Iterator[T]:
+            try:
+                for future in futures:
+                    yield future.result(timeout)
+            finally:  # a failed or abandoned painting takes its queued tiles with it
+                for future in futures:
+                    future.cancel()
+
+        return results()
 
 
 class Busy(Exception):
@@ -105,9 +129,20 @@ class Workshop:
         self._seconds = 1.0  # recent REST render time, for Retry-After
         self.stopping = False  # see stop()
 
-    def paint(self, scene: Scene, camera, width: int, height: int, params: PaintParams, should_stop=None, **options):
-        """Blocking: paint on the shared tile pool (call it inside :meth:`run`). Every painting stops at its
-        next tile once the workshop stops."""
+    def paint(
+        self,
+        scene: Scene,
+        camera,
+        width: int,
+        height: int,
+        params: PaintParams,
+        should_stop=None,
+        background: bool = False,
+        **options,
+    ):
+        """Blocking: paint on the shared tile pool (call it inside :meth:`run`); ``background`` (a video's
+        frames), only on the cores the walk-throughs and REST renders leave. Every painting stops at its next
+        tile once the workshop stops."""
 
         def stop() -> bool:
             return self.stopping or (should_stop is not None and should_stop())
@@ -116,7 +151,15 @@ class Workshop:
             self.in_progress += 1
         try:
             return paint(
-                scene, camera, width, height, params, pool=self.tiles, threads=self.threads, should_stop=stop, **options
+                scene,
+                camera,
+                width,
+                height,
+                params,
+                pool=self.tiles.background if background else self.tiles,
+                threads=self.threads,
+                should_stop=stop,
+                **options,
             )
         finally:
             with self._counting:
