@@ -1,7 +1,7 @@
 # rcp serve in a container: the walk-through client at /, REST renders under /api, the WebSocket at /ws.
 #   docker build -t rcp . && docker run --rm -p 8000:8000 rcp
 # Settings are RCP_* environment variables (rcp_server/service/settings.py), e.g. -e RCP_THREADS=4.
-# With Ray (the cluster extra; deploy/raycluster.yaml runs it on KubeRay): docker build --build-arg EXTRAS=cluster -t rcp:ray .
+# With Ray (deploy/raycluster.yaml runs it on KubeRay): docker build --build-arg EXTRAS=cluster-node -t rcp:ray .
 
 # ---- builder: the project and its dependencies in a venv (no test extras) ----
 FROM python:3.11-slim AS builder
@@ -24,6 +24,8 @@ RUN if [ -n "$EXTRAS" ]; then apt-get update && apt-get install -y --no-install-
     && rm -rf /var/lib/apt/lists/*; fi
 RUN groupadd --system rcp && useradd --system --gid rcp --create-home --home-dir /home/rcp rcp \
  && mkdir -p /var/cache/rcp/numba && chown -R rcp:rcp /var/cache/rcp
+# a login shell's /etc/profile sets PATH anew (KubeRay starts Ray with `bash -lc`): it finds the venv here too
+RUN echo 'PATH=/opt/venv/bin:$PATH' >/etc/profile.d/venv.sh
 COPY --from=builder /opt/venv /opt/venv
 COPY scenes/ /opt/rcp/scenes/
 COPY client/ /opt/rcp/client/

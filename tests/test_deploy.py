@@ -39,14 +39,25 @@ def test_every_container_runs_the_image_built_with_ray(documents):
     images = {c["image"] for pod in pods(documents) for c in pod["containers"]}
     assert images == {"rcp:ray"}
     dockerfile = (ROOT / "Dockerfile").read_text()
-    assert "docker build --build-arg EXTRAS=cluster -t rcp:ray ." in MANIFEST.read_text()
+    assert "docker build --build-arg EXTRAS=cluster-node -t rcp:ray ." in MANIFEST.read_text()
     assert 'pip install ".${EXTRAS:+[$EXTRAS]}"' in dockerfile  # the build argument reaches pip
     assert dockerfile.count('ARG EXTRAS=""') == 2  # both stages: the default image stays lean
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert "rcp-server[cluster]" in extras["cluster-node"]
     (ray,) = [r for r in extras["cluster"] if r.startswith("ray")]
     lowest = tuple(int(n) for n in re.search(r">=([\d.]+)", ray).group(1).split("."))
     version = tuple(int(n) for n in cluster(documents)["spec"]["rayVersion"].split("."))
     assert version >= lowest
+
+
+def test_the_service_shares_the_head_containers_ray_session_folder(documents):
+    """A driver reaches its node's raylet through a socket under /tmp/ray: the head container's."""
+    head = pods(documents)[0]
+    mounts = {c["name"]: {m["mountPath"]: m["name"] for m in c.get("volumeMounts", [])} for c in head["containers"]}
+    shared = {mounts[name].get("/tmp/ray") for name in mounts}
+    assert len(shared) == 1 and None not in shared
+    (volume,) = [v for v in head["volumes"] if v["name"] in shared]
+    assert "emptyDir" in volume
 
 
 def test_the_service_container_runs_rcp_serve_with_settings_it_takes(documents, capsys):
