@@ -11,6 +11,7 @@ import httpx
 import numpy as np
 import pytest
 from conftest import SPINNING_BOX
+from PIL import Image
 
 from rcp_server import images
 from rcp_server.bench.harness import BackgroundServer
@@ -79,6 +80,28 @@ def test_a_path_becomes_an_mp4_of_its_paintings(server, scenes):
     assert server.delete(f"/api/videos/{created['id']}").json()["state"] == "done"
     assert server.get(f"/api/videos/{created['id']}").status_code == 404
     assert server.get(f"/api/videos/{created['id']}/file").status_code == 404
+
+
+def test_a_video_takes_a_style_as_a_render_does(server, scenes):
+    """``"style"`` in a video's ``paint``: the style's settings, the explicit ones beside it winning."""
+    paint_settings = {"style": "fractured", "iterations": 2}
+    body = {"scene": "tiny", "path": {**PATH, "fps": 1}, "width": 32, "height": 24, "paint": paint_settings}
+    answer = server.post("/api/videos", json=body)
+    assert answer.status_code == 202, answer.text
+    assert wait_until(server, answer.json()["id"])["state"] == "done"
+    frame = server.get(f"/api/videos/{answer.json()['id']}/file").content
+    with av.open(io.BytesIO(frame)) as container:
+        first = next(container.decode(video=0)).to_ndarray(format="rgb24")
+    camera = {k: v for k, v in PATH["keyframes"][0].items() if k != "t"}
+    render = {"scene": "tiny", "width": 32, "height": 24, "camera": camera, "paint": paint_settings}
+    png = server.post("/api/render", json=render)
+    assert png.status_code == 200, png.text
+    expected = np.asarray(Image.open(io.BytesIO(png.content)).convert("RGB"))
+    played = av.VideoFrame.from_ndarray(expected, format="rgb24").reformat(format="yuv420p")
+    mse = np.mean((first.astype(float) - played.reformat(format="rgb24").to_ndarray()) ** 2)
+    assert 10 * np.log10(255**2 / mse) > 35
+    refused = server.post("/api/videos", json={**body, "paint": {"style": "nope"}})
+    assert refused.status_code == 422 and refused.json()["detail"][0]["loc"] == ["body", "paint", "style"]
 
 
 def test_cancelling_stops_the_painting_and_the_server_goes_on(server):

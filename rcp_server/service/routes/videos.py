@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from fastapi import APIRouter, Depends, HTTPException, Response
 from fastapi.responses import FileResponse, JSONResponse
 from fastapi.routing import APIRoute
@@ -11,6 +9,7 @@ from starlette.types import Receive, Scope, Send
 
 from ...camera import CameraError
 from ...camerapath import PathError
+from ...styles import with_style
 from .. import protocol
 from ..access import require_token
 from ..state import ServiceDep
@@ -106,7 +105,7 @@ async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.V
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         path = body.path.resolve(scene.camera)
-        params = replace(scene.paint, **body.paint.given())
+        params = with_style(scene.paint, body.paint.given())
         if body.width % 2 or body.height % 2:
             raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {body.width}x{body.height}")
         job = service.videos.submit(scene, path, body.width, body.height, params, body.temporal)
