@@ -235,7 +235,7 @@ class RayPainter:
         self._actors: list = []
         self._held: OrderedDict[int, tuple[Scene, Held]] = OrderedDict()
         self._lock = threading.Lock()
-        self._jobs = itertools.count(1)
+        self._serial = itertools.count(1)  # names the scenes held and the jobs
 
     def start(self) -> None:
         """Join (or start) Ray now, rather than with the first painting; raises :class:`ClusterError`."""
@@ -263,7 +263,7 @@ class RayPainter:
         with self._lock:
             entry = self._held.get(id(scene))
             if entry is None or entry[0] is not scene:
-                held = Held(f"scene-{next(self._jobs)}", [_ray().put(portable(scene))])
+                held = Held(f"scene-{next(self._serial)}", [_ray().put(portable(scene))])
                 entry = self._held[id(scene)] = (scene, held)
                 while len(self._held) > WARM_SCENES:
                     self._held.popitem(last=False)
@@ -312,7 +312,7 @@ class RayPainter:
         ``should_stop`` says so."""
         actors = self.actors()
         held = self.hold(scene)
-        job = f"job-{next(self._jobs)}"
+        job = f"job-{next(self._serial)}"
         workers = _split(actors, width, height, params) if temporal else []
         limit = IN_FLIGHT_PER_ACTOR * (1 if temporal else len(actors))
         pending: deque = deque()  # the refs of each frame in flight, in order

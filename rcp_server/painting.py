@@ -210,7 +210,7 @@ def seen_grid(scene: Scene, time: float, width: int, height: int, params: PaintP
     """The image whose pixel centres decide most rays of a ``width x height`` painting (:func:`uses_seen`),
     None when every ray is traced. At several samples it is twice as fine: it sees the
     thin geometry that the samples antialias."""
-    if not _sees_first(scene, time, params):
+    if not uses_seen(params) or scene.geometry(time)[1] is None:
         return None
     fine = 1 if params.spp == 1 else 2
     return Region(fine * width, fine * height)
@@ -231,10 +231,6 @@ def uses_seen(params: PaintParams) -> bool:
     painting costs nothing more), and more than one ray a pixel. Not the region's size: a tile must be a crop."""
     fast = params.fast and params.method == "raytrace" and params.lambda_e == 0.0 and params.lambda_p != 0.0
     return fast and params.iterations * params.spp > 1
-
-
-def _sees_first(scene: Scene, time: float, params: PaintParams) -> bool:
-    return uses_seen(params) and scene.geometry(time)[1] is not None
 
 
 def _visible(scene: Scene, time: float, camera: Camera, tile: Region, seen: kernels.Seen) -> dict[str, float]:

@@ -18,6 +18,7 @@ from .. import protocol
 from ..access import admits, require_token
 from ..state import ServiceDep
 from ..workshop import Busy
+from . import SCENE_BODY
 
 public = APIRouter(prefix="/api")
 NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
@@ -54,9 +55,7 @@ async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
     response_class=Response,
     responses={
         200: {"content": {"image/png": {}, "image/jpeg": {}}, "description": "the painting"},
-        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
-        404: {"description": "no such scene"},
-        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        **SCENE_BODY,
         422: {"description": "a request the painting cannot take, or one over a limit"},
         503: BUSY,
     },

@@ -15,6 +15,7 @@ from ..access import require_token
 from ..state import ServiceDep
 from ..videos import VideoJob, VideoRefused
 from ..workshop import Busy
+from . import SCENE_BODY
 
 
 class _SharedPath(APIRoute):
@@ -60,9 +61,7 @@ PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 f
 @paths.post(
     "",
     responses={
-        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
-        404: {"description": "no such scene"},
-        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        **SCENE_BODY,
         422: {"description": "a path the painting cannot take"},
     },
 )
@@ -90,9 +89,7 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
     "",
     status_code=202,
     responses={
-        400: {"description": "a body that is not JSON text at all (not UTF-8, or nested too deep)"},
-        404: {"description": "no such scene"},
-        413: {"description": "the body is larger than RCP_MAX_BODY_BYTES"},
+        **SCENE_BODY,
         422: {"description": "a path or setting the painting cannot take, or one over a limit"},
         503: {"description": "every place in the video queue is taken; see Retry-After"},
         507: {"description": "the stored videos use all the disk allowed to them (RCP_VIDEO_DISK_BYTES)"},
