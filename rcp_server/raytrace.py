@@ -20,7 +20,7 @@ from .params import PaintParams
 from .sampling import noise_vectors, stratified_offsets
 from .scene import Scene
 from .stopwatch import Stopwatch
-from .tracer import Hits
+from .tracer import Hits, intersect_rays
 
 
 @dataclass
@@ -163,7 +163,8 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
     if tracer is None:
         out.face[:] = -1
         return
-    hits = tracer.intersect(rays.origins, rays.directions)
+    hits = Hits.misses(region.pixel_count)
+    intersect_rays(tracer.embree, rays.origins, rays.directions, setup.pixels, hits.face)
     kernels.place_hits(
         origins=rays.origins, directions=rays.directions, rays=setup.pixels, triangles=geometry.triangles, hits=hits
     )
@@ -205,8 +206,8 @@ def tile_iteration(
     every_ray = np.arange(n * params.spp)  # the rays an iteration casts are the first of these, in order
     if tracer is None:
         seen = None
-    if seen is not None:  # the hits of the rays decided without Embree, and the rays left to it
-        decided = Hits(*(np.empty(n * params.spp, a.dtype) for a in Hits.misses(1)))
+    hits = Hits.empty(n * params.spp)  # what the rays hit: Embree's, or decided without it
+    if seen is not None:  # the rays left to Embree
         pending = np.empty(n * params.spp, np.int64)
     changed = np.empty(n, np.int64) if params.fast else None
     compared = {name: name in reads for name in ("color", "depth", "normal", "direction")}
@@ -229,44 +230,37 @@ def tile_iteration(
         )
         return changed[:count]
 
-    def intersect(count: int, checked: bool, canvas: bool) -> Hits:
+    def intersect(count: int, canvas: bool) -> Hits:
         if tracer is None:
-            return Hits.misses(count)
+            hits.face[:count] = -1
+            return hits
         # an iteration from the canvas is the plain render: traced exactly, always (at one sample it casts
         # the very rays whose hits ``seen`` holds), so ``fast`` never changes the plain render and a first
         # iteration never depends on where ``seen`` came from (a tile stays a crop)
-        if seen is None or canvas:
-            hits = tracer.intersect(rays.origins[:count], rays.directions[:count], checked=checked)
-            kernels.place_hits(
-                origins=rays.origins, directions=rays.directions, rays=every_ray[:count], triangles=triangles, hits=hits
+        traced = every_ray[:count]
+        if seen is not None and not canvas:
+            left = kernels.resolve_seen(
+                origins=rays.origins,
+                directions=rays.directions,
+                count=count,
+                plane=setup.image_plane,
+                seen=seen,
+                triangles=triangles,
+                hits=hits,
+                pending=pending,
             )
-            return hits
-        left = kernels.resolve_seen(
-            origins=rays.origins,
-            directions=rays.directions,
-            count=count,
-            plane=setup.image_plane,
-            seen=seen,
-            triangles=triangles,
-            hits=decided,
-            pending=pending,
-        )
-        if left:
-            rest = pending[:left]
-            found = tracer.intersect(rays.origins[rest], rays.directions[rest])
-            decided.face[rest] = found.face
-            kernels.place_hits(
-                origins=rays.origins, directions=rays.directions, rays=rest, triangles=triangles, hits=decided
-            )
-        return decided
+            traced = pending[:left]
+        intersect_rays(tracer.embree, rays.origins, rays.directions, traced, hits.face)
+        kernels.place_hits(origins=rays.origins, directions=rays.directions, rays=traced, triangles=triangles, hits=hits)
+        return hits
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
         with watch.stage("camera"):
             pixels = to_paint(state)
-            invalid = assign_cameras(state, setup, params, z0, rays, pixels)
+            assign_cameras(state, setup, params, z0, rays, pixels)
         count = len(pixels) * params.spp
         with watch.stage("intersect"):
-            hits = intersect(count, invalid == 0, state.blank)
+            hits = intersect(count, state.blank)
             if record_seen is not None:
                 record_seen.face[:] = hits.face[:count]
                 record_seen.distance[:] = hits.t[:count]
