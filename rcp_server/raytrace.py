@@ -251,7 +251,9 @@ def tile_iteration(
             )
             traced = pending[:left]
         intersect_rays(tracer.embree, rays.origins, rays.directions, traced, hits.face)
-        kernels.place_hits(origins=rays.origins, directions=rays.directions, rays=traced, triangles=triangles, hits=hits)
+        kernels.place_hits(
+            origins=rays.origins, directions=rays.directions, rays=traced, triangles=triangles, hits=hits
+        )
         return hits
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:

@@ -101,7 +101,10 @@ def _library() -> ctypes.CDLL:
         "rtcCommitScene": (None, [void_p]),
         "rtcReleaseScene": (None, [void_p]),
         "rtcNewGeometry": (void_p, [void_p, ctypes.c_int]),
-        "rtcSetNewGeometryBuffer": (void_p, [void_p, ctypes.c_int, uint, ctypes.c_int, ctypes.c_size_t, ctypes.c_size_t]),
+        "rtcSetNewGeometryBuffer": (
+            void_p,
+            [void_p, ctypes.c_int, uint, ctypes.c_int, ctypes.c_size_t, ctypes.c_size_t],
+        ),
         "rtcCommitGeometry": (None, [void_p]),
         "rtcAttachGeometry": (uint, [void_p, void_p]),
         "rtcReleaseGeometry": (None, [void_p]),
@@ -310,7 +313,6 @@ class Tracer:
         intersect_rays(self.embree, origins, directions, listed, hits.face)
         place_hits(origins=origins, directions=directions, rays=listed, triangles=self.triangles, hits=hits)
         return hits
-
 
     def bare_query(self, origins: np.ndarray, directions: np.ndarray, face: np.ndarray) -> None:
         """Embree's packet query of every ray into ``face`` (n,) int32 and nothing else: the limit an

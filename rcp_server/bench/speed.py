@@ -105,7 +105,9 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         # each repeat pairs a painting with Embree alone right after it, under the same machine load: the
         # median of the pairwise ratios is steadier than the ratio of the medians
         ratios = sorted(p / a for p, a in zip(painted, seconds, strict=True))
-        print(f"{name + ' alone, same rays and threads:':38s} {embree * 1e3:7.2f} ms   {n / embree / 1e6:5.2f} M rays/s")
+        print(
+            f"{name + ' alone, same rays and threads:':38s} {embree * 1e3:7.2f} ms   {n / embree / 1e6:5.2f} M rays/s"
+        )
         print(
             f"  ratio iteration / {name}: {statistics.median(ratios):.2f}x median of {repeats} pairs "
             f"(spread {ratios[0]:.2f}-{ratios[-1]:.2f}; {targets[name]})"
