@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 from concurrent.futures import Executor, ThreadPoolExecutor
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -127,7 +127,7 @@ def paint(
     if previous is None or previous.region != region:
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
-    scene.geometry(time)  # build (or fetch) the BVH once, before the tiles ask for it
+    frame = raytrace.Frame.of(scene, time, camera, params)  # the scene as every tile's kernels take it, once
     tiles = region.tiles(tile_rows(region, threads, params.spp * params.iterations))
     keep = [np.empty((height, width, 3), np.float32) for _ in range(params.iterations)] if keep_iterations else None
     if keep is not None and region != Region(width, height):
@@ -141,9 +141,21 @@ def paint(
         with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as own:
             return list(own.map(work, over))
 
-    def run(iteration: Callable[[Region], TileIteration], start: PaintState, iterations: int, keep) -> list:
-        """Every tile: ``iterations`` of ``iteration(tile)`` from ``start``; each tile's state and seconds."""
-        return on_tiles(lambda tile: _run_tile(iteration(tile), start.rows(tile), iterations, keep, should_stop))
+    def run(
+        iteration: Callable[[Region], TileIteration], start, iterations: int, keep, beside: Callable | None = None
+    ) -> list:
+        """Every tile: ``iterations`` of ``iteration(tile)`` from ``start`` (a PaintState of the region, or one
+        per tile); each tile's state and seconds. ``beside``: a job for the same pool at the same time."""
+
+        def one(n: int) -> tuple[PaintState, dict[str, float]]:
+            if n == len(tiles):
+                beside()
+                return None
+            tile = tiles[n]
+            begin = start[n] if isinstance(start, list) else start.rows(tile)
+            return _run_tile(iteration(tile), begin, iterations, keep, should_stop)
+
+        return on_tiles(one, list(range(len(tiles) + (beside is not None))))[: len(tiles)]
 
     def then(first: list, rest: list) -> list:
         """The parts of two runs over the same tiles, one after the other: the second's states, both's seconds."""
@@ -160,36 +172,34 @@ def paint(
     free = previous.blank and params.spp == 1 and region == full and not given
     extra: list[dict[str, float]] = []  # seconds outside the tiles' iterations
 
-    def traced(settings: PaintParams, record: bool = False) -> Callable[[Region], TileIteration]:
-        """The traced iteration of a tile; ``record``: the iteration writes what it hits into ``seen``."""
+    painters: dict[Region, raytrace.TracedTile] = {}
 
-        def iteration(tile: Region) -> TileIteration:
-            setup = setup_tile(camera, tile, settings)
-            if record:
-                return raytrace.tile_iteration(scene, time, setup, settings, record_seen=seen.rows(tile))
-            return raytrace.tile_iteration(scene, time, setup, settings, seen=seen)
-
-        return iteration
+    def traced(tile: Region) -> TileIteration:
+        """The traced iterations of a tile, set up once for the painting (both runs of the fast path use it).
+        A painting whose first iteration is free records what it hits into ``seen``."""
+        if tile not in painters:
+            record = seen.rows(tile) if seen is not None and free else None
+            painters[tile] = raytrace.TracedTile(frame, setup_tile(camera, tile, params), params, seen, record)
+        return painters[tile]
 
     if seen is not None and free:
         # ---- fast, eyes at rest: the first iteration casts the plain render's rays; what they hit decides
-        # most rays of the later iterations (raytrace.tile_iteration) ----
-        first = run(traced(replace(params, iterations=1), record=True), previous, 1, keep)
+        # most rays of the later iterations (raytrace.TracedTile), once every tile has painted it ----
+        first = run(traced, previous, 1, keep, beside=lambda: raytrace.thin_parts(scene, time, camera, grid, seen))
         parts = first
         if params.iterations > 1:
-            start = PaintState.joined([p[0] for p in first], region)
             kept = keep[1:] if keep is not None else None
-            parts = then(first, run(traced(params), start, params.iterations - 1, kept))
+            parts = then(first, run(traced, [p[0] for p in first], params.iterations - 1, kept))
     elif params.method == "raytrace":
         if seen is not None and not given:  # what the pixel centres see, in a pass of its own
             visible = grid.tiles(tile_rows(grid, threads))
-            extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), visible)
-        parts = run(traced(params), previous, params.iterations, keep)
+            extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), [*visible, None])
+        parts = run(traced, previous, params.iterations, keep)
     else:
         # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
         temporal = not previous.blank
         plain_keep = keep[:1] if keep is not None and not temporal else None
-        plain_parts = run(traced(replace(params, iterations=1)), PaintState.canvas(region), 1, plain_keep)
+        plain_parts = run(traced, PaintState.canvas(region), 1, plain_keep)
         plain = PaintState.joined([p[0] for p in plain_parts], region)
         # ---- the later iterations (all of them in temporal mode), looked up tile by tile ----
         start = previous if temporal else plain
@@ -221,6 +231,7 @@ def see(scene: Scene, time: float, camera: Camera, rows: Region) -> kernels.Seen
     painting's ``seen``, found apart (``kernels.Seen.joined`` puts the parts together)."""
     part = kernels.Seen.empty(rows.width, rows.height)
     raytrace.visible_faces(scene, time, camera, rows, part)
+    raytrace.thin_parts(scene, time, camera, rows, part)
     return part
 
 
@@ -233,9 +244,13 @@ def uses_seen(params: PaintParams) -> bool:
     return fast and params.iterations * params.spp > 1
 
 
-def _visible(scene: Scene, time: float, camera: Camera, tile: Region, seen: kernels.Seen) -> dict[str, float]:
-    """:func:`raytrace.visible_faces` of one tile of the full image into ``seen``; its seconds."""
+def _visible(scene: Scene, time: float, camera: Camera, tile: Region | None, seen: kernels.Seen) -> dict[str, float]:
+    """:func:`raytrace.visible_faces` of one tile of the grid into ``seen`` (None: where its thin parts lie,
+    over the whole grid, :func:`raytrace.thin_parts`); its seconds."""
     watch = Stopwatch()
     with watch.stage("intersect"):
-        raytrace.visible_faces(scene, time, camera, tile, seen.rows(tile))
+        if tile is None:
+            raytrace.thin_parts(scene, time, camera, Region(seen.width, seen.height), seen)
+        else:
+            raytrace.visible_faces(scene, time, camera, tile, seen.rows(tile))
     return watch.seconds

@@ -8,6 +8,7 @@ the plain numpy form of the camera assignment's displacements.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -15,12 +16,12 @@ import numpy as np
 from . import kernels
 from .camera import RAY_DTYPE, Camera, Region, plane_points
 from .mappings import MappingInput, get_mapping
-from .paintstate import PaintState, TileIteration
+from .paintstate import PaintState
 from .params import PaintParams
 from .sampling import noise_vectors, stratified_offsets
 from .scene import Scene
 from .stopwatch import Stopwatch
-from .tracer import Hits, intersect_rays
+from .tracer import Embree, Hits, Tracer, intersect_rays
 
 
 @dataclass
@@ -119,37 +120,43 @@ def field_plan(
     return kernels.Field(kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32))
 
 
-def assign_cameras(
-    state: PaintState, setup: TileSetup, params: PaintParams, z0: float, rays: Rays, pixels: np.ndarray | None = None
-) -> int:
-    """Camera assignment: fill ``rays`` from ``I_{n-1}`` for ``pixels`` (ascending; default every pixel of
-    the tile), sample k of the m-th pixel listed in row m * spp + k. Returns how many rays came out
-    non-finite (they must not reach Embree)."""
+def cameras(
+    state: PaintState, setup: TileSetup, params: PaintParams, z0: float, write_origins: bool = True
+) -> kernels.Cast:
+    """The tile's cameras from ``I_{n-1}`` as ``kernels.cast_rays`` takes them (``write_origins``: False when the
+    eyes rest and the ray buffers already hold the eye)."""
     pitch = setup.camera.pixel_pitch(setup.region.full_height)
     moves = not state.blank and state.has(params.reads())
-    target = field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves)
-    eye = field_plan(state, setup, z0, params.eye_mapping, params.lambda_e, moves)
-    eye_fixed = eye.kind == kernels.FIELD_ZERO
-    bad = kernels.cast_rays(
+    return kernels.Cast(
         eye=np.asarray(setup.camera.eye, np.float64),
         plane=setup.image_plane,
         xi=setup.xi,
         eta=setup.eta,
-        previous=kernels.channels(state),
         z0=float(z0),
-        target=target,
-        eye_field=eye,
+        target=field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves),
+        eye_field=field_plan(state, setup, z0, params.eye_mapping, params.lambda_e, moves),
         noise=kernels.or_dummy(setup.noise, 2),
         noise_scale=float(params.noise) if moves else 0.0,
+        write_origins=write_origins,
+    )
+
+
+def assign_cameras(
+    state: PaintState, setup: TileSetup, params: PaintParams, z0: float, rays: Rays, pixels: np.ndarray | None = None
+) -> int:
+    """Camera assignment alone: fill ``rays`` from ``I_{n-1}`` for ``pixels`` (ascending; default every pixel of
+    the tile), sample k of the m-th pixel listed in row m * spp + k. Returns how many rays came out
+    non-finite (they miss). A painting's iteration does this inside ``kernels.paint_iteration``."""
+    cast = cameras(state, setup, params, z0)
+    return kernels.cast_rays(
+        **{name: getattr(cast, name) for name in kernels.Cast._fields},
+        previous=kernels.channels(state),
         pixels=setup.pixels if pixels is None else pixels,
         v_p=rays.v_p,
         v_e=rays.v_e,
         origins=rays.origins,
         directions=rays.directions,
-        write_origins=not (eye_fixed and rays.at_eye),
     )
-    rays.at_eye = eye_fixed
-    return bad
 
 
 def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out: kernels.Seen) -> None:
@@ -172,122 +179,138 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
     out.distance[:] = hits.t
 
 
-def tile_iteration(
-    scene: Scene,
-    time: float,
-    setup: TileSetup,
-    params: PaintParams,
-    seen: kernels.Seen | None = None,
-    record_seen: kernels.Seen | None = None,
-) -> TileIteration:
-    """One traced iteration of the tile ``setup`` describes, of ``scene`` at ``time``: ``I_{n-1} -> I_n``.
-    It records the channels ``params`` reads; its buffers are the tile's, reused by every iteration.
+def thin_parts(scene: Scene, time: float, camera: Camera, rows: Region, out: kernels.Seen) -> None:
+    """Where geometry thinner than the grid lies between the pixel centres of ``rows`` (full-width rows of a
+    seen grid), into ``out.near`` (a bundles.Seen of those rows): ``kernels.cover_thin``."""
+    geometry, tracer = scene.geometry(time)
+    out.near[:] = np.inf
+    if tracer is None:
+        return
+    kernels.cover_thin(
+        triangles=geometry.triangles,
+        eye=np.asarray(camera.eye, np.float64),
+        basis=np.stack(camera.basis()),
+        tan_half=camera.half_height(),
+        aspect=rows.full_width / rows.full_height,
+        width=rows.full_width,
+        height=rows.full_height,
+        row0=rows.y0,
+        rows=rows.height,
+        near=out.near,
+    )
+
+
+@dataclass(frozen=True)
+class Frame:
+    """What every tile of one painting shares: the scene at its time as the kernels take it, looked up once."""
+
+    trace: kernels.Trace
+    shading: kernels.Shading
+    tracer: Tracer | None  # held while the painting lives: ``trace`` has only its native handle
+
+    @classmethod
+    def of(cls, scene: Scene, time: float, camera: Camera, params: PaintParams) -> Frame:
+        geometry, tracer = scene.geometry(time)
+        light = scene.light
+        reads = params.reads()
+        z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(np.asarray(camera.eye), time)
+        shading = kernels.Shading(
+            surfaces=kernels.Surfaces(**{name: getattr(geometry, name) for name in kernels.Surfaces._fields}),
+            environment=scene.environment.image,
+            light_dir=np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64),
+            ambient=float(light.ambient if light else 1.0),
+            lit=light is not None,
+            z_max=float(z_max),
+            depth="depth" in reads,
+            normal="normal" in reads,
+            direction="direction" in reads,
+        )
+        embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
+        return cls(kernels.Trace(embree, geometry.triangles), shading, tracer)
+
+
+class TracedTile:
+    """The traced iterations of one tile, ``I_{n-1} -> I_n`` (a ``paintstate.TileIteration``): set up once
+    for the painting, each iteration one compiled call (``kernels.paint_iteration``) into one of the tile's
+    two buffers, in turn (the other holds ``I_{n-1}``).
 
     With ``params.fast`` an iteration paints again only the pixels whose inputs changed since the
     iteration before (``kernels.changed_pixels``: colors in display levels while the eyes rest, else
-    exact), and, given ``seen`` (:func:`visible_faces` of the
-    full image, for paintings whose eyes rest), intersects without the BVH where ``seen`` decides
-    (``kernels.resolve_seen``). ``record_seen`` (a bundles.Seen of the tile): where to write what this
-    iteration's rays hit, for a one-sample iteration from the canvas (whose rays are those of
-    :func:`visible_faces`).
+    exact), and, given ``seen`` (:func:`visible_faces` of the full image, for paintings whose eyes rest),
+    intersects without the BVH where ``seen`` decides (``kernels.resolve_seen``). An iteration from the
+    canvas is the plain render, traced exactly, always (at one sample it casts the very rays whose hits
+    ``seen`` holds), so ``fast`` never changes the plain render and a first iteration never depends on where
+    ``seen`` came from (a tile stays a crop). ``record_seen`` (a bundles.Seen of the tile): where such an
+    iteration at one sample writes what its rays hit.
     """
-    geometry, tracer = scene.geometry(time)
-    surfaces = kernels.Surfaces(**{name: getattr(geometry, name) for name in kernels.Surfaces._fields})
-    light = scene.light
-    light_dir = np.asarray(light.direction if light else (0.0, -1.0, 0.0), np.float64)
-    ambient = float(light.ambient if light else 1.0)
-    eye = np.asarray(setup.camera.eye, np.float64)
-    z0 = params.focus(setup.camera)
-    z_max = params.z_max if params.z_max is not None else scene.depth_of_miss(eye, time)
-    reads = params.reads()
-    triangles = geometry.triangles
-    n = setup.region.pixel_count
-    rays = Rays.allocate(n, params.spp)
-    every_ray = np.arange(n * params.spp)  # the rays an iteration casts are the first of these, in order
-    if tracer is None:
-        seen = None
-    hits = Hits.empty(n * params.spp)  # what the rays hit: Embree's, or decided without it
-    if seen is not None:  # the rays left to Embree
-        pending = np.empty(n * params.spp, np.int64)
-    changed = np.empty(n, np.int64) if params.fast else None
-    compared = {name: name in reads for name in ("color", "depth", "normal", "direction")}
-    # colors compare in display levels while the eyes rest; with moving eyes every shortcut is exact
-    color_levels = kernels.DISPLAY_LEVELS if params.lambda_e == 0.0 else 0
-    last: list[PaintState] = []  # the state the iteration before started from
 
-    def to_paint(state: PaintState) -> np.ndarray:
-        """The pixels this iteration must paint: all of them, or with ``fast`` the ones whose inputs changed."""
-        before = last[0] if last else None
-        last[:] = [state]
-        if changed is None or before is None or before.blank or state.blank or not before.has(reads):
-            return setup.pixels
-        count = kernels.changed_pixels(
-            before=kernels.channels(before),
-            after=kernels.channels(state),
-            **compared,
-            color_levels=color_levels,
-            out=changed,
+    def __init__(
+        self,
+        frame: Frame,
+        setup: TileSetup,
+        params: PaintParams,
+        seen: kernels.Seen | None = None,
+        record_seen: kernels.Seen | None = None,
+    ):
+        self.frame, self.setup, self.params = frame, setup, params
+        self.seen = seen if frame.tracer is not None else None
+        self.record_seen = record_seen
+        self.z0 = params.focus(setup.camera)
+        self.reads = params.reads()
+        n, spp = setup.region.pixel_count, params.spp
+        self.scratch = kernels.Scratch(
+            v_p=np.empty((n, 3)),
+            v_e=np.empty((n, 3)),
+            origins=np.empty((n * spp, 3), RAY_DTYPE),
+            directions=np.empty((n * spp, 3), RAY_DTYPE),
+            hits=Hits.empty(n * spp),
+            pending=np.empty(n * spp, np.int64),
+            changed=np.empty(n, np.int64),
+            every=np.arange(n * spp),
         )
-        return changed[:count]
+        self.buffers = (PaintState.empty(setup.region, self.reads), PaintState.empty(setup.region, self.reads))
+        self.at_eye = False  # every origin in the ray buffers already is the camera's eye
+        self.last: PaintState | None = None  # the state the iteration before started from
+        self.clock = np.zeros(3, np.int64)
 
-    def intersect(count: int, canvas: bool) -> Hits:
-        if tracer is None:
-            hits.face[:count] = -1
-            return hits
-        # an iteration from the canvas is the plain render: traced exactly, always (at one sample it casts
-        # the very rays whose hits ``seen`` holds), so ``fast`` never changes the plain render and a first
-        # iteration never depends on where ``seen`` came from (a tile stays a crop)
-        traced = every_ray[:count]
-        if seen is not None and not canvas:
-            left = kernels.resolve_seen(
-                origins=rays.origins,
-                directions=rays.directions,
-                count=count,
-                plane=setup.image_plane,
-                seen=seen,
-                triangles=triangles,
-                hits=hits,
-                pending=pending,
-            )
-            traced = pending[:left]
-        intersect_rays(tracer.embree, rays.origins, rays.directions, traced, hits.face)
-        kernels.place_hits(
-            origins=rays.origins, directions=rays.directions, rays=traced, triangles=triangles, hits=hits
+    def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
+        params, reads, before = self.params, self.reads, self.last
+        self.last = state
+        compare = params.fast and before is not None and not (before.blank or state.blank) and before.has(reads)
+        cast = cameras(state, self.setup, params, self.z0)
+        eyes_rest = cast.eye_field.kind == kernels.FIELD_ZERO
+        cast = cast._replace(write_origins=not (eyes_rest and self.at_eye))
+        self.at_eye = eyes_rest
+        out = self.buffers[1] if state.color is self.buffers[0].color else self.buffers[0]
+        use_seen = self.seen is not None and not state.blank
+        self.clock[:] = 0
+        clock = time.perf_counter()
+        kernels.paint_iteration(
+            cast=cast,
+            compare=kernels.Compare(
+                any=compare,
+                color="color" in reads,
+                depth="depth" in reads,
+                normal="normal" in reads,
+                direction="direction" in reads,
+                # colors compare in display levels while the eyes rest; with moving eyes every shortcut is exact
+                color_levels=kernels.DISPLAY_LEVELS if params.lambda_e == 0.0 else 0,
+            ),
+            before=kernels.channels(before if compare else state),
+            previous=kernels.channels(state),
+            out=kernels.channels(out),
+            trace=self.frame.trace,
+            seen=self.seen if use_seen else _NO_SEEN,
+            use_seen=use_seen,
+            shading=self.frame.shading,
+            scratch=self.scratch,
+            clock=self.clock,
         )
-        return hits
+        watch.share(time.perf_counter() - clock, dict(zip(("camera", "intersect", "shade"), self.clock, strict=True)))
+        if self.record_seen is not None and state.blank and params.spp == 1:
+            self.record_seen.face[:] = self.scratch.hits.face
+            self.record_seen.distance[:] = self.scratch.hits.t
+        return out
 
-    def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
-        with watch.stage("camera"):
-            pixels = to_paint(state)
-            assign_cameras(state, setup, params, z0, rays, pixels)
-        count = len(pixels) * params.spp
-        with watch.stage("intersect"):
-            hits = intersect(count, state.blank)
-            if record_seen is not None:
-                record_seen.face[:] = hits.face[:count]
-                record_seen.distance[:] = hits.t[:count]
-        with watch.stage("shade"):
-            # the pixels not painted keep their value: start from a copy of the state
-            new = PaintState.empty(setup.region, reads) if len(pixels) == n else state.copy()
-            kernels.shade(
-                origins=rays.origins,
-                directions=rays.directions,
-                hits=hits,
-                spp=params.spp,
-                pixels=pixels,
-                surfaces=surfaces,
-                environment=scene.environment.image,
-                light_dir=light_dir,
-                ambient=ambient,
-                lit=light is not None,
-                eye=eye,
-                forward=setup.basis[2],
-                z_max=float(z_max),
-                out=kernels.channels(new),
-                need_depth=new.depth is not None,
-                need_normal=new.normal is not None,
-                need_direction=new.direction is not None,
-            )
-        return new
 
-    return iterate
+_NO_SEEN = kernels.Seen.empty(1, 1)

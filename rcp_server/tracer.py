@@ -194,13 +194,14 @@ def _finite(origins, directions, s):
 
 
 @numba.njit(nogil=True, cache=True)
-def intersect_rays(embree, origins, directions, rays, face):
+def intersect_rays(embree, origins, directions, rays, face, coherent=True):
     """Closest triangle of each listed ray, found by Embree: ``face[s]`` for every ``s`` in ``rays``.
 
     embree : :class:`Embree`;  origins, directions : (n, 3) float32, directions unit length;  rays : (m,)
     int64, the rays to trace (in screen order for coherent packets);  face : (n,) int32, written -1 for a miss.
-    A ray with a non-finite component is not sent to Embree: it misses. Rays go in packets of eight
-    consecutive entries of ``rays``, marked coherent; fewer than two valid rays go alone.
+    A ray with a non-finite component is not sent to Embree: it misses. ``coherent``: rays go in packets of
+    eight consecutive entries of ``rays`` (fewer than two valid rays go alone), else one by one (scattered
+    rays: a packet whose rays part at the root costs more than its rays alone).
     """
     ints, floats, address = _aligned(_RAYHIT8_WORDS + _PACKET + _ARGS_WORDS)
     rayhit, valid, arguments = address, address + 4 * _RAYHIT8_WORDS, address + 4 * (_RAYHIT8_WORDS + _PACKET)
@@ -235,7 +236,7 @@ def intersect_rays(embree, origins, directions, rays, face):
             ints[_INST * 8 + lane] = _INVALID_ID
         if count == 0:
             continue
-        if count == 1:  # a lone ray costs less alone
+        if count == 1 or not coherent:  # a lone ray costs less alone
             for lane in range(lanes):
                 if ints[_RAYHIT8_WORDS + lane] == 0:
                     continue

@@ -170,7 +170,7 @@ def test_every_shipped_scene_loads_and_paints(tmp_path, capsys):
         assert np.asarray(Image.open(out)).std() > 1, name
 
 
-def test_bench_speed_prints_the_stage_split_and_the_ratio_to_embree_alone(capsys):
+def test_bench_speed_prints_the_stage_split_and_the_ratios_to_embreex_and_to_embree_packets(capsys):
     assert main(["bench", "speed", "--width", "64", "--height", "36", "--iterations", "2", "--repeats", "1"]) == 0
     out = capsys.readouterr().out
     for needle in (
@@ -179,7 +179,9 @@ def test_bench_speed_prints_the_stage_split_and_the_ratio_to_embree_alone(capsys
         "intersect",
         "shade",
         "bookkeeping",
-        "Embree alone",
-        "ratio iteration / Embree alone",
+        "embreex alone",
+        "ratio iteration / embreex",
+        "packets alone",
+        "ratio iteration / packets",
     ):
         assert needle in out, needle

@@ -46,6 +46,12 @@ def _speed(args: argparse.Namespace) -> None:
     speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
 
 
+def _agreement(args: argparse.Namespace) -> None:
+    from .agreement import run
+
+    run(args.models, args.width, args.height)
+
+
 def _levels(args: argparse.Namespace) -> None:
     from .levels import levels
 
@@ -120,6 +126,12 @@ def add_bench_commands(subparsers) -> None:
     )
     p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
     p.set_defaults(run_bench=_speed)
+
+    p = command("agreement", "how often fast changes a pixel, against tracing every ray, on scenes and models")
+    p.add_argument("models", nargs="*", help="model or scene files to check besides the shipped scenes")
+    p.add_argument("--width", type=positive_int, default=320, help="pixels (default 320)")
+    p.add_argument("--height", type=positive_int, default=180, help="pixels (default 180)")
+    p.set_defaults(run_bench=_agreement)
 
     p = command("levels", "fast's colors compared in 8 display levels, against a change of seed")
     p.add_argument("--width", type=positive_int, default=640, help="pixels (default 640)")

@@ -2,21 +2,36 @@
 
 ``cast.py``: camera assignment (``cast_rays``, with the built-in mappings fused in, and ``fill_field``);
 ``shade.py``: hits -> per-pixel data (``shade``); ``triangle.py``: where a ray meets the triangle it hits
-(``place_hits``); ``lookup.py``: the image-space method's lookup (``look_up``); ``seen.py`` and
+(``place_hits``); ``iterate.py``: one traced iteration of a tile, the steps above chained in one call
+(``paint_iteration``); ``lookup.py``: the image-space method's lookup (``look_up``); ``seen.py`` and
 ``reuse.py``: the shortcuts of the ``fast`` setting (``resolve_seen`` finds the hit where the plain render
-already knows it, ``changed_pixels`` what must be painted again). Each releases the GIL, so tiles run on
-threads side by side with Embree, and each has a plain numpy reference in ``tests/engine`` that it is
-checked against.
+already knows it, ``cover_thin`` where it may not; ``changed_pixels`` what must be painted again,
+``carry`` what is kept). Each releases the GIL, so tiles run on threads side by side, and each has a plain
+numpy reference in ``tests/engine`` that it is checked against.
 
 Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same type passed in each
 other's place must be an error, not a wrong image.
 """
 
-from .bundles import Channels, Field, ImagePlane, Seen, Surfaces, channels, or_dummy
+from .bundles import (
+    Cast,
+    Channels,
+    Compare,
+    Field,
+    ImagePlane,
+    Scratch,
+    Seen,
+    Shading,
+    Surfaces,
+    Trace,
+    channels,
+    or_dummy,
+)
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
+from .iterate import paint_iteration
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
-from .reuse import DISPLAY_LEVELS, changed_pixels
-from .seen import resolve_seen
+from .reuse import DISPLAY_LEVELS, carry, changed_pixels
+from .seen import cover_thin, resolve_seen
 from .shade import shade
 from .triangle import place_hits
 
@@ -30,17 +45,25 @@ __all__ = [
     "FIELD_GIVEN",
     "FIELD_NORMAL",
     "FIELD_ZERO",
+    "Cast",
     "Channels",
+    "Compare",
     "Field",
     "ImagePlane",
+    "Scratch",
     "Seen",
+    "Shading",
     "Surfaces",
+    "Trace",
+    "carry",
     "cast_rays",
+    "cover_thin",
     "changed_pixels",
     "channels",
     "fill_field",
     "look_up",
     "or_dummy",
+    "paint_iteration",
     "place_hits",
     "resolve_seen",
     "shade",

@@ -71,31 +71,97 @@ class Surfaces(NamedTuple):
     texture_height: np.ndarray  # (K,) int64
 
 
+class Cast(NamedTuple):
+    """A tile's cameras, as ``cast.cast_rays`` takes them (its docstring has the shapes)."""
+
+    eye: np.ndarray  # (3,) float64
+    plane: ImagePlane
+    xi: np.ndarray  # (n, spp) float64
+    eta: np.ndarray
+    z0: float
+    target: Field
+    eye_field: Field
+    noise: np.ndarray  # (n, 3) float32, or a dummy
+    noise_scale: float
+    write_origins: bool
+
+
+class Compare(NamedTuple):
+    """Which channels decide whether a pixel is painted again (``reuse.changed_pixels``); ``any``: compare at
+    all (else every pixel is painted)."""
+
+    any: bool
+    color: bool
+    depth: bool
+    normal: bool
+    direction: bool
+    color_levels: int
+
+
+class Trace(NamedTuple):
+    """The scene as intersection needs it: Embree's handle (``tracer.Embree``; scene 0 when there are no
+    triangles) and the triangles (F, 3, 3) float32 where hits are placed."""
+
+    embree: tuple
+    triangles: np.ndarray
+
+
+class Shading(NamedTuple):
+    """What ``shade.shade`` needs of a painting beyond the rays, and the channels it records."""
+
+    surfaces: Surfaces
+    environment: np.ndarray  # (h, w, 3) float32
+    light_dir: np.ndarray  # (3,) float64
+    ambient: float
+    lit: bool
+    z_max: float
+    depth: bool  # record depth, normal, direction
+    normal: bool
+    direction: bool
+
+
+class Scratch(NamedTuple):
+    """A tile's working buffers, reused by all its iterations (a large allocation inside a kernel costs more
+    than the kernel): n pixels, spp samples."""
+
+    v_p: np.ndarray  # (n, 3) float64
+    v_e: np.ndarray  # (n, 3) float64
+    origins: np.ndarray  # (n*spp, 3) float32
+    directions: np.ndarray  # (n*spp, 3) float32
+    hits: tuple  # tracer.Hits of n*spp rays
+    pending: np.ndarray  # (n*spp,) int64 rays left to Embree
+    changed: np.ndarray  # (n,) int64 pixels painted again
+    every: np.ndarray  # (n*spp,) int64 0, 1, 2, ...
+
+
 class Seen(NamedTuple):
     """What the camera sees at the pixel centres of a ``width x height`` image (the painting's, or a finer
-    one for many samples): the hits of its plain render's rays, row-major (``raytrace.visible_faces``;
-    ``seen.resolve_seen`` reads it)."""
+    one for many samples): the hits of its plain render's rays, row-major (``raytrace.visible_faces``), and
+    where thin geometry lies between the centres (``seen.cover_thin``); ``seen.resolve_seen`` reads it."""
 
     face: np.ndarray  # (height * width,) int32, -1: the sky
     distance: np.ndarray  # (height * width,) float32 along the unit ray to the hit, meaningless on the sky
+    near: np.ndarray  # (height * width,) float32 least view depth of a thin part in the cell right-below, or inf
     width: int
     height: int
 
     @classmethod
     def empty(cls, width: int, height: int) -> Seen:
-        return cls(np.empty(width * height, np.int32), np.empty(width * height, np.float32), width, height)
+        n = width * height
+        return cls(np.empty(n, np.int32), np.empty(n, np.float32), np.full(n, np.inf, np.float32), width, height)
 
     @classmethod
     def joined(cls, parts: Sequence[Seen]) -> Seen:
         """Parts of full-width rows, top to bottom, as one."""
-        face = np.concatenate([p.face for p in parts])
-        distance = np.concatenate([p.distance for p in parts])
-        return cls(face, distance, parts[0].width, sum(p.height for p in parts))
+        face, distance, near = (
+            np.concatenate([getattr(p, name) for p in parts]) for name in ("face", "distance", "near")
+        )
+        return cls(face, distance, near, parts[0].width, sum(p.height for p in parts))
 
     def rows(self, tile: Region) -> Seen:
         """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""
         rows = slice(tile.y0 * self.width, (tile.y0 + tile.height) * self.width)
-        return Seen(self.face[rows], self.distance[rows], self.width, tile.height)
+        return Seen(self.face[rows], self.distance[rows], self.near[rows], self.width, tile.height)
 
 
 _DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}

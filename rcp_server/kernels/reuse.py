@@ -56,3 +56,26 @@ def changed_pixels(before, after, color, depth, normal, direction, color_levels,
             out[count] = pix
             count += 1
     return count
+
+
+@jit
+def carry(previous, out, painted, depth, normal, direction):
+    """Copy every pixel not listed in ``painted`` (ascending) from ``previous`` to ``out`` (bundles.Channels of
+    n pixels): the pixels an iteration keeps, written into the tile's other buffer rather than copying the
+    whole state before painting over it. Color always; depth, normal, direction: whether to copy that channel.
+    """
+    n = out.color.shape[0]
+    cursor = 0
+    for pix in range(n):
+        if cursor < len(painted) and painted[cursor] == pix:
+            cursor += 1
+            continue
+        for q in range(3):
+            out.color[pix, q] = previous.color[pix, q]
+        if depth:
+            out.depth[pix] = previous.depth[pix]
+        for q in range(3):
+            if normal:
+                out.normal[pix, q] = previous.normal[pix, q]
+            if direction:
+                out.direction[pix, q] = previous.direction[pix, q]

@@ -5,10 +5,11 @@ some point of the image plane, and the plain render says which triangle each pix
 that crosses the image plane among four pixel centres that saw triangles is tested against those
 triangles alone (one to four tests against Embree's tree walk); among four centres that all saw the sky
 it misses. Everything else (off screen, behind the eye, a silhouette: centres whose hits lie at
-distances apart, a ray that hits none of its candidates) is left to Embree. What this can get wrong is
-geometry thinner than the grid of centres that no centre saw: paintings of several samples, which
-antialias such geometry, look at a grid twice as fine. The tests bound how often it matters, against
-tracing every ray.
+distances apart, a ray that hits none of its candidates) is left to Embree, and so is a ray through a
+cell where geometry thinner than the grid lies nearer than what the corners saw (``cover_thin``: a
+baluster, a chair leg, a rail between centres that all saw the wall behind). What this can still get
+wrong: the sharp tip of a larger triangle poking into a cell whose corners did not see it, and a thin
+part at nearly the corners' depth. The tests bound how often it matters, against tracing every ray.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pendi
     ``triangle.place_hits`` gives them);  pending : (>= count,) int64 out
     """
     basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
-    seen_face, seen_distance = seen.face, seen.distance
+    seen_face, seen_distance, near = seen.face, seen.distance, seen.near
     width, height = seen.width, seen.height  # its grid of centres: the image's, or a finer one
     face, t_hit, b1_hit, b2_hit = hits.face, hits.t, hits.b1, hits.b2
     # image-plane coordinates (at unit distance along f) -> continuous pixel coordinates, centres at integers
@@ -62,22 +63,25 @@ def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pendi
         f10 = seen_face[corner + width]
         f11 = seen_face[corner + width + 1]
         if f00 < 0 and f01 < 0 and f10 < 0 and f11 < 0:
-            face[s] = -1
-            continue
-        if not (f00 == f01 and f00 == f10 and f00 == f11):
-            # several triangles: one surface, or a silhouette whose front object the ray may hit on a face
-            # no centre saw (a cylinder's next side). Their distances tell: a jump is a silhouette
-            near = math.inf
-            far = 0.0
-            for q in range(4):
-                c = corner + (q & 1) + (q >> 1) * width
-                if seen_face[c] >= 0:
-                    near = min(near, seen_distance[c])
-                    far = max(far, seen_distance[c])
-            if far > near * SILHOUETTE:
+            if near[corner] < math.inf:  # something thin between centres that saw the sky
                 pending[n_pending] = s
                 n_pending += 1
                 continue
+            face[s] = -1
+            continue
+        # the corners' distances: a jump is a silhouette, whose front object the ray may hit on a face no
+        # centre saw (a cylinder's next side); a thin part nearer than all of them is one no centre saw
+        closest = math.inf
+        far = 0.0
+        for q in range(4):
+            c = corner + (q & 1) + (q >> 1) * width
+            if seen_face[c] >= 0:
+                closest = min(closest, seen_distance[c])
+                far = max(far, seen_distance[c])
+        if far > closest * SILHOUETTE or near[corner] < closest * along * (1.0 - NEARER):
+            pending[n_pending] = s
+            n_pending += 1
+            continue
         ox = origins[s, 0]
         oy = origins[s, 1]
         oz = origins[s, 2]
@@ -101,3 +105,86 @@ def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pendi
         b1_hit[s] = best_u
         b2_hit[s] = best_v
     return n_pending
+
+
+THIN = 0.75  # a projected triangle whose inscribed circle is at least this wide (in grid cells) holds a
+# centre of the grid (any disk of radius sqrt(2)/2 does): some centre sees it unless something is in front
+NEARER = 0.01  # how much nearer than what the corners saw (relative) a thin part must be to count
+
+
+@jit
+def cover_thin(triangles, eye, basis, tan_half, aspect, width, height, row0, rows, near):
+    """Where geometry that no centre of the grid may see lies: for each cell of a ``width x height`` grid of
+    pixel centres (the cell whose top-left centre is pixel (x, y), at ``near[(y - row0) * width + x]``), the
+    least view depth of the *thin* triangles (``THIN``) that overlap it, for the cells of rows ``row0 ..
+    row0 + rows - 1``; ``near`` (rows * width,) float32 must hold +inf where nothing is written.
+
+    A ray that ``resolve_seen`` would decide by the corners' triangles goes to Embree where something thin
+    lies nearer than the corners saw: a baluster, a chair leg, a rail between centres that all saw the wall.
+    triangles : (F, 3, 3) float32;  eye : (3,);  basis : (3, 3) rows r, u, f;  tan_half, aspect : the camera's
+    Triangles reaching behind the eye's plane are left out (they cross the whole screen; rare, and then only
+    their own pixels can be wrong).
+    """
+    x_scale = width / (2.0 * aspect * tan_half)
+    y_scale = height / (2.0 * tan_half)
+    xs = [0.0, 0.0, 0.0]
+    ys = [0.0, 0.0, 0.0]
+    for f in range(triangles.shape[0]):
+        z_min = math.inf
+        behind = False
+        for k in range(3):
+            rx = triangles[f, k, 0] - eye[0]
+            ry = triangles[f, k, 1] - eye[1]
+            rz = triangles[f, k, 2] - eye[2]
+            z = rx * basis[2, 0] + ry * basis[2, 1] + rz * basis[2, 2]
+            if not z > 1e-6:
+                behind = True
+                break
+            xs[k] = ((rx * basis[0, 0] + ry * basis[0, 1] + rz * basis[0, 2]) / z + aspect * tan_half) * x_scale - 0.5
+            ys[k] = (tan_half - (rx * basis[1, 0] + ry * basis[1, 1] + rz * basis[1, 2]) / z) * y_scale - 0.5
+            z_min = min(z_min, z)
+        if behind:
+            continue
+        x_lo = min(xs[0], xs[1], xs[2])
+        x_hi = max(xs[0], xs[1], xs[2])
+        y_lo = min(ys[0], ys[1], ys[2])
+        y_hi = max(ys[0], ys[1], ys[2])
+        if x_hi < 0.0 or x_lo > width - 1 or y_hi < row0 or y_lo > row0 + rows:
+            continue  # off these rows of the grid
+        # ---- thin: the inscribed circle's radius, twice the area over the perimeter ----
+        area2 = abs((xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]))
+        perimeter = (
+            math.hypot(xs[1] - xs[0], ys[1] - ys[0])
+            + math.hypot(xs[2] - xs[1], ys[2] - ys[1])
+            + math.hypot(xs[0] - xs[2], ys[0] - ys[2])
+        )
+        if area2 >= THIN * perimeter:
+            continue
+        # ---- the cells it overlaps: row by row, the triangle's extent within the row's slab ----
+        first = max(int(math.floor(y_lo)), row0, 0)
+        last = min(int(math.floor(y_hi)), row0 + rows - 1, height - 2)
+        for cy in range(first, last + 1):
+            top = float(cy)
+            bottom = top + 1.0
+            lo = math.inf
+            hi = -math.inf
+            for k in range(3):
+                if top <= ys[k] <= bottom:
+                    lo = min(lo, xs[k])
+                    hi = max(hi, xs[k])
+                a = xs[k]
+                b = ys[k]
+                c = xs[(k + 1) % 3]
+                d = ys[(k + 1) % 3]
+                if b != d:
+                    for edge_y in (top, bottom):
+                        if (b - edge_y) * (d - edge_y) <= 0.0:
+                            x = a + (edge_y - b) * (c - a) / (d - b)
+                            lo = min(lo, x)
+                            hi = max(hi, x)
+            if lo > hi:
+                continue
+            for cx in range(max(int(math.floor(lo)), 0), min(int(math.floor(hi)), width - 2) + 1):
+                cell = (cy - row0) * width + cx
+                if z_min < near[cell]:
+                    near[cell] = z_min

@@ -1,0 +1,117 @@
+"""One traced iteration of one tile in one compiled call: which pixels to paint, their cameras, their hits
+(the visible-surface grid where it decides, Embree's packets for the rest) and their shading, without
+returning to Python in between (``raytrace.TracedTile`` calls it once an iteration). Each step is a kernel
+of its own module, tested there against its numpy reference; this one only chains them and times them.
+"""
+
+from __future__ import annotations
+
+from ..tracer import intersect_rays
+from .cast import cast_rays
+from .clock import cycles
+from .jit import jit
+from .reuse import carry, changed_pixels
+from .seen import resolve_seen
+from .shade import shade
+from .triangle import place_hits
+
+
+@jit
+def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen, shading, scratch, clock):
+    """``I_n`` of a tile into ``out`` from ``previous`` (``I_{n-1}``); returns how many pixels it painted.
+
+    cast : bundles.Cast, the tile's cameras (its ``pixels`` field is ignored: the pixels are decided here)
+    compare : bundles.Compare: with ``compare.any``, a pixel whose inputs in ``previous`` equal those in
+    ``before`` (``I_{n-2}``) is not painted but carried over (``reuse.changed_pixels``, ``reuse.carry``);
+    else every pixel is painted.  before, previous, out : bundles.Channels of the tile (``out`` may be
+    ``before``'s buffer: each pixel of it is read before it is written, never ``previous``'s)
+    trace : bundles.Trace, the scene's Embree handle and triangles (scene 0: no triangles, every ray misses)
+    seen, use_seen : the visible-surface grid and whether it decides rays (``seen.resolve_seen``)
+    shading : bundles.Shading;  scratch : bundles.Scratch of the tile
+    clock : (3,) int64, cycles added per stage: camera (including which pixels), intersect, shade
+    """
+    start = cycles()
+    n = out.color.shape[0]
+    spp = cast.xi.shape[1]
+    if compare.any:
+        count = changed_pixels(
+            before=before,
+            after=previous,
+            color=compare.color,
+            depth=compare.depth,
+            normal=compare.normal,
+            direction=compare.direction,
+            color_levels=compare.color_levels,
+            out=scratch.changed,
+        )
+        pixels = scratch.changed[:count]
+        carry(previous, out, pixels, shading.depth, shading.normal, shading.direction)
+    else:
+        count = n
+        pixels = scratch.every[:n]
+    cast_rays(
+        eye=cast.eye,
+        plane=cast.plane,
+        xi=cast.xi,
+        eta=cast.eta,
+        previous=previous,
+        z0=cast.z0,
+        target=cast.target,
+        eye_field=cast.eye_field,
+        noise=cast.noise,
+        noise_scale=cast.noise_scale,
+        pixels=pixels,
+        v_p=scratch.v_p,
+        v_e=scratch.v_e,
+        origins=scratch.origins,
+        directions=scratch.directions,
+        write_origins=cast.write_origins,
+    )
+    cast_end = cycles()
+    rays = count * spp
+    hits = scratch.hits
+    traced = scratch.every[:rays]
+    if use_seen:
+        left = resolve_seen(
+            origins=scratch.origins,
+            directions=scratch.directions,
+            count=rays,
+            plane=cast.plane,
+            seen=seen,
+            triangles=trace.triangles,
+            hits=hits,
+            pending=scratch.pending,
+        )
+        traced = scratch.pending[:left]
+    if trace.embree.scene == 0:
+        for s in traced:
+            hits.face[s] = -1
+    else:
+        intersect_rays(trace.embree, scratch.origins, scratch.directions, traced, hits.face, True)
+        place_hits(
+            origins=scratch.origins, directions=scratch.directions, rays=traced, triangles=trace.triangles, hits=hits
+        )
+    intersect_end = cycles()
+    shade(
+        origins=scratch.origins,
+        directions=scratch.directions,
+        hits=hits,
+        spp=spp,
+        pixels=pixels,
+        surfaces=shading.surfaces,
+        environment=shading.environment,
+        light_dir=shading.light_dir,
+        ambient=shading.ambient,
+        lit=shading.lit,
+        eye=cast.eye,
+        forward=cast.plane.basis[2],
+        z_max=shading.z_max,
+        out=out,
+        need_depth=shading.depth,
+        need_normal=shading.normal,
+        need_direction=shading.direction,
+    )
+    clock[0] += cast_end - start
+    clock[1] += intersect_end - cast_end
+    clock[2] += cycles() - intersect_end
+    return count
