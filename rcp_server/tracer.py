@@ -193,6 +193,28 @@ def _finite(origins, directions, s):
     return total == 0.0  # NaN or infinity anywhere makes the sum NaN
 
 
+EDGE = 1e-4  # a packet's hit this close to its triangle's edge (in barycentric weight) is asked again alone
+
+
+@numba.njit(inline="always")
+def _single(embree, origins, directions, s, ints, floats, address, arguments):
+    """Ray ``s`` alone (``rtcIntersect1``): its closest triangle, -1 for a miss."""
+    for k in range(3):
+        floats[_ORG + k] = origins[s, k]
+        floats[_DIR + k] = directions[s, k]
+    floats[_TNEAR] = 0.0
+    floats[_TIME] = 0.0
+    floats[_TFAR] = np.inf
+    ints[_MASK] = 0xFFFFFFFF
+    ints[_ID] = 0
+    ints[_FLAGS] = 0
+    ints[_GEOM] = _INVALID_ID
+    ints[_PRIM] = _INVALID_ID
+    ints[_INST] = _INVALID_ID
+    _call(embree.intersect1, embree.scene, address, arguments, 0)
+    return np.int32(ints[_PRIM]) if ints[_GEOM] != _INVALID_ID else np.int32(-1)
+
+
 @numba.njit(nogil=True, cache=True)
 def intersect_rays(embree, origins, directions, rays, face, coherent=True):
     """Closest triangle of each listed ray, found by Embree: ``face[s]`` for every ``s`` in ``rays``.
@@ -202,13 +224,16 @@ def intersect_rays(embree, origins, directions, rays, face, coherent=True):
     A ray with a non-finite component is not sent to Embree: it misses. ``coherent``: rays go in packets of
     eight consecutive entries of ``rays`` (fewer than two valid rays go alone), else one by one (scattered
     rays: a packet whose rays part at the root costs more than its rays alone).
+
+    The answer of a ray does not depend on the rays beside it: where two triangles tie (a ray through their
+    shared edge or corner), which one a packet reports depends on the order its traversal took, so a hit
+    within ``EDGE`` of its triangle's edge is asked again alone, and a tile stays a crop of the whole image.
     """
     ints, floats, address = _aligned(_RAYHIT8_WORDS + _PACKET + _ARGS_WORDS)
     rayhit, valid, arguments = address, address + 4 * _RAYHIT8_WORDS, address + 4 * (_RAYHIT8_WORDS + _PACKET)
     ints[_RAYHIT8_WORDS + _PACKET] = _QUERY_COHERENT
     ints[_RAYHIT8_WORDS + _PACKET + 1] = _FEATURES_ALL
     one_ints, one_floats, one = _aligned(_RAYHIT1_WORDS)
-    one_arguments = address + 4 * (_RAYHIT8_WORDS + _PACKET)  # the same arguments: coherent is a hint
     m = len(rays)
     for start in range(0, m, _PACKET):
         lanes = min(_PACKET, m - start)
@@ -238,31 +263,24 @@ def intersect_rays(embree, origins, directions, rays, face, coherent=True):
             continue
         if count == 1 or not coherent:  # a lone ray costs less alone
             for lane in range(lanes):
-                if ints[_RAYHIT8_WORDS + lane] == 0:
-                    continue
-                s = rays[start + lane]
-                for k in range(3):
-                    one_floats[_ORG + k] = origins[s, k]
-                    one_floats[_DIR + k] = directions[s, k]
-                one_floats[_TNEAR] = 0.0
-                one_floats[_TIME] = 0.0
-                one_floats[_TFAR] = np.inf
-                one_ints[_MASK] = 0xFFFFFFFF
-                one_ints[_ID] = 0
-                one_ints[_FLAGS] = 0
-                one_ints[_GEOM] = _INVALID_ID
-                one_ints[_PRIM] = _INVALID_ID
-                one_ints[_INST] = _INVALID_ID
-                _call(embree.intersect1, embree.scene, one, one_arguments, 0)
-                hit = one_ints[_GEOM] != _INVALID_ID
-                face[s] = np.int32(one_ints[_PRIM]) if hit else -1
+                if ints[_RAYHIT8_WORDS + lane] != 0:
+                    s = rays[start + lane]
+                    face[s] = _single(embree, origins, directions, s, one_ints, one_floats, one, arguments)
             continue
         _call(embree.intersect8, valid, embree.scene, rayhit, arguments)
         for lane in range(lanes):
             if ints[_RAYHIT8_WORDS + lane] == 0:
                 continue
-            hit = ints[_GEOM * 8 + lane] != _INVALID_ID
-            face[rays[start + lane]] = np.int32(ints[_PRIM * 8 + lane]) if hit else -1
+            s = rays[start + lane]
+            if ints[_GEOM * 8 + lane] == _INVALID_ID:
+                face[s] = -1
+                continue
+            u = floats[_U * 8 + lane]
+            v = floats[_V * 8 + lane]
+            if u < EDGE or v < EDGE or u + v > 1.0 - EDGE:
+                face[s] = _single(embree, origins, directions, s, one_ints, one_floats, one, arguments)
+            else:
+                face[s] = np.int32(ints[_PRIM * 8 + lane])
 
 
 # ---- the scene -----------------------------------------------------------------------------------------
