@@ -43,7 +43,10 @@ def _rays(triangles: np.ndarray) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         "at corners": (eye, _unit(corners)),
         "through edges": (eye[: len(edges)], _unit(edges)),
         "from inside": (inside, _unit(RNG.normal(size=(n, 3)))),
-        "grazing": (grazing_origins, _unit(np.stack([np.ones(n), RNG.uniform(-1e-4, 1e-4, n), RNG.uniform(-1, 1, n)], 1))),
+        "grazing": (
+            grazing_origins,
+            _unit(np.stack([np.ones(n), RNG.uniform(-1e-4, 1e-4, n), RNG.uniform(-1, 1, n)], 1)),
+        ),
     }
 
 
