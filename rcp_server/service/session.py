@@ -59,6 +59,7 @@ class Session:
         self.width = self.height = 0
         self.quality = 80
         self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
+        self.params: PaintParams | None = None  # the scene's with the overrides, validated once when they change
         self.temporal = False  # per-frame paintings: every frame is the painting of its camera
         self.animate = False
         self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
@@ -145,7 +146,8 @@ class Session:
         elif isinstance(msg, protocol.PaintMessage):
             overrides = {**self.overrides, **msg.changes()}
             overrides = {k: v for k, v in overrides.items() if v is not None}
-            self._check(self.scene, self.width, self.height, overrides)  # refuse now, keep the old settings
+            # refuse now, keep the old settings
+            self.params = self._check(self.scene, self.width, self.height, overrides)
             self.overrides = overrides
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
@@ -162,7 +164,7 @@ class Session:
         scene = self.service.scene(msg.scene)
         if scene is None:
             raise ValueError(self.service.unknown_scene(msg.scene))
-        self._check(scene, msg.width, msg.height, {})
+        self.params = self._check(scene, msg.width, msg.height, {})
         self.scene = scene
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
@@ -181,9 +183,12 @@ class Session:
             )
         )
 
-    def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> None:
-        """Refuses a view whose paintings could not be made: a bad setting, or more work than one may take."""
-        self.settings.check_painting(width, height, with_style(scene.paint, overrides))
+    def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> PaintParams:
+        """The view's painting settings, validated once here; refuses a view whose paintings could not be made:
+        a bad setting, or more work than one may take."""
+        params = with_style(scene.paint, overrides)
+        self.settings.check_painting(width, height, params)
+        return params
 
     def _changed(self) -> None:
         self.planner.view_changed()
@@ -219,12 +224,9 @@ class Session:
                 continue  # painted for a scene the client has left
             self._finished(job, result, seconds)
 
-    def _params(self) -> PaintParams:
-        return with_style(self.scene.paint, self.overrides)
-
     def _view(self) -> View:
         moving = self.animate and self.scene.animated
-        return View(self.width, self.height, self._params(), self.temporal, moving)
+        return View(self.width, self.height, self.params, self.temporal, moving)
 
     def _until_rest(self) -> float | None:
         """Seconds until refinement starts, None when nothing is due (the planner's, once there is a scene)."""
