@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .jit import jit
 from .triangle import ray_triangle
 
@@ -127,8 +129,10 @@ def cover_thin(triangles, eye, basis, tan_half, aspect, width, height, row0, row
     """
     x_scale = width / (2.0 * aspect * tan_half)
     y_scale = height / (2.0 * tan_half)
-    xs = [0.0, 0.0, 0.0]
-    ys = [0.0, 0.0, 0.0]
+    x_shift = aspect * tan_half * x_scale - 0.5
+    y_shift = tan_half * y_scale - 0.5
+    xs = np.empty(3)
+    ys = np.empty(3)
     for f in range(triangles.shape[0]):
         z_min = math.inf
         behind = False
@@ -140,8 +144,9 @@ def cover_thin(triangles, eye, basis, tan_half, aspect, width, height, row0, row
             if not z > 1e-6:
                 behind = True
                 break
-            xs[k] = ((rx * basis[0, 0] + ry * basis[0, 1] + rz * basis[0, 2]) / z + aspect * tan_half) * x_scale - 0.5
-            ys[k] = (tan_half - (rx * basis[1, 0] + ry * basis[1, 1] + rz * basis[1, 2]) / z) * y_scale - 0.5
+            inv = 1.0 / z
+            xs[k] = (rx * basis[0, 0] + ry * basis[0, 1] + rz * basis[0, 2]) * inv * x_scale + x_shift
+            ys[k] = y_shift - (rx * basis[1, 0] + ry * basis[1, 1] + rz * basis[1, 2]) * inv * y_scale
             z_min = min(z_min, z)
         if behind:
             continue
@@ -151,14 +156,15 @@ def cover_thin(triangles, eye, basis, tan_half, aspect, width, height, row0, row
         y_hi = max(ys[0], ys[1], ys[2])
         if x_hi < 0.0 or x_lo > width - 1 or y_hi < row0 or y_lo > row0 + rows:
             continue  # off these rows of the grid
-        # ---- thin: the inscribed circle's radius, twice the area over the perimeter ----
+        # ---- thin: the inscribed circle's radius, twice the area over the perimeter (at most three times the
+        # longest edge, which needs one root where the perimeter needs three) ----
         area2 = abs((xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]))
-        perimeter = (
-            math.hypot(xs[1] - xs[0], ys[1] - ys[0])
-            + math.hypot(xs[2] - xs[1], ys[2] - ys[1])
-            + math.hypot(xs[0] - xs[2], ys[0] - ys[2])
-        )
-        if area2 >= THIN * perimeter:
+        e0 = (xs[1] - xs[0]) ** 2 + (ys[1] - ys[0]) ** 2
+        e1 = (xs[2] - xs[1]) ** 2 + (ys[2] - ys[1]) ** 2
+        e2 = (xs[0] - xs[2]) ** 2 + (ys[0] - ys[2]) ** 2
+        if area2 * area2 >= 9.0 * THIN * THIN * max(e0, e1, e2):
+            continue
+        if area2 >= THIN * (math.sqrt(e0) + math.sqrt(e1) + math.sqrt(e2)):
             continue
         # ---- the cells it overlaps: row by row, the triangle's extent within the row's slab ----
         first = max(int(math.floor(y_lo)), row0, 0)
