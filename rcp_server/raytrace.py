@@ -189,12 +189,7 @@ def thin_parts(scene: Scene, time: float, camera: Camera, rows: Region, out: ker
     kernels.cover_thin(
         triangles=geometry.triangles,
         eye=np.asarray(camera.eye, np.float64),
-        basis=np.stack(camera.basis()),
-        tan_half=camera.half_height(),
-        aspect=rows.full_width / rows.full_height,
-        width=rows.full_width,
-        height=rows.full_height,
-        row0=rows.y0,
+        plane=kernels.ImagePlane.of(camera, rows),
         rows=rows.height,
         near=out.near,
     )

@@ -115,18 +115,20 @@ NEARER = 0.01  # how much nearer than what the corners saw (relative) a thin par
 
 
 @jit
-def cover_thin(triangles, eye, basis, tan_half, aspect, width, height, row0, rows, near):
-    """Where geometry that no centre of the grid may see lies: for each cell of a ``width x height`` grid of
-    pixel centres (the cell whose top-left centre is pixel (x, y), at ``near[(y - row0) * width + x]``), the
-    least view depth of the *thin* triangles (``THIN``) that overlap it, for the cells of rows ``row0 ..
-    row0 + rows - 1``; ``near`` (rows * width,) float32 must hold +inf where nothing is written.
+def cover_thin(triangles, eye, plane, rows, near):
+    """Where geometry that no centre of the grid may see lies: for each cell of the grid of pixel centres of
+    ``plane`` (a bundles.ImagePlane of the grid, whose ``y0`` is the first row of these cells; the cell
+    whose top-left centre is pixel (x, y) at ``near[(y - y0) * width + x]``), the least view depth of the
+    *thin* triangles (``THIN``) that overlap it, for the cells of ``rows`` rows; ``near`` (rows * width,)
+    float32 must hold +inf where nothing is written.
 
     A ray that ``resolve_seen`` would decide by the corners' triangles goes to Embree where something thin
     lies nearer than the corners saw: a baluster, a chair leg, a rail between centres that all saw the wall.
-    triangles : (F, 3, 3) float32;  eye : (3,);  basis : (3, 3) rows r, u, f;  tan_half, aspect : the camera's
-    Triangles reaching behind the eye's plane are left out (they cross the whole screen; rare, and then only
-    their own pixels can be wrong).
+    triangles : (F, 3, 3) float32;  eye : (3,) float64. Triangles reaching behind the eye's plane are left out
+    (they cross the whole screen; rare, and then only their own pixels can be wrong).
     """
+    basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
+    width, height, row0 = plane.full_width, plane.full_height, plane.y0
     x_scale = width / (2.0 * aspect * tan_half)
     y_scale = height / (2.0 * tan_half)
     x_shift = aspect * tan_half * x_scale - 0.5

@@ -115,7 +115,6 @@ def test_cover_thin_marks_every_cell_a_thin_triangle_crosses_and_nothing_far_fro
     rng = np.random.default_rng(5)
     width, height = 40, 30
     eye = np.zeros(3)
-    basis = np.eye(3) * np.array([1.0, 1.0, -1.0])[:, None]  # r = +x, u = +y, f = -z
     tan_half, aspect = np.tan(np.radians(30.0)), width / height
     # slivers and specks (thin) and a few large triangles (not thin) at depths 3 to 9
     centers = np.stack([rng.uniform(-3, 3, 60), rng.uniform(-2, 2, 60), rng.uniform(-9, -3, 60)], axis=1)
@@ -126,12 +125,7 @@ def test_cover_thin_marks_every_cell_a_thin_triangle_crosses_and_nothing_far_fro
     kernels.cover_thin(
         triangles=triangles,
         eye=eye,
-        basis=basis,
-        tan_half=tan_half,
-        aspect=aspect,
-        width=width,
-        height=height,
-        row0=0,
+        plane=kernels.ImagePlane.of(CAMERA, Region(width, height)),  # r = +x, u = +y, f = -z
         rows=height,
         near=near,
     )
