@@ -1,8 +1,10 @@
 """Triangle meshes with their surface colors: loaded from files through trimesh, or built as primitives.
 
 Every mesh becomes a :class:`Part`: vertices and faces plus per-corner shading data (colors, UVs, one
-optional texture), whatever the source carried: a texture through UVs, vertex colors, face colors, or a
-flat color. Broken input is repaired with a warning (non-finite vertices, zero-area faces) or refused
+optional texture) and its :class:`Material` (emission, unlit, alpha mask), whatever the source carried: a
+texture through UVs, vertex colors, face colors, or a flat color. A glTF also brings its cameras and lights
+(:class:`Model`, read by ``gltf.py``). Textures stay 8-bit RGBA as the file holds them (display colors;
+alpha linear). Broken input is repaired with a warning (non-finite vertices, zero-area faces) or refused
 with a :class:`MeshError` naming the file.
 """
 
@@ -11,11 +13,13 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 import trimesh
+
+from . import gltf
 
 log = logging.getLogger("rcp")
 
@@ -36,13 +40,36 @@ class MeshError(ValueError):
     """A mesh that cannot be used; the message names the source and what is wrong."""
 
 
+@dataclass(frozen=True, eq=False)
+class Material:
+    """What a surface shows beside its albedo.
+
+    emission : display color added after lighting (glTF's emissiveFactor), times ``emission_texture``
+    ((h, w, 4) uint8 over the part's UVs) when there is one;  unlit : the albedo as it is, no light
+    alpha_cutoff : a hit where the texture's alpha (in [0, 1]) is below this lets the ray through
+    (glTF's MASK; BLEND is drawn as a mask at 0.5); 0: opaque
+    """
+
+    emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    emission_texture: np.ndarray | None = None
+    unlit: bool = False
+    alpha_cutoff: float = 0.0
+
+    @property
+    def plain(self) -> bool:
+        return self.emission_texture is None and not any(self.emission) and not self.unlit and not self.alpha_cutoff
+
+
+PLAIN = Material()
+
+
 @dataclass
 class Part:
     """One surface in object space.
 
     vertices : (V, 3) float64, scene units;  faces : (F, 3) int64
-    corner_colors : (F, 3, 3) float32, linear [0, 1], multiplied into the texture when there is one
-    corner_uv : (F, 3, 2) float32 or None;  texture : (h, w, 3) float32 in [0, 1] or None
+    corner_colors : (F, 3, 3) float32, display colors in [0, 1], multiplied into the texture when there is one
+    corner_uv : (F, 3, 2) float32 or None;  texture : (h, w, 4) uint8 RGBA (as the file holds it) or None
     colored : the source carried colors of its own (a texture or material color, vertex or face colors);
     otherwise corner_colors is the default grey
     """
@@ -53,6 +80,7 @@ class Part:
     corner_uv: np.ndarray | None = None
     texture: np.ndarray | None = None
     colored: bool = False
+    material: Material = PLAIN
 
     def tinted(self, color) -> Part:
         return replace(self, corner_colors=self.corner_colors * np.asarray(color, np.float32).reshape(1, 1, 3))
@@ -158,12 +186,42 @@ def dropped_faces(counts: Counter) -> str:
     )
 
 
+@dataclass
+class Model:
+    """A model file's parts, and the cameras and lights it carries (a glTF's; none for other kinds)."""
+
+    parts: list[Part]
+    viewpoints: list[gltf.Viewpoint] = field(default_factory=list)
+    lights: list[gltf.PunctualLight] = field(default_factory=list)
+
+
 def _image_array(image) -> np.ndarray:
-    return np.asarray(image.convert("RGB"), dtype=np.float32) / 255.0
+    """A PIL image as (h, w, 4) uint8 RGBA (opaque where it has no alpha)."""
+    return np.ascontiguousarray(np.asarray(image.convert("RGBA"), dtype=np.uint8))
 
 
-def load_texture(path: Path) -> np.ndarray:
-    """An image file as (h, w, 3) float32 in [0, 1]."""
+def rgba8(texture: np.ndarray) -> np.ndarray:
+    """A texture as (h, w, 4) uint8 RGBA: as it is, or from (h, w, 3|4) floats in [0, 1] (rounded)."""
+    if texture.dtype == np.uint8 and texture.shape[-1] == 4:
+        return texture
+    if texture.dtype == np.uint8:
+        values = texture
+    else:
+        values = np.round(np.clip(texture, 0.0, 1.0) * 255.0).astype(np.uint8)
+    if values.shape[-1] == 4:
+        return np.ascontiguousarray(values)
+    out = np.full(values.shape[:2] + (4,), 255, np.uint8)
+    out[..., :3] = values
+    return out
+
+
+def texture_floats(texture: np.ndarray) -> np.ndarray:
+    """An 8-bit RGBA texture's colors as (h, w, 3) float32 in [0, 1] (the environment keeps floats)."""
+    return texture[..., :3].astype(np.float32) / 255.0
+
+
+def read_image(path: Path) -> np.ndarray:
+    """An image file as (h, w, 4) uint8 RGBA."""
     from PIL import Image, UnidentifiedImageError
 
     try:
@@ -173,41 +231,138 @@ def load_texture(path: Path) -> np.ndarray:
         raise MeshError(f"{path}: cannot read the image ({exc})") from None
 
 
+def load_texture(path: Path) -> np.ndarray:
+    """An image file as (h, w, 3) float32 in [0, 1]."""
+    return texture_floats(read_image(path))
+
+
+def _rgb(values) -> np.ndarray:
+    """Colors as trimesh hands them (uint8, uint16 or float) as (n, 3) float32 in [0, 1]."""
+    a = np.asarray(values)
+    scale = float(np.iinfo(a.dtype).max) if np.issubdtype(a.dtype, np.integer) else 1.0
+    return (a[..., :3].astype(np.float32) / scale).astype(np.float32)
+
+
+def _with_alpha(texture: np.ndarray | None, alpha: np.ndarray) -> np.ndarray:
+    """``texture`` (or white) with its alpha channel replaced by ``alpha`` (h', w') uint8, resized to fit."""
+    from PIL import Image
+
+    if texture is None:
+        texture = np.full(alpha.shape + (4,), 255, np.uint8)
+    if alpha.shape != texture.shape[:2]:
+        alpha = np.asarray(Image.fromarray(alpha).resize(texture.shape[1::-1], Image.BILINEAR))
+    out = texture.copy()
+    out[..., 3] = alpha
+    return out
+
+
+def _obj_alpha(material, folder: Path | None, images: dict) -> tuple[np.ndarray | None, float]:
+    """OBJ's ``map_d`` (its alpha channel, else its luminance) and ``d`` of a trimesh SimpleMaterial."""
+    from PIL import Image
+
+    kwargs = getattr(material, "kwargs", None) or {}
+    try:
+        dissolve = float(kwargs.get("d", ["1"])[0])
+    except (TypeError, ValueError, IndexError):
+        dissolve = 1.0
+    names = kwargs.get("map_d")
+    alpha = None
+    if names and folder is not None:
+        path = folder / " ".join(names)[-200:].split()[-1]
+        key = ("map_d", str(path))
+        if key not in images:
+            try:
+                with Image.open(path) as image:
+                    images[key] = np.asarray(image.getchannel("A") if "A" in image.getbands() else image.convert("L"))
+            except (OSError, ValueError) as exc:
+                log.warning("%s: cannot read the map_d image %s (%s); the material is opaque", folder, path.name, exc)
+                images[key] = None
+        alpha = images[key]
+    return alpha, dissolve if np.isfinite(dissolve) else 1.0
+
+
 def _part_from_trimesh(
-    mesh: trimesh.Trimesh, world_from_mesh: np.ndarray, source: str, tally: Counter, images: dict
-) -> Part:
+    mesh: trimesh.Trimesh,
+    world_from_mesh: np.ndarray,
+    source: str,
+    tally: Counter,
+    images: dict,
+    materials: list[gltf.MaterialInfo] | None = None,
+    folder: Path | None = None,
+) -> Part | None:
     """A part from one trimesh placed by the file's transform; ``images`` caches textures by identity,
-    since a file's meshes share few images (the staircase interior: 348 textured meshes, 9 images)."""
+    since a file's meshes share few images (the staircase interior: 348 textured meshes, 9 images).
+    ``materials``: a glTF's (``gltf.extras``), found again by the names ``gltf.renamed_materials`` gave;
+    ``folder``: where an OBJ's ``map_d`` lies. None: the mesh is wholly transparent (alpha below its cutoff)."""
     faces = np.asarray(mesh.faces, dtype=np.int64)
     with np.errstate(invalid="ignore", over="ignore"):  # non-finite vertices are repaired just below
         vertices = np.asarray(mesh.vertices, dtype=np.float64) @ world_from_mesh[:3, :3].T + world_from_mesh[:3, 3]
     visual = mesh.visual
     colors = _grey(len(faces))
     uv = texture = None
+    material_out = PLAIN
     kind = getattr(visual, "kind", None)
+    material = getattr(visual, "material", None)
     colored = kind in ("texture", "vertex", "face")
-    if kind == "texture":
+    if material is not None:
+        colored = True
         colors[:] = 1.0  # glTF's base color factor and OBJ's Kd default to white over a texture
-        material = visual.material
         image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
-        factor = getattr(material, "baseColorFactor", None)
-        if factor is None:
-            factor = getattr(material, "diffuse", None)
-        if factor is not None:
-            colors[:] = np.asarray(factor, dtype=np.float32)[:3] / 255.0
+        index = gltf.material_index(getattr(material, "name", None))
+        info = materials[index] if materials is not None and index is not None and index < len(materials) else None
+        if info is not None:  # a glTF material: its factors from the JSON, as floats and display colors
+            colors[:] = np.asarray(info.base_color, dtype=np.float32)
+        else:
+            factor = getattr(material, "baseColorFactor", None)
+            if factor is None:
+                factor = getattr(material, "diffuse", None)
+            if factor is not None:
+                colors[:] = np.asarray(factor, dtype=np.float32)[:3] / 255.0
+        vertex_rgb = getattr(visual, "vertex_attributes", {}).get("color")
+        if vertex_rgb is not None and len(vertex_rgb) == len(mesh.vertices):  # glTF's COLOR_0 beside a texture
+            colors *= gltf.display(_rgb(vertex_rgb)).astype(np.float32)[faces]
         # a material without an image is a flat color (a texture trimesh failed to read is reported by
         # load_mesh_file, from trimesh's own log)
-        if image is not None and visual.uv is not None and len(visual.uv) == len(vertices):
+        has_uv = getattr(visual, "uv", None) is not None and len(visual.uv) == len(mesh.vertices)
+        if has_uv:
             uv = np.asarray(visual.uv, dtype=np.float32)[faces]
+            if info is not None and info.uv_transform is not None:
+                uv = gltf.transformed_uv(uv, info.uv_transform)
+        if image is not None and has_uv:
             if id(image) not in images:
                 images[id(image)] = _image_array(image)
             texture = images[id(image)]
+        alpha_cutoff, emission, emission_texture, unlit = 0.0, (0.0, 0.0, 0.0), None, False
+        if info is not None:
+            coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
+            if coverage < info.alpha_cutoff and info.alpha_mode != "OPAQUE":
+                return None
+            textured_alpha = texture is not None and info.alpha_mode != "OPAQUE" and texture[..., 3].min() < 255
+            alpha_cutoff = info.alpha_cutoff / coverage if textured_alpha else 0.0
+            emission, unlit = info.emissive, info.unlit
+            emissive_image = getattr(material, "emissiveTexture", None)
+            if info.has_emissive_texture and emissive_image is not None and has_uv:
+                if id(emissive_image) not in images:
+                    images[id(emissive_image)] = _image_array(emissive_image)
+                emission_texture = images[id(emissive_image)]
+        elif kind == "texture" or image is not None:  # OBJ: map_d and d
+            alpha, dissolve = _obj_alpha(material, folder, images)
+            if dissolve < 0.5:
+                return None
+            if alpha is not None and has_uv and alpha.min() < 255:
+                key = ("with map_d", id(texture), id(alpha))
+                if key not in images:
+                    images[key] = _with_alpha(texture, alpha)
+                texture, alpha_cutoff = images[key], 0.5
+        if texture is None and emission_texture is None:
+            uv = None
+        material_out = Material(emission, emission_texture, unlit, alpha_cutoff)
     elif kind == "vertex":
-        colors = (np.asarray(visual.vertex_colors, dtype=np.float32)[:, :3] / 255.0)[faces]
+        colors = _rgb(visual.vertex_colors)[faces]
     elif kind == "face":
-        face_rgb = np.asarray(visual.face_colors, dtype=np.float32)[:, :3] / 255.0
+        face_rgb = _rgb(visual.face_colors)
         colors = np.repeat(face_rgb[:, None, :], 3, axis=1)
-    part = repaired(Part(vertices, faces, colors, uv, texture, colored), source, tally)
+    part = repaired(Part(vertices, faces, colors, uv, texture, colored, material_out), source, tally)
     # weld corners that share a position (a triangle soup, UV seams) so normals shade smooth across
     # them; colors and UVs live per corner, so welding changes nothing else
     unique, inverse = trimesh.grouping.unique_rows(part.vertices[part.faces].reshape(-1, 3), digits=8)
@@ -232,7 +387,36 @@ class _TrimeshTroubles(logging.Handler):
 
 
 def load_mesh_file(path: Path, refuse_nonfinite: bool = False) -> list[Part]:
-    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied.
+    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied
+    (:func:`load_model`'s parts)."""
+    return load_model(path, refuse_nonfinite).parts
+
+
+def _read_trimesh_scene(path: Path) -> tuple[trimesh.Scene, gltf.GltfExtras | None]:
+    """trimesh's scene of the file, and for a glTF what trimesh drops (its materials found again by name)."""
+    suffix = path.suffix.lower()
+    if suffix not in (".glb", ".gltf"):
+        # process=False: trimesh would silently drop non-finite vertices; repaired() reports them
+        return trimesh.load_scene(str(path), process=False), None
+    glb = suffix == ".glb"
+    data = path.read_bytes()
+    try:
+        document, binary = gltf.split(data, glb)
+        found = gltf.extras(document)
+        data = gltf.joined(gltf.renamed_materials(document), binary, glb)
+    except gltf.GltfError as exc:
+        raise MeshError(f"{path}: {exc}") from None
+    import io
+
+    resolver = trimesh.resolvers.FilePathResolver(str(path))
+    loaded = trimesh.load_scene(io.BytesIO(data), file_type=suffix[1:], resolver=resolver, process=False)
+    del data
+    return loaded, found
+
+
+def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
+    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied, and
+    a glTF's cameras and lights.
 
     Meshes of the file with no usable triangle are skipped with a warning; a file with none is an error.
     ``refuse_nonfinite``: a vertex that is not a finite number is an error, not a repair (files from strangers).
@@ -245,9 +429,9 @@ def load_mesh_file(path: Path, refuse_nonfinite: bool = False) -> list[Part]:
     trimesh_log.addHandler(troubles)
     level = trimesh_log.level
     trimesh_log.setLevel(logging.DEBUG)
+    found = None
     try:
-        # process=False: trimesh would silently drop non-finite vertices; repaired() reports them
-        loaded = trimesh.load_scene(str(path), process=False)
+        loaded, found = _read_trimesh_scene(path)
         # walk the scene graph rather than dump(): dump() copies every mesh and its texture image
         meshes = []
         for node in loaded.graph.nodes_geometry:
@@ -255,6 +439,8 @@ def load_mesh_file(path: Path, refuse_nonfinite: bool = False) -> list[Part]:
             mesh = loaded.geometry.get(name)
             if isinstance(mesh, trimesh.Trimesh) and len(mesh.faces):
                 meshes.append((mesh, np.asarray(world_from_mesh, dtype=np.float64)))
+    except MeshError:
+        raise
     except Exception as exc:  # trimesh raises anything from ValueError to KeyError on a bad file
         raise MeshError(f"{path}: trimesh cannot read it ({type(exc).__name__}: {exc})") from None
     finally:
@@ -264,12 +450,20 @@ def load_mesh_file(path: Path, refuse_nonfinite: bool = False) -> list[Part]:
         log.warning("%s: %s", path, message)
     if not meshes:
         raise MeshError(f"{path}: the file holds no triangles")
-    parts, unusable, tally, images = [], 0, Counter(), {}
+    parts, unusable, hidden, tally, images = [], 0, 0, Counter(), {}
+    materials = found.materials if found is not None else None
     for mesh, world_from_mesh in meshes:
         try:
-            parts.append(_part_from_trimesh(mesh, world_from_mesh, str(path), tally, images))
+            part = _part_from_trimesh(mesh, world_from_mesh, str(path), tally, images, materials, path.parent)
         except MeshError:
             unusable += 1
+            continue
+        if part is None:
+            hidden += 1
+        else:
+            parts.append(part)
+    mesh_count = len(meshes)
+    del loaded, meshes, images  # trimesh's copies of the images: only the 8-bit arrays the parts hold stay
     if refuse_nonfinite and tally["non-finite"]:
         raise MeshError(
             f"{path}: {tally['non-finite']:,} of {tally['faces']:,} triangles have vertices that are not finite "
@@ -278,10 +472,14 @@ def load_mesh_file(path: Path, refuse_nonfinite: bool = False) -> list[Part]:
     if tally["non-finite"] or tally["zero area"]:
         log.warning("%s: %s", path, dropped_faces(tally))
     if unusable and parts:
-        log.warning("%s: skipped %d of %d meshes that hold no usable triangle", path, unusable, len(meshes))
+        log.warning("%s: skipped %d of %d meshes that hold no usable triangle", path, unusable, mesh_count)
+    if hidden:
+        log.info("%s: %d meshes are wholly transparent (alpha below their cutoff) and left out", path, hidden)
     if not parts:
         raise MeshError(f"{path}: the file holds no usable triangles")
-    return parts
+    if found is None:
+        return Model(parts)
+    return Model(parts, found.viewpoints, found.lights)
 
 
 # ---- primitives: base on y = 0 and axis along +y (box, cylinder, cone); sphere about the origin ----

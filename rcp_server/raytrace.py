@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernels
+from .alphamask import pass_masked
 from .camera import RAY_DTYPE, Camera, Region, plane_points
 from .mappings import MappingInput, get_mapping
 from .paintstate import PaintState, TileIteration
@@ -167,6 +168,8 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
     kernels.place_hits(
         origins=rays.origins, directions=rays.directions, rays=setup.pixels, triangles=geometry.triangles, hits=hits
     )
+    if geometry.masked:  # ---- alpha: cut-outs let rays through (alphamask.py) ----
+        pass_masked(tracer, geometry, rays.origins, rays.directions, setup.pixels, hits)
     out.face[:] = hits.face
     out.distance[:] = hits.t
 
@@ -240,6 +243,8 @@ def tile_iteration(
             kernels.place_hits(
                 origins=rays.origins, directions=rays.directions, rays=every_ray[:count], triangles=triangles, hits=hits
             )
+            if geometry.masked:  # ---- alpha: cut-outs let rays through (alphamask.py) ----
+                pass_masked(tracer, geometry, rays.origins, rays.directions, every_ray[:count], hits)
             return hits
         left = kernels.resolve_seen(
             origins=rays.origins,
@@ -258,6 +263,8 @@ def tile_iteration(
             kernels.place_hits(
                 origins=rays.origins, directions=rays.directions, rays=rest, triangles=triangles, hits=decided
             )
+        if geometry.masked:  # ---- alpha: cut-outs let rays through, decided and pending alike (alphamask.py) ----
+            pass_masked(tracer, geometry, rays.origins, rays.directions, every_ray[:count], decided)
         return decided
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:

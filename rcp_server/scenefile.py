@@ -23,7 +23,7 @@ import trimesh
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .camera import Camera, CameraError
-from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
+from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive, read_image
 from .params import PaintParams
 from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
@@ -226,7 +226,7 @@ def _parts(spec: ObjectSpec, folder: Path, where: str) -> list[Part]:
 
 def _scene_object(spec: ObjectSpec, folder: Path, where: str) -> list[SceneObject]:
     objects = []
-    texture = load_texture(folder / spec.texture) if spec.texture else None
+    texture = read_image(folder / spec.texture) if spec.texture else None
     placements = [m @ spec.matrix() for m in _instances(spec)]
     motion = _motion(spec)
     waves = tuple(Waves(w.amplitude, w.wavelength, w.direction, w.speed) for w in spec.waves)

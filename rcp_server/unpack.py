@@ -391,7 +391,7 @@ def write_parts(path: Path, parts: list) -> None:
         if part.texture is not None and part.corner_uv is not None:
             if id(part.texture) not in images:
                 images[id(part.texture)] = len(images)
-                arrays[f"image_{len(images) - 1}"] = np.round(part.texture * 255).astype(np.uint8)
+                arrays[f"image_{len(images) - 1}"] = part.texture
             texture = images[id(part.texture)]
             arrays[f"uv_{k}"] = part.corner_uv
         arrays[f"texture_{k}"] = np.int64(texture)

@@ -83,10 +83,10 @@ def _array(arrays: dict, key: str, dtype, shape: tuple) -> np.ndarray:
 
 def _parts(arrays: dict, limits: Limits) -> list[Part]:
     count = int(_array(arrays, "images", np.int64, ()))
-    images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 3)) for j in range(count)]
+    images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 4)) for j in range(count)]
     if sum(im.shape[0] * im.shape[1] for im in images) > limits.max_texture_pixels:
         raise Refused(f"the model's images have more than {limits.max_texture_pixels:,} pixels")
-    textures = [im.astype(np.float32) / 255.0 for im in images]
+    textures = images  # 8-bit RGBA, as the shading reads them
     count = int(_array(arrays, "parts", np.int64, ()))
     if not 1 <= count <= limits.max_meshes:
         raise Refused(f"the model has {count:,} meshes; from 1 to {limits.max_meshes:,} are taken")

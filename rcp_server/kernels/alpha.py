@@ -1,0 +1,62 @@
+"""Which hits land on a texel that lets the ray through (glTF's alpha ``MASK``, OBJ's ``map_d``), compiled.
+
+``rcp_server/alphamask.py`` casts those rays again from just past their hit; its numpy reference is in
+``tests/engine/test_alpha.py``.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .jit import jit
+
+
+@jit
+def masked_rays(rays, hits, surfaces, out):
+    """Of the listed ``rays``, those whose hit lies on a texel with alpha below its material's cutoff; writes
+    their indices to the start of ``out`` and returns how many.
+
+    rays : (m,) int64;  hits : tracer.Hits (face -1 on a miss; b1, b2 placed);  surfaces : bundles.Surfaces
+    out : (>= m,) int64. Alpha is the texture's fourth channel in [0, 1], bilinear (it is linear coverage,
+    not a display value), wrapping as the colors do.
+    """
+    face, b1, b2 = hits.face, hits.b1, hits.b2
+    uv, texture_id, texels = surfaces.uv, surfaces.texture_id, surfaces.texels
+    offsets, widths, heights = surfaces.texture_offset, surfaces.texture_width, surfaces.texture_height
+    face_material, cutoff = surfaces.face_material, surfaces.material_alpha_cutoff
+    count = 0
+    for s in rays:
+        f = face[s]
+        if f < 0:
+            continue
+        limit = cutoff[face_material[f]]
+        tid = texture_id[f]
+        if limit <= 0.0 or tid < 0:
+            continue
+        w1 = b1[s]
+        w2 = b2[s]
+        w0 = 1.0 - w1 - w2
+        width = widths[tid]
+        height = heights[tid]
+        x = (w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]) * width - 0.5
+        y = (1.0 - (w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1])) * height - 0.5
+        fx0 = math.floor(x)
+        fy0 = math.floor(y)
+        fx = x - fx0
+        fy = y - fy0
+        c0 = int(fx0) % width
+        c1 = c0 + 1 if c0 + 1 < width else 0
+        r0 = int(fy0) % height
+        r1 = r0 + 1 if r0 + 1 < height else 0
+        a = offsets[tid] + r0 * width
+        b = offsets[tid] + r1 * width
+        alpha = (
+            (1.0 - fx) * (1.0 - fy) * texels[a + c0, 3]
+            + fx * (1.0 - fy) * texels[a + c1, 3]
+            + (1.0 - fx) * fy * texels[b + c0, 3]
+            + fx * fy * texels[b + c1, 3]
+        ) / 255.0
+        if alpha < limit:
+            out[count] = s
+            count += 1
+    return count
