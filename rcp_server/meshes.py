@@ -10,6 +10,7 @@ with a :class:`MeshError` naming the file.
 
 from __future__ import annotations
 
+import gc
 import logging
 import math
 from collections import Counter
@@ -215,6 +216,58 @@ def rgba8(texture: np.ndarray) -> np.ndarray:
     return out
 
 
+def packed(parts: list[Part]) -> list[Part]:
+    """``parts`` with every distinct texture (colors and emission) moved into one (T, 4) uint8 store, each
+    part's a view of it: the scene's geometry then takes the store as it is (``scene.build_geometry``)
+    rather than a second copy of every texel. Each texture's own array is let go as soon as it is copied,
+    so the store costs no second copy while it fills (its pages are touched only as they are written)."""
+    parts = list(parts)
+    users: dict[int, list[tuple[int, str]]] = {}  # id(image) -> (part index, "texture" or "emission")
+    images: dict[int, np.ndarray] = {}
+    for k, part in enumerate(parts):
+        for slot, image in (("texture", part.texture), ("emission", part.material.emission_texture)):
+            if image is not None:
+                images.setdefault(id(image), image)
+                users.setdefault(id(image), []).append((k, slot))
+    bases = {id(_base(image)) for image in images.values()}
+    if not images or (len(bases) == 1 and _base(next(iter(images.values()))).ndim == 2):
+        return parts  # none, or all in one store already
+    store = np.empty((sum(im.shape[0] * im.shape[1] for im in images.values()), 4), np.uint8)
+    start = 0
+    for key in list(images):
+        image = images.pop(key)
+        size = image.shape[0] * image.shape[1]
+        view = store[start : start + size].reshape(image.shape[0], image.shape[1], 4)
+        view[:] = rgba8(image)
+        start += size
+        del image
+        for k, slot in users[key]:
+            part = parts[k]
+            if slot == "texture":
+                parts[k] = replace(part, texture=view)
+            else:
+                parts[k] = replace(part, material=replace(part.material, emission_texture=view))
+    return parts
+
+
+def _base(image: np.ndarray) -> np.ndarray:
+    """The array whose memory ``image`` views (itself when it owns its memory)."""
+    while isinstance(image.base, np.ndarray):
+        image = image.base
+    return image
+
+
+def release_freed_memory() -> None:
+    """Hands memory that was freed back to the system (glibc keeps freed heap pages otherwise, and a loaded
+    model has just freed hundreds of MB of trimesh's and Pillow's); nothing elsewhere."""
+    try:
+        import ctypes
+
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
 def texture_floats(texture: np.ndarray) -> np.ndarray:
     """An 8-bit RGBA texture's colors as (h, w, 3) float32 in [0, 1] (the environment keeps floats)."""
     return texture[..., :3].astype(np.float32) / 255.0
@@ -329,9 +382,7 @@ def _part_from_trimesh(
             if info is not None and info.uv_transform is not None:
                 uv = gltf.transformed_uv(uv, info.uv_transform)
         if image is not None and has_uv:
-            if id(image) not in images:
-                images[id(image)] = _image_array(image)
-            texture = images[id(image)]
+            texture = images.decoded(image)
         alpha_cutoff, emission, emission_texture, unlit = 0.0, (0.0, 0.0, 0.0), None, False
         if info is not None:
             coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
@@ -342,9 +393,7 @@ def _part_from_trimesh(
             emission, unlit = info.emissive, info.unlit
             emissive_image = getattr(material, "emissiveTexture", None)
             if info.has_emissive_texture and emissive_image is not None and has_uv:
-                if id(emissive_image) not in images:
-                    images[id(emissive_image)] = _image_array(emissive_image)
-                emission_texture = images[id(emissive_image)]
+                emission_texture = images.decoded(emissive_image)
         elif kind == "texture" or image is not None:  # OBJ: map_d and d
             alpha, dissolve = _obj_alpha(material, folder, images)
             if dissolve < 0.5:
@@ -368,6 +417,42 @@ def _part_from_trimesh(
     unique, inverse = trimesh.grouping.unique_rows(part.vertices[part.faces].reshape(-1, 3), digits=8)
     welded = part.vertices[part.faces].reshape(-1, 3)[unique]
     return replace(part, vertices=welded, faces=inverse.reshape(-1, 3).astype(np.int64))
+
+
+class _Images(dict):
+    """A file's images, each decoded once, straight into one (T, 4) uint8 store sized up front from the
+    images' headers (trimesh's images are not decoded until asked), and Pillow's copy closed at once: the
+    staircase interior's 9 images never exist twice. Other arrays made while reading (OBJ's ``map_d``
+    combined with its colors) are kept by key as in a dict."""
+
+    def __init__(self, meshes: list):
+        super().__init__()
+        distinct = {}
+        for mesh, _ in meshes:
+            material = getattr(mesh.visual, "material", None)
+            for name in ("baseColorTexture", "image", "emissiveTexture"):
+                image = getattr(material, name, None)
+                if image is not None and hasattr(image, "size"):
+                    distinct.setdefault(id(image), image.size)
+        self.slots, start = {}, 0
+        for key, (width, height) in distinct.items():
+            self.slots[key] = (start, width, height)
+            start += width * height
+        self.store = np.empty((start, 4), np.uint8)  # pages are touched only as images are written
+
+    def decoded(self, image) -> np.ndarray:
+        """``image`` (a PIL image) as (h, w, 4) uint8 RGBA."""
+        key = id(image)
+        if key not in self:
+            if key in self.slots and image.size == self.slots[key][1:]:
+                start, width, height = self.slots[key]
+                view = self.store[start : start + width * height].reshape(height, width, 4)
+                view[:] = _image_array(image)
+                self[key] = view
+            else:
+                self[key] = _image_array(image)
+            image.close()  # its decoded pixels: the store holds them now
+        return self[key]
 
 
 class _TrimeshTroubles(logging.Handler):
@@ -450,7 +535,7 @@ def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
         log.warning("%s: %s", path, message)
     if not meshes:
         raise MeshError(f"{path}: the file holds no triangles")
-    parts, unusable, hidden, tally, images = [], 0, 0, Counter(), {}
+    parts, unusable, hidden, tally, images = [], 0, 0, Counter(), _Images(meshes)
     materials = found.materials if found is not None else None
     for mesh, world_from_mesh in meshes:
         try:
@@ -463,7 +548,10 @@ def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
         else:
             parts.append(part)
     mesh_count = len(meshes)
-    del loaded, meshes, images  # trimesh's copies of the images: only the 8-bit arrays the parts hold stay
+    # trimesh's scene holds its meshes and decoded images in reference cycles: collect them now, not at
+    # the next cyclic collection (the staircase interior: 100 MB held for nothing until then)
+    del loaded, meshes, images
+    gc.collect()
     if refuse_nonfinite and tally["non-finite"]:
         raise MeshError(
             f"{path}: {tally['non-finite']:,} of {tally['faces']:,} triangles have vertices that are not finite "
@@ -477,6 +565,8 @@ def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
         log.info("%s: %d meshes are wholly transparent (alpha below their cutoff) and left out", path, hidden)
     if not parts:
         raise MeshError(f"{path}: the file holds no usable triangles")
+    parts = packed(parts)
+    release_freed_memory()
     if found is None:
         return Model(parts)
     return Model(parts, found.viewpoints, found.lights)

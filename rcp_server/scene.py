@@ -160,6 +160,30 @@ class _Packer:
         return self.materials[id(material)][0]
 
 
+def _store_of(images: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The texels of ``images`` ((h, w, 4) uint8 each) packed as (T, 4) with each one's first texel: the
+    store they are all views of (``meshes.packed``), taken as it is, or else a new one."""
+    if not images:
+        return None
+    base = images[0].base
+    while isinstance(base, np.ndarray) and base.base is not None and isinstance(base.base, np.ndarray):
+        base = base.base
+    if isinstance(base, np.ndarray) and base.ndim == 2 and base.shape[1] == 4 and base.dtype == np.uint8:
+        start = base.__array_interface__["data"][0]
+        offsets = []
+        for im in images:
+            delta = im.__array_interface__["data"][0] - start
+            inside = 0 <= delta and delta + im.nbytes <= base.nbytes and im.flags.c_contiguous
+            if not (inside and np.may_share_memory(im, base)):
+                break
+            offsets.append(delta // 4)
+        else:
+            return base, np.asarray(offsets, np.int64)
+    sizes = np.array([im.shape[0] * im.shape[1] for im in images], dtype=np.int64)
+    texels = np.concatenate([im.reshape(-1, 4) for im in images], dtype=np.uint8)
+    return texels, np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+
+
 def build_geometry(objects: list[SceneObject], time: float, static_cache: dict | None = None) -> Geometry:
     """Concatenate all instances of all objects, placed and deformed at ``time``.
 
@@ -188,8 +212,8 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             tex_ids.append(np.full(len(tri), index, np.int32))
             face_materials.append(np.full(len(tri), row, np.int32))
     images = [image for _, image in sorted(packer.textures.values(), key=lambda item: item[0])]
+    store = _store_of(images)
     materials = [m for _, m in sorted(packer.materials.values(), key=lambda item: item[0])]
-    sizes = np.array([im.shape[0] * im.shape[1] for im in images], dtype=np.int64)
     triangles = np.concatenate(tris, dtype=np.float32) if tris else np.zeros((0, 3, 3), np.float32)
     points = triangles.reshape(-1, 3) if tris else np.zeros((1, 3), np.float32)
     return Geometry(
@@ -198,14 +222,8 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
         colors=np.concatenate(colors, dtype=np.float32) if colors else np.zeros((0, 3, 3), np.float32),
         uv=np.concatenate(uvs, dtype=np.float32) if uvs else np.zeros((0, 3, 2), np.float32),
         texture_id=np.concatenate(tex_ids) if tex_ids else np.zeros(0, np.int32),
-        texels=(
-            np.concatenate([im.reshape(-1, 4) for im in images], dtype=np.uint8)
-            if images
-            else np.zeros((1, 4), np.uint8)
-        ),
-        texture_offset=np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        if images
-        else np.zeros(1, np.int64),
+        texels=store[0] if store else np.zeros((1, 4), np.uint8),
+        texture_offset=store[1] if store else np.zeros(1, np.int64),
         texture_width=np.array([im.shape[1] for im in images] or [1], dtype=np.int64),
         texture_height=np.array([im.shape[0] for im in images] or [1], dtype=np.int64),
         face_material=np.concatenate(face_materials) if face_materials else np.zeros(0, np.int32),
