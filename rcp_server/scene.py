@@ -247,6 +247,7 @@ class Scene:
     objects: list[SceneObject] = field(default_factory=list)
     paint: PaintParams = field(default_factory=PaintParams)  # how this scene is painted unless told otherwise
     z_max: float | None = None  # depth a miss records; derived from the scene's size when None
+    viewpoints: dict[str, Camera] = field(default_factory=dict)  # other cameras offered by name (a glTF's)
     _cache: dict = field(default_factory=dict, repr=False)
     _static: dict = field(default_factory=dict, repr=False)  # placed instances of objects that never move
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)

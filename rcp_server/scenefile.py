@@ -23,7 +23,8 @@ import trimesh
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .camera import Camera, CameraError
-from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive, read_image
+from . import framing
+from .meshes import DEFAULT_ALBEDO, MeshError, Model, Part, load_mesh_file, load_model, load_texture, primitive, read_image
 from .params import PaintParams
 from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
@@ -313,20 +314,43 @@ def frame_camera(parts: list[Part], fov: float = 45.0) -> Camera:
 
 
 def mesh_scene(path: Path) -> Scene:
-    """A bare mesh file as a scene: a soft light, a calm backdrop, a camera that frames it."""
+    """A bare mesh file as a scene: its own cameras and light if it has them, a calm backdrop."""
     try:
-        parts = load_mesh_file(path)
+        model = load_model(path)
     except MeshError as exc:
         raise SceneError(str(exc)) from None
-    return parts_scene(parts, Path(path).stem, Path(path).name)
+    return model_scene(model, Path(path).stem, Path(path).name)
 
 
 def parts_scene(parts: list[Part], name: str, title: str) -> Scene:
-    """Parts of a model as a scene: a soft light from the front, a calm backdrop, a camera that frames them
-    from their front (glTF's +z), a little above and to the right."""
+    """Parts of a model as a scene (:func:`model_scene` of a model with no cameras or lights)."""
+    return model_scene(Model(parts), name, title)
+
+
+def _unique(names: list[str]) -> list[str]:
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
+    return out
+
+
+def model_scene(model: Model, name: str, title: str) -> Scene:
+    """A model as a scene, as its authors made it where they said (``framing.py``): its first camera is the
+    scene's, the others offered as viewpoints; its light (``framing.light_of``) or a soft one from the
+    front; without a camera, framed from inside an interior or from where a figure faces. Builds the
+    scene's tree (which the framing reads, and painting needs anyway)."""
+    parts = model.parts
     objects = [SceneObject(f"{title}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
-    light = Light(tuple(np.array([-0.4, -1.0, -0.5]) / np.linalg.norm([-0.4, -1.0, -0.5])), 0.35)
-    return Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
+    light = Light(tuple(np.array(framing.DEFAULT_LIGHT) / np.linalg.norm(framing.DEFAULT_LIGHT)), framing.DEFAULT_AMBIENT)
+    scene = Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
+    geometry, tracer = scene.geometry(0.0)
+    scene.light = framing.light_of(model.lights, geometry) if model.lights else framing.default_light(geometry)
+    names = _unique([v.name for v in model.viewpoints])
+    scene.viewpoints = {n: framing.viewpoint_camera(v, geometry, tracer) for n, v in zip(names, model.viewpoints, strict=True)}
+    scene.camera = next(iter(scene.viewpoints.values()), None) or framing.default_camera(geometry, tracer)
+    return scene
 
 
 def scene_names(folder: Path = SCENES_DIR) -> list[str]:
