@@ -211,7 +211,10 @@ def extras(gltf: dict) -> GltfExtras:
     out = GltfExtras(materials=[_material(m) for m in _list(gltf, "materials")])
     nodes = _list(gltf, "nodes")
     cameras = _list(gltf, "cameras")
-    lights = _list(gltf.get("extensions", {}).get("KHR_lights_punctual", {}) if isinstance(gltf.get("extensions"), dict) else {}, "lights")
+    lights = _list(
+        gltf.get("extensions", {}).get("KHR_lights_punctual", {}) if isinstance(gltf.get("extensions"), dict) else {},
+        "lights",
+    )
     for k, m in sorted(world_matrices(gltf).items()):
         node = nodes[k]
         eye = m[:3, 3]
@@ -227,7 +230,11 @@ def extras(gltf: dict) -> GltfExtras:
                 out.viewpoints.append(
                     Viewpoint(name, _floats(eye), _floats(forward), _floats(up), math.degrees(float(yfov)))
                 )
-        light = node.get("extensions", {}).get("KHR_lights_punctual", {}) if isinstance(node.get("extensions"), dict) else {}
+        light = (
+            node.get("extensions", {}).get("KHR_lights_punctual", {})
+            if isinstance(node.get("extensions"), dict)
+            else {}
+        )
         index = light.get("light") if isinstance(light, dict) else None
         if isinstance(index, int) and 0 <= index < len(lights):
             spec = lights[index]
@@ -246,7 +253,11 @@ def _material(material: dict) -> MaterialInfo:
     cutoff = float(cutoff) if isinstance(cutoff, (int, float)) and math.isfinite(cutoff) else 0.5
     extensions = material.get("extensions") if isinstance(material.get("extensions"), dict) else {}
     texture = pbr.get("baseColorTexture") if isinstance(pbr.get("baseColorTexture"), dict) else {}
-    transform = texture.get("extensions", {}).get("KHR_texture_transform") if isinstance(texture.get("extensions"), dict) else None
+    transform = (
+        texture.get("extensions", {}).get("KHR_texture_transform")
+        if isinstance(texture.get("extensions"), dict)
+        else None
+    )
     return MaterialInfo(
         base_color=tuple(display(factor[:3]).tolist()),
         alpha=min(max(factor[3], 0.0), 1.0),

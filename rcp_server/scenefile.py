@@ -22,9 +22,18 @@ import numpy as np
 import trimesh
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from .camera import Camera, CameraError
 from . import framing
-from .meshes import DEFAULT_ALBEDO, MeshError, Model, Part, load_mesh_file, load_model, load_texture, primitive, read_image
+from .camera import Camera, CameraError
+from .meshes import (
+    DEFAULT_ALBEDO,
+    MeshError,
+    Model,
+    Part,
+    load_model,
+    load_texture,
+    primitive,
+    read_image,
+)
 from .params import PaintParams
 from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
@@ -241,14 +250,18 @@ class _Named:
 
     def camera(self, name: str, scene: Scene) -> Camera:
         if name not in self.cameras:
-            raise SceneError(f"camera: no camera named {name!r} in the objects' files (they have: {_listed(self.cameras)})")
+            raise SceneError(
+                f"camera: no camera named {name!r} in the objects' files (they have: {_listed(self.cameras)})"
+            )
         geometry, tracer = scene.geometry(0.0)
         viewpoint, placement = self.cameras[name]
         return framing.viewpoint_camera(viewpoint, geometry, tracer, placement)
 
     def light(self, name: str, scene: Scene) -> Light:
         if name not in self.lights:
-            raise SceneError(f"light: no light named {name!r} in the objects' files (they have: {_listed(self.lights)})")
+            raise SceneError(
+                f"light: no light named {name!r} in the objects' files (they have: {_listed(self.lights)})"
+            )
         light, placement = self.lights[name]
         return framing.light_of([light], scene.geometry(0.0)[0], placement)
 
@@ -328,7 +341,14 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
         paint = PaintParams.from_dict(spec.paint)  # refuse bad painting settings now, not at the first render
         stand_in = Camera((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))  # until the named camera is placed in the scene
         scene = Scene(
-            name or path.stem, spec.title or path.stem, camera or stand_in, environment, light, objects, paint, spec.z_max
+            name or path.stem,
+            spec.title or path.stem,
+            camera or stand_in,
+            environment,
+            light,
+            objects,
+            paint,
+            spec.z_max,
         )
         # ---- the cameras and lights of the objects' glTF files, by name ----
         if isinstance(spec.light, str):
@@ -390,7 +410,9 @@ def model_scene(model: Model, name: str, title: str) -> Scene:
     scene's tree (which the framing reads, and painting needs anyway)."""
     parts = model.parts
     objects = [SceneObject(f"{title}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
-    light = Light(tuple(np.array(framing.DEFAULT_LIGHT) / np.linalg.norm(framing.DEFAULT_LIGHT)), framing.DEFAULT_AMBIENT)
+    light = Light(
+        tuple(np.array(framing.DEFAULT_LIGHT) / np.linalg.norm(framing.DEFAULT_LIGHT)), framing.DEFAULT_AMBIENT
+    )
     scene = Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
     geometry, tracer = scene.geometry(0.0)
     scene.light = framing.light_of(model.lights, geometry) if model.lights else framing.default_light(geometry)

@@ -413,9 +413,13 @@ def write_parts(path: Path, model) -> None:
         m = part.material
         arrays[f"material_{k}"] = np.array([*m.emission, float(m.unlit), m.alpha_cutoff], np.float64)
     arrays["images"] = np.int64(len(images))
-    arrays["viewpoints"] = np.array([[*v.eye, *v.forward, *v.up, v.fov] for v in model.viewpoints], np.float64).reshape(-1, 10)
+    arrays["viewpoints"] = np.array([[*v.eye, *v.forward, *v.up, v.fov] for v in model.viewpoints], np.float64).reshape(
+        -1, 10
+    )
     arrays["viewpoint_names"] = np.array([v.name[:80] for v in model.viewpoints], dtype=np.str_).reshape(-1)
-    arrays["lights"] = np.array([[*light.position, *light.direction] for light in model.lights], np.float64).reshape(-1, 6)
+    arrays["lights"] = np.array([[*light.position, *light.direction] for light in model.lights], np.float64).reshape(
+        -1, 6
+    )
     arrays["light_kinds"] = np.array([light.kind for light in model.lights], dtype=np.str_).reshape(-1)
     arrays["light_names"] = np.array([light.name[:80] for light in model.lights], dtype=np.str_).reshape(-1)
     np.savez(path, **arrays)

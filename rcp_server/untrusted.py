@@ -40,9 +40,9 @@ def _forks():
 
 
 def read_model(work: Path, filename: str, limits: Limits) -> Model:
-    """The model (its parts, a glTF's cameras and lights) whose bytes are ``work/upload``; ``filename`` (as the uploader named it) gives
-    its kind. Blocking, for seconds: run it in a worker thread. ``work`` is a folder of its own that the
-    caller removes afterwards (the child unpacks there)."""
+    """The model (its parts, a glTF's cameras and lights) whose bytes are ``work/upload``; ``filename`` (as
+    the uploader named it) gives its kind. Blocking, for seconds: run it in a worker thread. ``work`` is a
+    folder of its own that the caller removes afterwards (the child unpacks there)."""
     suffix = Path(filename).suffix.lower()
     if suffix not in UPLOAD_SUFFIXES:
         raise Refused(f"{filename[:80]!r} is not a kind of file this server reads ({', '.join(UPLOAD_SUFFIXES)})")
@@ -115,7 +115,9 @@ def _parts(arrays: dict, limits: Limits) -> list[Part]:
         emission = int(_array(arrays, f"emission_texture_{k}", np.int64, ()))
         if emission >= len(textures) or (emission >= 0 and uv is None):
             if uv is None and 0 <= emission < len(textures):
-                uv = np.nan_to_num(_array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2)), nan=0.0, posinf=0.0, neginf=0.0)
+                uv = np.nan_to_num(
+                    _array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2)), nan=0.0, posinf=0.0, neginf=0.0
+                )
             else:
                 raise ValueError(f"emission_texture_{k}: {emission} of {len(textures)}")
         m = _array(arrays, f"material_{k}", np.float64, (5,))
@@ -155,7 +157,9 @@ def _cameras_and_lights(arrays: dict) -> tuple[list[Viewpoint], list[PunctualLig
     if not (np.isfinite(views).all() and np.isfinite(lights).all()):
         raise Refused("the model's cameras or lights hold numbers that are not finite")
     viewpoints = [
-        Viewpoint(str(name)[:80], tuple(map(float, v[:3])), tuple(map(float, v[3:6])), tuple(map(float, v[6:9])), float(v[9]))
+        Viewpoint(
+            str(name)[:80], tuple(map(float, v[:3])), tuple(map(float, v[3:6])), tuple(map(float, v[6:9])), float(v[9])
+        )
         for name, v in zip(names, views, strict=True)
         if 0 < v[9] < 180 and np.linalg.norm(v[3:6]) > 0.5 and np.linalg.norm(v[6:9]) > 0.5
     ]

@@ -130,7 +130,14 @@ def weight_of(scene: Scene) -> int:
         count(a)
     for obj in scene.objects:
         for part in [obj.part, *(p for _, p in obj.instances)]:
-            for a in (part.vertices, part.faces, part.corner_colors, part.corner_uv, part.texture, part.material.emission_texture):
+            for a in (
+                part.vertices,
+                part.faces,
+                part.corner_colors,
+                part.corner_uv,
+                part.texture,
+                part.material.emission_texture,
+            ):
                 count(a)
     return sum(a.nbytes for a in arrays.values()) + BVH_BYTES_PER_TRIANGLE * geometry.face_count
 
