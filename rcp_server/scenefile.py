@@ -33,6 +33,7 @@ from .meshes import (
     load_texture,
     primitive,
     read_image,
+    release_freed_memory,
 )
 from .params import PaintParams
 from .radiance import read_radiance, tonemap
@@ -415,6 +416,7 @@ def model_scene(model: Model, name: str, title: str) -> Scene:
     )
     scene = Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
     geometry, tracer = scene.geometry(0.0)
+    release_freed_memory()  # building the tree freed as much again as it keeps
     scene.light = framing.light_of(model.lights, geometry) if model.lights else framing.default_light(geometry)
     names = _unique([v.name for v in model.viewpoints])
     cameras = [framing.viewpoint_camera(v, geometry, tracer) for v in model.viewpoints]
