@@ -3,9 +3,10 @@
 Every mesh becomes a :class:`Part`: vertices and faces plus per-corner shading data (colors, UVs, one
 optional texture) and its :class:`Material` (emission, unlit, alpha mask), whatever the source carried: a
 texture through UVs, vertex colors, face colors, or a flat color. A glTF also brings its cameras and lights
-(:class:`Model`, read by ``gltf.py``). Textures stay 8-bit RGBA as the file holds them (display colors;
-alpha linear). Broken input is repaired with a warning (non-finite vertices, zero-area faces) or refused
-with a :class:`MeshError` naming the file.
+(:class:`Model`, read by ``gltf.py``). Textures stay 8-bit as the file holds them: RGB display colors,
+and an alpha channel apart, kept only for a material that lets rays through its texels. Broken input is
+repaired with a warning (non-finite vertices, zero-area faces) or refused with a :class:`MeshError` naming
+the file.
 """
 
 from __future__ import annotations
@@ -46,15 +47,17 @@ class Material:
     """What a surface shows beside its albedo.
 
     emission : display color added after lighting (glTF's emissiveFactor), times ``emission_texture``
-    ((h, w, 4) uint8 over the part's UVs) when there is one;  unlit : the albedo as it is, no light
-    alpha_cutoff : a hit where the texture's alpha (in [0, 1]) is below this lets the ray through
-    (glTF's MASK; BLEND is drawn as a mask at 0.5); 0: opaque
+    ((h, w, 3) uint8 over the part's UVs) when there is one;  unlit : the albedo as it is, no light
+    alpha_texture : (h, w) uint8 coverage over the part's UVs, the size of the part's texture, or None;
+    alpha_cutoff : a hit where it (in [0, 1]) is below this lets the ray through (glTF's MASK; BLEND is
+    drawn as a mask at 0.5; OBJ's map_d); 0: opaque
     """
 
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
     emission_texture: np.ndarray | None = None
     unlit: bool = False
     alpha_cutoff: float = 0.0
+    alpha_texture: np.ndarray | None = None
 
     @property
     def plain(self) -> bool:
@@ -70,7 +73,8 @@ class Part:
 
     vertices : (V, 3) float64, scene units;  faces : (F, 3) int64
     corner_colors : (F, 3, 3) float32, display colors in [0, 1], multiplied into the texture when there is one
-    corner_uv : (F, 3, 2) float32 or None;  texture : (h, w, 4) uint8 RGBA (as the file holds it) or None
+    corner_uv : (F, 3, 2) float32 or None;  texture : (h, w, 3) uint8 RGB display colors (as the file holds
+    them) or None
     colored : the source carried colors of its own (a texture or material color, vertex or face colors);
     otherwise corner_colors is the default grey
     """
@@ -197,27 +201,27 @@ class Model:
 
 
 def _image_array(image) -> np.ndarray:
-    """A PIL image as (h, w, 4) uint8 RGBA (opaque where it has no alpha)."""
-    return np.ascontiguousarray(np.asarray(image.convert("RGBA"), dtype=np.uint8))
+    """A PIL image's colors as (h, w, 3) uint8 RGB."""
+    return np.ascontiguousarray(np.asarray(image.convert("RGB"), dtype=np.uint8))
 
 
-def rgba8(texture: np.ndarray) -> np.ndarray:
-    """A texture as (h, w, 4) uint8 RGBA: as it is, or from (h, w, 3|4) floats in [0, 1] (rounded)."""
-    if texture.dtype == np.uint8 and texture.shape[-1] == 4:
-        return texture
-    if texture.dtype == np.uint8:
-        values = texture
-    else:
-        values = np.round(np.clip(texture, 0.0, 1.0) * 255.0).astype(np.uint8)
-    if values.shape[-1] == 4:
-        return np.ascontiguousarray(values)
-    out = np.full(values.shape[:2] + (4,), 255, np.uint8)
-    out[..., :3] = values
-    return out
+def _alpha_array(image) -> np.ndarray | None:
+    """A PIL image's alpha as (h, w) uint8, or None when it has none or is opaque everywhere."""
+    if image.mode in ("RGBA", "LA", "PA", "RGBa", "La") or (image.mode == "P" and "transparency" in image.info):
+        alpha = np.asarray(image.convert("RGBA").getchannel("A"), dtype=np.uint8)
+        return alpha if alpha.min() < 255 else None
+    return None
+
+
+def rgb8(texture: np.ndarray) -> np.ndarray:
+    """A texture as (h, w, 3) uint8: as it is, or from (h, w, 3|4) uint8 or floats in [0, 1] (rounded)."""
+    if texture.dtype != np.uint8:
+        texture = np.round(np.clip(texture, 0.0, 1.0) * 255.0).astype(np.uint8)
+    return texture if texture.shape[-1] == 3 else np.ascontiguousarray(texture[..., :3])
 
 
 def packed(parts: list[Part]) -> list[Part]:
-    """``parts`` with every distinct texture (colors and emission) moved into one (T, 4) uint8 store, each
+    """``parts`` with every distinct texture (colors and emission) moved into one (T, 3) uint8 store, each
     part's a view of it: the scene's geometry then takes the store as it is (``scene.build_geometry``)
     rather than a second copy of every texel. Each texture's own array is let go as soon as it is copied,
     so the store costs no second copy while it fills (its pages are touched only as they are written)."""
@@ -232,13 +236,13 @@ def packed(parts: list[Part]) -> list[Part]:
     bases = {id(_base(image)) for image in images.values()}
     if not images or (len(bases) == 1 and _base(next(iter(images.values()))).ndim == 2):
         return parts  # none, or all in one store already
-    store = np.empty((sum(im.shape[0] * im.shape[1] for im in images.values()), 4), np.uint8)
+    store = np.empty((sum(im.shape[0] * im.shape[1] for im in images.values()), 3), np.uint8)
     start = 0
     for key in list(images):
         image = images.pop(key)
         size = image.shape[0] * image.shape[1]
-        view = store[start : start + size].reshape(image.shape[0], image.shape[1], 4)
-        view[:] = rgba8(image)
+        view = store[start : start + size].reshape(image.shape[0], image.shape[1], 3)
+        view[:] = rgb8(image)
         start += size
         del image
         for k, slot in users[key]:
@@ -269,12 +273,12 @@ def release_freed_memory() -> None:
 
 
 def texture_floats(texture: np.ndarray) -> np.ndarray:
-    """An 8-bit RGBA texture's colors as (h, w, 3) float32 in [0, 1] (the environment keeps floats)."""
+    """An 8-bit texture's colors as (h, w, 3) float32 in [0, 1] (the environment keeps floats)."""
     return texture[..., :3].astype(np.float32) / 255.0
 
 
 def read_image(path: Path) -> np.ndarray:
-    """An image file as (h, w, 4) uint8 RGBA."""
+    """An image file's colors as (h, w, 3) uint8 RGB."""
     from PIL import Image, UnidentifiedImageError
 
     try:
@@ -296,17 +300,13 @@ def _rgb(values) -> np.ndarray:
     return (a[..., :3].astype(np.float32) / scale).astype(np.float32)
 
 
-def _with_alpha(texture: np.ndarray | None, alpha: np.ndarray) -> np.ndarray:
-    """``texture`` (or white) with its alpha channel replaced by ``alpha`` (h', w') uint8, resized to fit."""
+def _fitted(alpha: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """``alpha`` (h', w') uint8 resized to ``shape`` (h, w) when it differs (bilinear)."""
     from PIL import Image
 
-    if texture is None:
-        texture = np.full(alpha.shape + (4,), 255, np.uint8)
-    if alpha.shape != texture.shape[:2]:
-        alpha = np.asarray(Image.fromarray(alpha).resize(texture.shape[1::-1], Image.BILINEAR))
-    out = texture.copy()
-    out[..., 3] = alpha
-    return out
+    if alpha.shape == shape:
+        return alpha
+    return np.asarray(Image.fromarray(alpha).resize((shape[1], shape[0]), Image.BILINEAR), dtype=np.uint8)
 
 
 def _obj_alpha(material, folder: Path | None, images: dict) -> tuple[np.ndarray | None, float]:
@@ -383,13 +383,15 @@ def _part_from_trimesh(
                 uv = gltf.transformed_uv(uv, info.uv_transform)
         if image is not None and has_uv:
             texture = images.decoded(image)
-        alpha_cutoff, emission, emission_texture, unlit = 0.0, (0.0, 0.0, 0.0), None, False
+        alpha_cutoff, alpha_texture, emission, emission_texture, unlit = 0.0, None, (0.0, 0.0, 0.0), None, False
         if info is not None:
             coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
             if coverage < info.alpha_cutoff and info.alpha_mode != "OPAQUE":
                 return None
-            textured_alpha = texture is not None and info.alpha_mode != "OPAQUE" and texture[..., 3].min() < 255
-            alpha_cutoff = info.alpha_cutoff / coverage if textured_alpha else 0.0
+            alpha_texture = (
+                images.alphas.get(id(image)) if texture is not None and info.alpha_mode != "OPAQUE" else None
+            )
+            alpha_cutoff = info.alpha_cutoff / coverage if alpha_texture is not None else 0.0
             emission, unlit = info.emissive, info.unlit
             emissive_image = getattr(material, "emissiveTexture", None)
             if info.has_emissive_texture and emissive_image is not None and has_uv:
@@ -399,13 +401,18 @@ def _part_from_trimesh(
             if dissolve < 0.5:
                 return None
             if alpha is not None and has_uv and alpha.min() < 255:
-                key = ("with map_d", id(texture), id(alpha))
+                if texture is None:  # map_d without map_Kd: a white texture to cut out of
+                    key = ("white", alpha.shape)
+                    if key not in images:
+                        images[key] = np.full(alpha.shape + (3,), 255, np.uint8)
+                    texture = images[key]
+                key = ("map_d", id(alpha), texture.shape[:2])
                 if key not in images:
-                    images[key] = _with_alpha(texture, alpha)
-                texture, alpha_cutoff = images[key], 0.5
+                    images[key] = _fitted(alpha, texture.shape[:2])
+                alpha_texture, alpha_cutoff = images[key], 0.5
         if texture is None and emission_texture is None:
             uv = None
-        material_out = Material(emission, emission_texture, unlit, alpha_cutoff)
+        material_out = Material(emission, emission_texture, unlit, alpha_cutoff, alpha_texture)
     elif kind == "vertex":
         colors = _rgb(visual.vertex_colors)[faces]
     elif kind == "face":
@@ -420,10 +427,10 @@ def _part_from_trimesh(
 
 
 class _Images(dict):
-    """A file's images, each decoded once, straight into one (T, 4) uint8 store sized up front from the
+    """A file's images, each decoded once, straight into one (T, 3) uint8 store sized up front from the
     images' headers (trimesh's images are not decoded until asked), and Pillow's copy closed at once: the
-    staircase interior's 9 images never exist twice. Other arrays made while reading (OBJ's ``map_d``
-    combined with its colors) are kept by key as in a dict."""
+    staircase interior's 9 images never exist twice. An image's alpha is kept apart (``alphas``), and only
+    when it is not opaque everywhere. Other arrays made while reading (OBJ's ``map_d``) are kept by key."""
 
     def __init__(self, meshes: list):
         super().__init__()
@@ -438,19 +445,23 @@ class _Images(dict):
         for key, (width, height) in distinct.items():
             self.slots[key] = (start, width, height)
             start += width * height
-        self.store = np.empty((start, 4), np.uint8)  # pages are touched only as images are written
+        self.store = np.empty((start, 3), np.uint8)  # pages are touched only as images are written
+        self.alphas: dict[int, np.ndarray] = {}
 
     def decoded(self, image) -> np.ndarray:
-        """``image`` (a PIL image) as (h, w, 4) uint8 RGBA."""
+        """``image`` (a PIL image) as (h, w, 3) uint8 RGB; its alpha, if any, into ``alphas``."""
         key = id(image)
         if key not in self:
             if key in self.slots and image.size == self.slots[key][1:]:
                 start, width, height = self.slots[key]
-                view = self.store[start : start + width * height].reshape(height, width, 4)
+                view = self.store[start : start + width * height].reshape(height, width, 3)
                 view[:] = _image_array(image)
                 self[key] = view
             else:
                 self[key] = _image_array(image)
+            alpha = _alpha_array(image)
+            if alpha is not None:
+                self.alphas[key] = alpha
             image.close()  # its decoded pixels: the store holds them now
         return self[key]
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .camera import Camera
-from .meshes import PLAIN, Material, Part, corner_normals, rgba8
+from .meshes import PLAIN, Material, Part, corner_normals, rgb8
 from .params import PaintParams
 from .tracer import Tracer
 
@@ -80,8 +80,9 @@ class Geometry:
 
     triangles : (F, 3, 3) float32;  normals : (F, 3, 3) float32, unit shading normals per corner
     colors : (F, 3, 3) float32 albedo per corner;  uv : (F, 3, 2) float32;  texture_id : (F,) int32, -1 none
-    textures : packed texels (T, 4) uint8 RGBA (display colors, linear alpha) with (K,) offsets, widths
-    and heights (int64)
+    textures : packed texels (T, 3) uint8 RGB display colors with (K,) offsets, widths and heights (int64);
+    the coverage of those that let rays through, packed apart: alpha_texels (A,) uint8 and
+    texture_alpha_offset (K,) int64, -1 for a texture without
     materials (``meshes.Material``, one row per distinct one): face_material (F,) int32 its row;
     material_emission (M, 3) float32 display color added after light; material_emission_texture (M,)
     int32 texture or -1; material_unlit (M,) bool; material_alpha_cutoff (M,) float32, 0 when opaque
@@ -96,6 +97,8 @@ class Geometry:
     texture_offset: np.ndarray
     texture_width: np.ndarray
     texture_height: np.ndarray
+    alpha_texels: np.ndarray = field(default_factory=lambda: np.zeros(1, np.uint8))
+    texture_alpha_offset: np.ndarray = field(default_factory=lambda: np.full(1, -1, np.int64))
     face_material: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     material_emission: np.ndarray = field(default_factory=lambda: np.zeros((1, 3), np.float32))
     material_emission_texture: np.ndarray = field(default_factory=lambda: np.full(1, -1, np.int32))
@@ -143,15 +146,30 @@ class _Packer:
     """Distinct textures and materials of a scene, each once, in the order first met."""
 
     def __init__(self):
-        self.textures: dict[int, tuple[int, np.ndarray]] = {}  # id(texture array) -> (index, 8-bit RGBA array)
+        self.textures: dict[int, tuple[int, np.ndarray]] = {}  # id(texture array) -> (index, 8-bit RGB array)
         self.materials: dict[int, tuple[int, Material]] = {}
+        self.alphas: dict[int, np.ndarray] = {}  # texture index -> its coverage (h, w) uint8
 
     def texture(self, image: np.ndarray | None) -> int:
         if image is None:
             return -1
         if id(image) not in self.textures:
-            self.textures[id(image)] = (len(self.textures), rgba8(image))
+            self.textures[id(image)] = (len(self.textures), rgb8(image))
         return self.textures[id(image)][0]
+
+    def alpha(self, texture: int, alpha: np.ndarray | None) -> None:
+        if texture >= 0 and alpha is not None:
+            self.alphas.setdefault(texture, alpha)
+
+    def packed_alphas(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """(A,) uint8 coverage of every texture that has one, and (count,) int64 where each starts (-1 none)."""
+        offsets = np.full(max(count, 1), -1, np.int64)
+        chunks, start = [], 0
+        for k, alpha in sorted(self.alphas.items()):
+            offsets[k] = start
+            chunks.append(alpha.reshape(-1))
+            start += alpha.size
+        return (np.concatenate(chunks) if chunks else np.zeros(1, np.uint8)), offsets
 
     def material(self, material: Material) -> int:
         if id(material) not in self.materials:
@@ -161,14 +179,14 @@ class _Packer:
 
 
 def _store_of(images: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
-    """The texels of ``images`` ((h, w, 4) uint8 each) packed as (T, 4) with each one's first texel: the
+    """The texels of ``images`` ((h, w, 3) uint8 each) packed as (T, 3) with each one's first texel: the
     store they are all views of (``meshes.packed``), taken as it is, or else a new one."""
     if not images:
         return None
     base = images[0].base
     while isinstance(base, np.ndarray) and base.base is not None and isinstance(base.base, np.ndarray):
         base = base.base
-    if isinstance(base, np.ndarray) and base.ndim == 2 and base.shape[1] == 4 and base.dtype == np.uint8:
+    if isinstance(base, np.ndarray) and base.ndim == 2 and base.shape[1] == 3 and base.dtype == np.uint8:
         start = base.__array_interface__["data"][0]
         offsets = []
         for im in images:
@@ -176,11 +194,11 @@ def _store_of(images: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
             inside = 0 <= delta and delta + im.nbytes <= base.nbytes and im.flags.c_contiguous
             if not (inside and np.may_share_memory(im, base)):
                 break
-            offsets.append(delta // 4)
+            offsets.append(delta // 3)
         else:
             return base, np.asarray(offsets, np.int64)
     sizes = np.array([im.shape[0] * im.shape[1] for im in images], dtype=np.int64)
-    texels = np.concatenate([im.reshape(-1, 4) for im in images], dtype=np.uint8)
+    texels = np.concatenate([im.reshape(-1, 3) for im in images], dtype=np.uint8)
     return texels, np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
 
 
@@ -206,6 +224,7 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             normals.append(n)
             colors.append(part.corner_colors)
             index = packer.texture(part.texture)
+            packer.alpha(index, part.material.alpha_texture)
             row = 0 if part.material.plain else packer.material(part.material)
             keep_uv = part.corner_uv is not None and (index >= 0 or part.material.emission_texture is not None)
             uvs.append(part.corner_uv if keep_uv else np.zeros((len(tri), 3, 2), np.float32))
@@ -214,6 +233,7 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
     images = [image for _, image in sorted(packer.textures.values(), key=lambda item: item[0])]
     store = _store_of(images)
     materials = [m for _, m in sorted(packer.materials.values(), key=lambda item: item[0])]
+    alpha_texels, alpha_offsets = packer.packed_alphas(len(images))
     triangles = np.concatenate(tris, dtype=np.float32) if tris else np.zeros((0, 3, 3), np.float32)
     points = triangles.reshape(-1, 3) if tris else np.zeros((1, 3), np.float32)
     return Geometry(
@@ -222,10 +242,12 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
         colors=np.concatenate(colors, dtype=np.float32) if colors else np.zeros((0, 3, 3), np.float32),
         uv=np.concatenate(uvs, dtype=np.float32) if uvs else np.zeros((0, 3, 2), np.float32),
         texture_id=np.concatenate(tex_ids) if tex_ids else np.zeros(0, np.int32),
-        texels=store[0] if store else np.zeros((1, 4), np.uint8),
+        texels=store[0] if store else np.zeros((1, 3), np.uint8),
         texture_offset=store[1] if store else np.zeros(1, np.int64),
         texture_width=np.array([im.shape[1] for im in images] or [1], dtype=np.int64),
         texture_height=np.array([im.shape[0] for im in images] or [1], dtype=np.int64),
+        alpha_texels=alpha_texels,
+        texture_alpha_offset=alpha_offsets,
         face_material=np.concatenate(face_materials) if face_materials else np.zeros(0, np.int32),
         material_emission=np.array([m.emission for m in materials], dtype=np.float32).reshape(-1, 3),
         material_emission_texture=np.array([packer.texture(m.emission_texture) for m in materials], dtype=np.int32),

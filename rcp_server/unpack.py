@@ -382,12 +382,14 @@ def write_parts(path: Path, model) -> None:
     ``vertices_k`` (V, 3) float64, ``faces_k`` (F, 3) int64, ``colors_k`` (F, 3, 3) float32, ``colored_k``
     (), ``texture_k`` () int64 index or -1 and ``uv_k`` (F, 3, 2) float32 when textured or glowing through
     a texture, and its material as ``material_k`` (5,) float64 (emission r, g, b, unlit, alpha cutoff) and
-    ``emission_texture_k`` () int64 index or -1; each distinct texture once as ``image_j`` (h, w, 4) uint8;
+    ``emission_texture_k`` () int64 index or -1, ``alpha_k`` () int64 index of its coverage or -1; each
+    distinct texture once as ``image_j`` (h, w, 3) uint8, each distinct coverage as ``coverage_j`` (h, w) uint8;
     the file's cameras as ``viewpoints`` (n, 10) float64 (eye, forward, up, fov) with ``viewpoint_names``,
     its lights as ``lights`` (n, 6) float64 (position, direction) with ``light_kinds`` and ``light_names``."""
     parts = model.parts
     arrays: dict[str, np.ndarray] = {"parts": np.int64(len(parts))}
     images: dict[int, int] = {}
+    coverages: dict[int, int] = {}
 
     def image_index(image) -> int:
         if id(image) not in images:
@@ -410,9 +412,17 @@ def write_parts(path: Path, model) -> None:
                 arrays[f"uv_{k}"] = part.corner_uv
         arrays[f"texture_{k}"] = np.int64(texture)
         arrays[f"emission_texture_{k}"] = np.int64(emission)
+        alpha = -1
+        if texture >= 0 and part.material.alpha_texture is not None:
+            if id(part.material.alpha_texture) not in coverages:
+                coverages[id(part.material.alpha_texture)] = len(coverages)
+                arrays[f"coverage_{len(coverages) - 1}"] = part.material.alpha_texture
+            alpha = coverages[id(part.material.alpha_texture)]
+        arrays[f"alpha_{k}"] = np.int64(alpha)
         m = part.material
         arrays[f"material_{k}"] = np.array([*m.emission, float(m.unlit), m.alpha_cutoff], np.float64)
     arrays["images"] = np.int64(len(images))
+    arrays["coverages"] = np.int64(len(coverages))
     arrays["viewpoints"] = np.array([[*v.eye, *v.forward, *v.up, v.fov] for v in model.viewpoints], np.float64).reshape(
         -1, 10
     )

@@ -85,7 +85,11 @@ def _array(arrays: dict, key: str, dtype, shape: tuple) -> np.ndarray:
 
 def _parts(arrays: dict, limits: Limits) -> list[Part]:
     count = int(_array(arrays, "images", np.int64, ()))
-    images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 4)) for j in range(count)]
+    images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 3)) for j in range(count)]
+    coverages = [
+        _array(arrays, f"coverage_{j}", np.uint8, (None, None))
+        for j in range(int(_array(arrays, "coverages", np.int64, ())))
+    ]
     if sum(im.shape[0] * im.shape[1] for im in images) > limits.max_texture_pixels:
         raise Refused(f"the model's images have more than {limits.max_texture_pixels:,} pixels")
     textures = images  # 8-bit RGBA, as the shading reads them
@@ -121,13 +125,19 @@ def _parts(arrays: dict, limits: Limits) -> list[Part]:
             else:
                 raise ValueError(f"emission_texture_{k}: {emission} of {len(textures)}")
         m = _array(arrays, f"material_{k}", np.float64, (5,))
+        alpha = int(_array(arrays, f"alpha_{k}", np.int64, ()))
+        if alpha >= len(coverages) or (
+            alpha >= 0 and (texture < 0 or coverages[alpha].shape != textures[texture].shape[:2])
+        ):
+            raise ValueError(f"alpha_{k}: {alpha} of {len(coverages)}")
         if not np.isfinite(m).all():
             raise Refused("the model has material values that are not finite numbers")
         material = Material(
             tuple(float(v) for v in np.clip(m[:3], 0.0, 1.0)),
             textures[emission] if emission >= 0 else None,
             bool(m[3]),
-            float(np.clip(m[4], 0.0, 1e6)),
+            float(np.clip(m[4], 0.0, 1e6)) if alpha >= 0 else 0.0,
+            coverages[alpha] if alpha >= 0 else None,
         )
         parts.append(
             Part(

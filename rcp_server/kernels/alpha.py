@@ -17,12 +17,17 @@ def masked_rays(rays, hits, surfaces, out):
     their indices to the start of ``out`` and returns how many.
 
     rays : (m,) int64;  hits : tracer.Hits (face -1 on a miss; b1, b2 placed);  surfaces : bundles.Surfaces
-    out : (>= m,) int64. Alpha is the texture's fourth channel in [0, 1], bilinear (it is linear coverage,
-    not a display value), wrapping as the colors do.
+    out : (>= m,) int64. Alpha is the texture's coverage (``alpha_texels`` from ``texture_alpha_offset``) in
+    [0, 1], bilinear (it is linear coverage, not a display value), wrapping as the colors do.
     """
     face, b1, b2 = hits.face, hits.b1, hits.b2
-    uv, texture_id, texels = surfaces.uv, surfaces.texture_id, surfaces.texels
-    offsets, widths, heights = surfaces.texture_offset, surfaces.texture_width, surfaces.texture_height
+    uv, texture_id, alphas, alpha_offset = (
+        surfaces.uv,
+        surfaces.texture_id,
+        surfaces.alpha_texels,
+        surfaces.texture_alpha_offset,
+    )
+    widths, heights = surfaces.texture_width, surfaces.texture_height
     face_material, cutoff = surfaces.face_material, surfaces.material_alpha_cutoff
     count = 0
     for s in rays:
@@ -31,7 +36,7 @@ def masked_rays(rays, hits, surfaces, out):
             continue
         limit = cutoff[face_material[f]]
         tid = texture_id[f]
-        if limit <= 0.0 or tid < 0:
+        if limit <= 0.0 or tid < 0 or alpha_offset[tid] < 0:
             continue
         w1 = b1[s]
         w2 = b2[s]
@@ -48,13 +53,13 @@ def masked_rays(rays, hits, surfaces, out):
         c1 = c0 + 1 if c0 + 1 < width else 0
         r0 = int(fy0) % height
         r1 = r0 + 1 if r0 + 1 < height else 0
-        a = offsets[tid] + r0 * width
-        b = offsets[tid] + r1 * width
+        a = alpha_offset[tid] + r0 * width
+        b = alpha_offset[tid] + r1 * width
         alpha = (
-            (1.0 - fx) * (1.0 - fy) * texels[a + c0, 3]
-            + fx * (1.0 - fy) * texels[a + c1, 3]
-            + (1.0 - fx) * fy * texels[b + c0, 3]
-            + fx * fy * texels[b + c1, 3]
+            (1.0 - fx) * (1.0 - fy) * alphas[a + c0]
+            + fx * (1.0 - fy) * alphas[a + c1]
+            + (1.0 - fx) * fy * alphas[b + c0]
+            + fx * fy * alphas[b + c1]
         ) / 255.0
         if alpha < limit:
             out[count] = s

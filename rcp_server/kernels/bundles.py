@@ -65,10 +65,12 @@ class Surfaces(NamedTuple):
     colors: np.ndarray  # (F, 3, 3) float32 albedo per corner
     uv: np.ndarray  # (F, 3, 2) float32
     texture_id: np.ndarray  # (F,) int32, -1 none
-    texels: np.ndarray  # (T, 4) uint8 RGBA, every texture packed
+    texels: np.ndarray  # (T, 3) uint8 RGB display colors, every texture packed
     texture_offset: np.ndarray  # (K,) int64 first texel of each texture
     texture_width: np.ndarray  # (K,) int64
     texture_height: np.ndarray  # (K,) int64
+    alpha_texels: np.ndarray  # (A,) uint8 coverage of the textures that have one (``alpha.py`` reads it)
+    texture_alpha_offset: np.ndarray  # (K,) int64 where a texture's coverage starts in alpha_texels, -1 none
     face_material: np.ndarray  # (F,) int32 row of the material tables; row 0 is plain
     material_emission: np.ndarray  # (M, 3) float32 display color added after the light
     material_emission_texture: np.ndarray  # (M,) int32, -1 none

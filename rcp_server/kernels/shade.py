@@ -101,7 +101,7 @@ def _encode(linear):
 def texel_color(texels, offset, width, height, u, v):
     """A texture's display color at (u, v) (both wrap), an (r, g, b) tuple in [0, 1]: bilinear between its
     four nearest 8-bit texels, filtered in linear light (a blend of display values darkens an edge
-    between light and dark texels) and encoded back. texels : (T, 4) uint8 RGBA, every texture packed."""
+    between light and dark texels) and encoded back. texels : (T, 3) uint8 RGB, every texture packed."""
     x = u * width - 0.5
     y = (1.0 - v) * height - 0.5
     fx0 = math.floor(x)

@@ -223,6 +223,8 @@ def test_the_sandboxs_arrays_carry_materials_cameras_and_lights(tmp_path):
             )
             if a.texture is not None:
                 np.testing.assert_array_equal(a.texture, b_.texture)
+            if a.material.alpha_texture is not None:
+                np.testing.assert_array_equal(a.material.alpha_texture, b_.material.alpha_texture)
 
 
 def test_the_geometry_keeps_a_models_textures_without_copying_them(tmp_path):
@@ -230,4 +232,6 @@ def test_the_geometry_keeps_a_models_textures_without_copying_them(tmp_path):
     geometry, _ = scene.geometry()
     textured = [obj.part for obj in scene.objects if obj.part.texture is not None]
     assert textured and all(np.shares_memory(part.texture, geometry.texels) for part in textured)
-    assert geometry.texels.dtype == np.uint8 and geometry.texels.shape[1] == 4
+    assert geometry.texels.dtype == np.uint8 and geometry.texels.shape[1] == 3
+    # the cut-out's coverage is kept apart, for the one texture whose material lets rays through
+    assert geometry.alpha_texels.size == 8 * 8 and (geometry.texture_alpha_offset >= 0).sum() == 1

@@ -253,8 +253,8 @@ def ref_srgb_encode(x):
 
 
 def ref_texel_color(texels, offset, width, height, u, v):
-    """An 8-bit RGBA texture's color at (u, v): bilinear in linear light, encoded back to display values."""
-    linear = ref_srgb_decode(texels[:, :3])
+    """An 8-bit RGB texture's color at (u, v): bilinear in linear light, encoded back to display values."""
+    linear = ref_srgb_decode(texels)
     return ref_srgb_encode(ref_bilinear(linear, offset, width, height, u * width, (1 - v) * height, True))
 
 
@@ -279,6 +279,8 @@ def ref_shade(
     material_emission_texture,
     material_unlit,
     material_alpha_cutoff,
+    alpha_texels,
+    texture_alpha_offset,
     environment,
     light_dir,
     ambient,
@@ -364,9 +366,9 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
     colors = rng.uniform(-0.1, 1.4, (n_faces, 3, 3)).astype(np.float32)  # clamping is exercised
     uv = rng.uniform(-1.5, 2.5, (n_faces, 3, 2)).astype(np.float32)  # tiling in both directions
     texture_id = np.array([-1, 0, 1, 0, -1, 1, 0, -1, 1], np.int32)
-    tex_a = rng.integers(0, 256, (3, 5, 4)).astype(np.uint8)  # h x w, 8-bit RGBA
-    tex_b = rng.integers(0, 256, (4, 2, 4)).astype(np.uint8)
-    texels = np.concatenate([tex_a.reshape(-1, 4), tex_b.reshape(-1, 4)])
+    tex_a = rng.integers(0, 256, (3, 5, 3)).astype(np.uint8)  # h x w, 8-bit RGB
+    tex_b = rng.integers(0, 256, (4, 2, 3)).astype(np.uint8)
+    texels = np.concatenate([tex_a.reshape(-1, 3), tex_b.reshape(-1, 3)])
     texture_offset = np.array([0, 15], np.int64)
     texture_width = np.array([5, 2], np.int64)
     texture_height = np.array([3, 4], np.int64)
@@ -405,6 +407,8 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
         texture_offset=texture_offset,
         texture_width=texture_width,
         texture_height=texture_height,
+        alpha_texels=np.zeros(1, np.uint8),
+        texture_alpha_offset=np.full(2, -1, np.int64),
         # materials: 0 plain, 1 glowing (a color), 2 glowing through texture 1, 3 unlit
         face_material=np.array([0, 1, 2, 3, 0, 3, 2, 1, 0], np.int32),
         material_emission=np.array([[0, 0, 0], [0.2, 0.1, 0.05], [0.5, 0.9, 0.3], [0, 0, 0]], np.float32),
