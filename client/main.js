@@ -113,6 +113,7 @@ function ready(msg) {
 
 function startScene(scene) {
   walk.place(scene.camera);
+  showViewpoints(scene);
   state.lastCamera = walkCamera.toCamera(walk.walk); // what the server shows after hello
   state.paint = {};
   state.defaults = { ...ENGINE_DEFAULTS, z0: Number(walk.walk.distance.toPrecision(3)), ...scene.paint };
@@ -234,6 +235,22 @@ function flushPaint() {
 
 function resetCamera() {
   if (state.scene) walk.place(state.scene.camera);
+  $("viewpoint").value = "";
+}
+
+// the cameras a model's file brings besides the scene's own (SceneInfo.viewpoints): one select, hidden
+// when there are none
+function showViewpoints(scene) {
+  const select = $("viewpoint");
+  select.replaceChildren(new Option("the scene's camera", ""));
+  for (const [index, viewpoint] of scene.viewpoints.entries()) select.append(new Option(viewpoint.name, String(index)));
+  $("viewpoint-row").hidden = scene.viewpoints.length === 0;
+}
+
+function goToViewpoint() {
+  const index = $("viewpoint").value;
+  if (!state.scene) return;
+  walk.place(index === "" ? state.scene.camera : state.scene.viewpoints[Number(index)].camera);
 }
 
 function togglePanel() {
@@ -256,6 +273,7 @@ $("scene").addEventListener("change", (event) => {
   switchScene(event.target.value);
 });
 $("reset-camera").addEventListener("click", resetCamera);
+$("viewpoint").addEventListener("change", goToViewpoint);
 $("reset-paint").addEventListener("click", () => {
   for (const name of Object.keys(state.paint)) paintChanges[name] = null; // sent with this frame's edits
   state.paint = {};

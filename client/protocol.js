@@ -960,6 +960,14 @@ export const PROTOCOL = {
        "default": false,
        "title": "Uploaded",
        "type": "boolean"
+      },
+      "viewpoints": {
+       "default": [],
+       "items": {
+        "$ref": "#/$defs/Viewpoint"
+       },
+       "title": "Viewpoints",
+       "type": "array"
       }
      },
      "required": [
@@ -971,6 +979,24 @@ export const PROTOCOL = {
       "triangles"
      ],
      "title": "SceneInfo",
+     "type": "object"
+    },
+    "Viewpoint": {
+     "description": "Another camera a scene offers by name (a glTF's cameras after its first, which is ``camera``).",
+     "properties": {
+      "camera": {
+       "$ref": "#/$defs/CameraSpec"
+      },
+      "name": {
+       "title": "Name",
+       "type": "string"
+      }
+     },
+     "required": [
+      "name",
+      "camera"
+     ],
+     "title": "Viewpoint",
      "type": "object"
     }
    },

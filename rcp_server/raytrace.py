@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import kernels
+from .alphamask import pass_masked, step_floor
 from .camera import RAY_DTYPE, Camera, Region, plane_points
 from .mappings import MappingInput, get_mapping
 from .paintstate import PaintState
@@ -175,6 +176,8 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
     kernels.place_hits(
         origins=rays.origins, directions=rays.directions, rays=setup.pixels, triangles=geometry.triangles, hits=hits
     )
+    if geometry.masked:  # ---- alpha: cut-outs let rays through (alphamask.py) ----
+        pass_masked(tracer, geometry, rays.origins, rays.directions, setup.pixels, hits)
     out.face[:] = hits.face
     out.distance[:] = hits.t
 
@@ -221,7 +224,8 @@ class Frame:
             direction="direction" in reads,
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
-        return cls(kernels.Trace(embree, geometry.triangles), shading, tracer)
+        trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry))
+        return cls(trace, shading, tracer)
 
 
 class TracedTile:
@@ -262,6 +266,9 @@ class TracedTile:
             pending=np.empty(n * spp, np.int64),
             changed=np.empty(n, np.int64),
             every=np.arange(n * spp),
+            starts=np.empty((n * spp if frame.trace.masked else 1, 3), RAY_DTYPE),
+            todo=np.empty(n * spp if frame.trace.masked else 1, np.int64),
+            next_todo=np.empty(n * spp if frame.trace.masked else 1, np.int64),
         )
         self.buffers = (PaintState.empty(setup.region, self.reads), PaintState.empty(setup.region, self.reads))
         self.at_eye = False  # every origin in the ray buffers already is the camera's eye

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .camera import Camera
-from .meshes import Part, corner_normals
+from .meshes import PLAIN, Material, Part, corner_normals, rgb8
 from .params import PaintParams
 from .tracer import Tracer
 
@@ -80,7 +80,12 @@ class Geometry:
 
     triangles : (F, 3, 3) float32;  normals : (F, 3, 3) float32, unit shading normals per corner
     colors : (F, 3, 3) float32 albedo per corner;  uv : (F, 3, 2) float32;  texture_id : (F,) int32, -1 none
-    textures : packed texels (T, 3) float32 with (K,) offsets, widths and heights (int64)
+    textures : packed texels (T, 3) uint8 RGB display colors with (K,) offsets, widths and heights (int64);
+    the coverage of those that let rays through, packed apart: alpha_texels (A,) uint8 and
+    texture_alpha_offset (K,) int64, -1 for a texture without
+    materials (``meshes.Material``, one row per distinct one): face_material (F,) int32 its row;
+    material_emission (M, 3) float32 display color added after light; material_emission_texture (M,)
+    int32 texture or -1; material_unlit (M,) bool; material_alpha_cutoff (M,) float32, 0 when opaque
     """
 
     triangles: np.ndarray
@@ -92,11 +97,23 @@ class Geometry:
     texture_offset: np.ndarray
     texture_width: np.ndarray
     texture_height: np.ndarray
+    alpha_texels: np.ndarray = field(default_factory=lambda: np.zeros(1, np.uint8))
+    texture_alpha_offset: np.ndarray = field(default_factory=lambda: np.full(1, -1, np.int64))
+    face_material: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    material_emission: np.ndarray = field(default_factory=lambda: np.zeros((1, 3), np.float32))
+    material_emission_texture: np.ndarray = field(default_factory=lambda: np.full(1, -1, np.int32))
+    material_unlit: np.ndarray = field(default_factory=lambda: np.zeros(1, np.bool_))
+    material_alpha_cutoff: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
     bounds: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # (2, 3) min and max corner
 
     @property
     def face_count(self) -> int:
         return len(self.triangles)
+
+    @property
+    def masked(self) -> bool:
+        """Some surface has texels that rays pass through (``kernels.alpha``); without, nothing is checked."""
+        return bool((self.material_alpha_cutoff > 0).any())
 
 
 def _transform_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -104,7 +121,8 @@ def _transform_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def _placed(obj: SceneObject, time: float) -> list[tuple[np.ndarray, np.ndarray, Part]]:
-    """World triangles (F, 3, 3) and unit corner normals (F, 3, 3) of each instance of ``obj`` at ``time``."""
+    """World triangles (F, 3, 3) and unit corner normals (F, 3, 3) of each instance of ``obj`` at ``time``,
+    float32 (what the tracer and the shading read)."""
     vertices = obj.part.vertices
     if obj.waves:
         vertices = vertices.copy()
@@ -120,18 +138,80 @@ def _placed(obj: SceneObject, time: float) -> list[tuple[np.ndarray, np.ndarray,
         n /= np.maximum(np.linalg.norm(n, axis=2, keepdims=True), 1e-30)
         if np.linalg.det(m[:3, :3]) < 0:  # a mirroring transform flips the winding; keep normals outward
             n = -n
-        placed.append((tri, n, part))
+        placed.append((tri.astype(np.float32), n.astype(np.float32), part))
     return placed
+
+
+class _Packer:
+    """Distinct textures and materials of a scene, each once, in the order first met."""
+
+    def __init__(self):
+        self.textures: dict[int, tuple[int, np.ndarray]] = {}  # id(texture array) -> (index, 8-bit RGB array)
+        self.materials: dict[int, tuple[int, Material]] = {}
+        self.alphas: dict[int, np.ndarray] = {}  # texture index -> its coverage (h, w) uint8
+
+    def texture(self, image: np.ndarray | None) -> int:
+        if image is None:
+            return -1
+        if id(image) not in self.textures:
+            self.textures[id(image)] = (len(self.textures), rgb8(image))
+        return self.textures[id(image)][0]
+
+    def alpha(self, texture: int, alpha: np.ndarray | None) -> None:
+        if texture >= 0 and alpha is not None:
+            self.alphas.setdefault(texture, alpha)
+
+    def packed_alphas(self, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """(A,) uint8 coverage of every texture that has one, and (count,) int64 where each starts (-1 none)."""
+        offsets = np.full(max(count, 1), -1, np.int64)
+        chunks, start = [], 0
+        for k, alpha in sorted(self.alphas.items()):
+            offsets[k] = start
+            chunks.append(alpha.reshape(-1))
+            start += alpha.size
+        return (np.concatenate(chunks) if chunks else np.zeros(1, np.uint8)), offsets
+
+    def material(self, material: Material) -> int:
+        if id(material) not in self.materials:
+            self.texture(material.emission_texture)
+            self.materials[id(material)] = (len(self.materials), material)
+        return self.materials[id(material)][0]
+
+
+def _store_of(images: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The texels of ``images`` ((h, w, 3) uint8 each) packed as (T, 3) with each one's first texel: the
+    store they are all views of (``meshes.packed``), taken as it is, or else a new one."""
+    if not images:
+        return None
+    base = images[0].base
+    while isinstance(base, np.ndarray) and base.base is not None and isinstance(base.base, np.ndarray):
+        base = base.base
+    if isinstance(base, np.ndarray) and base.ndim == 2 and base.shape[1] == 3 and base.dtype == np.uint8:
+        start = base.__array_interface__["data"][0]
+        offsets = []
+        for im in images:
+            delta = im.__array_interface__["data"][0] - start
+            inside = 0 <= delta and delta + im.nbytes <= base.nbytes and im.flags.c_contiguous
+            if not (inside and np.may_share_memory(im, base)):
+                break
+            offsets.append(delta // 3)
+        else:
+            return base, np.asarray(offsets, np.int64)
+    sizes = np.array([im.shape[0] * im.shape[1] for im in images], dtype=np.int64)
+    texels = np.concatenate([im.reshape(-1, 3) for im in images], dtype=np.uint8)
+    return texels, np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
 
 
 def build_geometry(objects: list[SceneObject], time: float, static_cache: dict | None = None) -> Geometry:
     """Concatenate all instances of all objects, placed and deformed at ``time``.
 
     ``static_cache`` keeps the placed instances of objects that do not move, so an animated scene
-    re-places only what moves.
+    re-places only what moves. Each array is made once, in the dtype it keeps (the staircase interior's
+    geometry is 262k triangles: a copy of each array is tens of MB).
     """
-    tris, normals, colors, uvs, tex_ids = [], [], [], [], []
-    textures: dict[int, tuple[int, np.ndarray]] = {}  # id(texture array) -> (index, array)
+    tris, normals, colors, uvs, tex_ids, face_materials = [], [], [], [], [], []
+    packer = _Packer()
+    packer.material(PLAIN)  # row 0: every part without a material of its own
     for obj in objects:
         if obj.animated or static_cache is None:
             placed = _placed(obj, time)
@@ -143,33 +223,37 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             tris.append(tri)
             normals.append(n)
             colors.append(part.corner_colors)
-            if part.texture is not None:
-                index, _ = textures.setdefault(id(part.texture), (len(textures), part.texture))
-                uvs.append(part.corner_uv)
-                tex_ids.append(np.full(len(tri), index, np.int32))
-            else:
-                uvs.append(np.zeros((len(tri), 3, 2), np.float32))
-                tex_ids.append(np.full(len(tri), -1, np.int32))
-    images = [image for _, image in sorted(textures.values(), key=lambda item: item[0])]
-    points = np.concatenate(tris).reshape(-1, 3) if tris else np.zeros((1, 3))
-    sizes = np.array([im.shape[0] * im.shape[1] for im in images], dtype=np.int64)
+            index = packer.texture(part.texture)
+            packer.alpha(index, part.material.alpha_texture)
+            row = 0 if part.material.plain else packer.material(part.material)
+            keep_uv = part.corner_uv is not None and (index >= 0 or part.material.emission_texture is not None)
+            uvs.append(part.corner_uv if keep_uv else np.zeros((len(tri), 3, 2), np.float32))
+            tex_ids.append(np.full(len(tri), index, np.int32))
+            face_materials.append(np.full(len(tri), row, np.int32))
+    images = [image for _, image in sorted(packer.textures.values(), key=lambda item: item[0])]
+    store = _store_of(images)
+    materials = [m for _, m in sorted(packer.materials.values(), key=lambda item: item[0])]
+    alpha_texels, alpha_offsets = packer.packed_alphas(len(images))
+    triangles = np.concatenate(tris, dtype=np.float32) if tris else np.zeros((0, 3, 3), np.float32)
+    points = triangles.reshape(-1, 3) if tris else np.zeros((1, 3), np.float32)
     return Geometry(
-        triangles=np.concatenate(tris).astype(np.float32) if tris else np.zeros((0, 3, 3), np.float32),
-        normals=np.concatenate(normals).astype(np.float32) if normals else np.zeros((0, 3, 3), np.float32),
-        colors=np.concatenate(colors).astype(np.float32) if colors else np.zeros((0, 3, 3), np.float32),
-        uv=np.concatenate(uvs).astype(np.float32) if uvs else np.zeros((0, 3, 2), np.float32),
+        triangles=triangles,
+        normals=np.concatenate(normals, dtype=np.float32) if normals else np.zeros((0, 3, 3), np.float32),
+        colors=np.concatenate(colors, dtype=np.float32) if colors else np.zeros((0, 3, 3), np.float32),
+        uv=np.concatenate(uvs, dtype=np.float32) if uvs else np.zeros((0, 3, 2), np.float32),
         texture_id=np.concatenate(tex_ids) if tex_ids else np.zeros(0, np.int32),
-        texels=(
-            np.concatenate([im.reshape(-1, 3) for im in images]).astype(np.float32)
-            if images
-            else np.zeros((1, 3), np.float32)
-        ),
-        texture_offset=np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        if images
-        else np.zeros(1, np.int64),
+        texels=store[0] if store else np.zeros((1, 3), np.uint8),
+        texture_offset=store[1] if store else np.zeros(1, np.int64),
         texture_width=np.array([im.shape[1] for im in images] or [1], dtype=np.int64),
         texture_height=np.array([im.shape[0] for im in images] or [1], dtype=np.int64),
-        bounds=np.stack([points.min(axis=0), points.max(axis=0)]),
+        alpha_texels=alpha_texels,
+        texture_alpha_offset=alpha_offsets,
+        face_material=np.concatenate(face_materials) if face_materials else np.zeros(0, np.int32),
+        material_emission=np.array([m.emission for m in materials], dtype=np.float32).reshape(-1, 3),
+        material_emission_texture=np.array([packer.texture(m.emission_texture) for m in materials], dtype=np.int32),
+        material_unlit=np.array([m.unlit for m in materials], dtype=np.bool_),
+        material_alpha_cutoff=np.array([m.alpha_cutoff for m in materials], dtype=np.float32),
+        bounds=np.stack([points.min(axis=0), points.max(axis=0)]).astype(np.float64),
     )
 
 
@@ -185,6 +269,7 @@ class Scene:
     objects: list[SceneObject] = field(default_factory=list)
     paint: PaintParams = field(default_factory=PaintParams)  # how this scene is painted unless told otherwise
     z_max: float | None = None  # depth a miss records; derived from the scene's size when None
+    viewpoints: dict[str, Camera] = field(default_factory=dict)  # other cameras offered by name (a glTF's)
     _cache: dict = field(default_factory=dict, repr=False)
     _static: dict = field(default_factory=dict, repr=False)  # placed instances of objects that never move
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
@@ -201,7 +286,7 @@ class Scene:
         key = float(time) if self.animated else 0.0
         with self._lock:
             if key not in self._cache:
-                geometry = build_geometry(self.objects, key, self._static)
+                geometry = build_geometry(self.objects, key, self._static if self.animated else None)
                 tracer = Tracer(geometry.triangles) if geometry.face_count else None
                 while len(self._cache) >= 4:
                     self._cache.pop(next(iter(self._cache)))

@@ -22,8 +22,19 @@ import numpy as np
 import trimesh
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from . import framing
 from .camera import Camera, CameraError
-from .meshes import DEFAULT_ALBEDO, MeshError, Part, load_mesh_file, load_texture, primitive
+from .meshes import (
+    DEFAULT_ALBEDO,
+    MeshError,
+    Model,
+    Part,
+    load_model,
+    load_texture,
+    primitive,
+    read_image,
+    release_freed_memory,
+)
 from .params import PaintParams
 from .radiance import read_radiance, tonemap
 from .scene import Environment, Light, Scene, SceneObject, Waves
@@ -153,9 +164,9 @@ class ObjectSpec(Placement):
 
 class SceneSpec(_Model):
     title: str = ""
-    camera: CameraSpec
+    camera: CameraSpec | str  # or the name of a camera in one of the objects' glTF files
     environment: EnvironmentSpec = EnvironmentSpec(color=(0.55, 0.62, 0.72))
-    light: LightSpec | None = None
+    light: LightSpec | str | None = None  # or the name of a light (KHR_lights_punctual) in one of them
     paint: dict[str, str | int | float] = {}
     z_max: Annotated[float, Field(gt=0)] | None = None
     objects: list[ObjectSpec] = []
@@ -215,22 +226,61 @@ def _motion(spec: ObjectSpec):
     return motion
 
 
-def _parts(spec: ObjectSpec, folder: Path, where: str) -> list[Part]:
+def _model(spec: ObjectSpec, folder: Path, where: str) -> Model:
     if (spec.mesh is None) == (spec.primitive is None):
         raise SceneError(f"{where}: give exactly one of 'mesh' or 'primitive'")
     if spec.mesh is not None:
-        return load_mesh_file(folder / spec.mesh)
+        return load_model(folder / spec.mesh)
     p = spec.primitive
-    return [primitive(p.type, **{k: v for k, v in p.model_dump().items() if k != "type" and v is not None})]
+    return Model([primitive(p.type, **{k: v for k, v in p.model_dump().items() if k != "type" and v is not None})])
 
 
-def _scene_object(spec: ObjectSpec, folder: Path, where: str) -> list[SceneObject]:
+class _Named:
+    """The cameras and lights that the objects' model files bring, by name, each with the placement of its
+    object's first copy (4x4): what a scene file's ``camera = "name"`` and ``light = "name"`` refer to."""
+
+    def __init__(self):
+        self.cameras: dict = {}
+        self.lights: dict = {}
+
+    def add(self, model: Model, world_from_model: np.ndarray) -> None:
+        for viewpoint in model.viewpoints:
+            self.cameras.setdefault(viewpoint.name, (viewpoint, world_from_model))
+        for light in model.lights:
+            self.lights.setdefault(light.name, (light, world_from_model))
+
+    def camera(self, name: str, scene: Scene) -> Camera:
+        if name not in self.cameras:
+            raise SceneError(
+                f"camera: no camera named {name!r} in the objects' files (they have: {_listed(self.cameras)})"
+            )
+        geometry, tracer = scene.geometry(0.0)
+        viewpoint, placement = self.cameras[name]
+        return framing.viewpoint_camera(viewpoint, geometry, tracer, placement)
+
+    def light(self, name: str, scene: Scene) -> Light:
+        if name not in self.lights:
+            raise SceneError(
+                f"light: no light named {name!r} in the objects' files (they have: {_listed(self.lights)})"
+            )
+        light, placement = self.lights[name]
+        return framing.light_of([light], scene.geometry(0.0)[0], placement)
+
+
+def _listed(names) -> str:
+    return ", ".join(repr(n) for n in list(names)[:8]) or "none"
+
+
+def _scene_object(spec: ObjectSpec, folder: Path, where: str, named: _Named | None = None) -> list[SceneObject]:
     objects = []
-    texture = load_texture(folder / spec.texture) if spec.texture else None
+    texture = read_image(folder / spec.texture) if spec.texture else None
     placements = [m @ spec.matrix() for m in _instances(spec)]
+    model = _model(spec, folder, where)
+    if named is not None and placements:
+        named.add(model, placements[0])
     motion = _motion(spec)
     waves = tuple(Waves(w.amplitude, w.wavelength, w.direction, w.speed) for w in spec.waves)
-    for k, part in enumerate(_parts(spec, folder, where)):
+    for k, part in enumerate(model.parts):
         if texture is not None:
             if part.corner_uv is None:
                 raise SceneError(f"{where}: 'texture' needs a mesh with texture coordinates")
@@ -271,7 +321,8 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
         raise SceneError(f"{path}: {one_line(exc)}") from None
     folder = path.parent
     try:
-        camera = Camera(**spec.camera.model_dump())
+        named = _Named()
+        camera = Camera(**spec.camera.model_dump()) if isinstance(spec.camera, CameraSpec) else None
         env = spec.environment
         if (env.image is None) == (env.color is None):
             raise SceneError("environment: give exactly one of 'image' or 'color'")
@@ -279,19 +330,37 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
             load_environment(folder / env.image, env.exposure) if env.image else Environment.constant(env.color)
         )
         light = None
-        if spec.light is not None:
+        if isinstance(spec.light, LightSpec):
             d = np.asarray(spec.light.direction, dtype=np.float64)
             if np.linalg.norm(d) == 0:
                 raise SceneError("light.direction must not be zero")
             light = Light(tuple(d / np.linalg.norm(d)), spec.light.ambient)
         objects = []
         for index, obj in enumerate(spec.objects):
-            objects.extend(_scene_object(obj, folder, f"objects.{index}" + (f" ({obj.name})" if obj.name else "")))
+            where = f"objects.{index}" + (f" ({obj.name})" if obj.name else "")
+            objects.extend(_scene_object(obj, folder, where, named))
         paint = PaintParams.from_dict(spec.paint)  # refuse bad painting settings now, not at the first render
+        stand_in = Camera((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))  # until the named camera is placed in the scene
+        scene = Scene(
+            name or path.stem,
+            spec.title or path.stem,
+            camera or stand_in,
+            environment,
+            light,
+            objects,
+            paint,
+            spec.z_max,
+        )
+        # ---- the cameras and lights of the objects' glTF files, by name ----
+        if isinstance(spec.light, str):
+            scene.light = named.light(spec.light, scene)
+        if isinstance(spec.camera, str):
+            scene.camera = named.camera(spec.camera, scene)
+        scene.viewpoints = {n: named.camera(n, scene) for n in named.cameras if n != spec.camera}
     except (SceneError, MeshError, CameraError, ValueError) as exc:
         message = str(exc)
         raise SceneError(message if message.startswith(str(path)) else f"{path}: {message}") from None
-    return Scene(name or path.stem, spec.title or path.stem, camera, environment, light, objects, paint, spec.z_max)
+    return scene
 
 
 def load_environment(path: Path, exposure: float = 0.0) -> Environment:
@@ -313,20 +382,47 @@ def frame_camera(parts: list[Part], fov: float = 45.0) -> Camera:
 
 
 def mesh_scene(path: Path) -> Scene:
-    """A bare mesh file as a scene: a soft light, a calm backdrop, a camera that frames it."""
+    """A bare mesh file as a scene: its own cameras and light if it has them, a calm backdrop."""
     try:
-        parts = load_mesh_file(path)
+        model = load_model(path)
     except MeshError as exc:
         raise SceneError(str(exc)) from None
-    return parts_scene(parts, Path(path).stem, Path(path).name)
+    return model_scene(model, Path(path).stem, Path(path).name)
 
 
 def parts_scene(parts: list[Part], name: str, title: str) -> Scene:
-    """Parts of a model as a scene: a soft light from the front, a calm backdrop, a camera that frames them
-    from their front (glTF's +z), a little above and to the right."""
+    """Parts of a model as a scene (:func:`model_scene` of a model with no cameras or lights)."""
+    return model_scene(Model(parts), name, title)
+
+
+def _unique(names: list[str]) -> list[str]:
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f"{name} ({seen[name]})")
+    return out
+
+
+def model_scene(model: Model, name: str, title: str) -> Scene:
+    """A model as a scene, as its authors made it where they said (``framing.py``): its first camera is the
+    scene's, the others offered as ``viewpoints`` by name; its light (``framing.light_of``) or a soft one from the
+    front; without a camera, framed from inside an interior or from where a figure faces. Builds the
+    scene's tree (which the framing reads, and painting needs anyway)."""
+    parts = model.parts
     objects = [SceneObject(f"{title}#{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
-    light = Light(tuple(np.array([-0.4, -1.0, -0.5]) / np.linalg.norm([-0.4, -1.0, -0.5])), 0.35)
-    return Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
+    light = Light(
+        tuple(np.array(framing.DEFAULT_LIGHT) / np.linalg.norm(framing.DEFAULT_LIGHT)), framing.DEFAULT_AMBIENT
+    )
+    scene = Scene(name, title, frame_camera(parts), Environment.constant((0.62, 0.68, 0.78)), light, objects)
+    geometry, tracer = scene.geometry(0.0)
+    release_freed_memory()  # building the tree freed as much again as it keeps
+    scene.light = framing.light_of(model.lights, geometry) if model.lights else framing.default_light(geometry)
+    names = _unique([v.name for v in model.viewpoints])
+    cameras = [framing.viewpoint_camera(v, geometry, tracer) for v in model.viewpoints]
+    scene.camera = cameras[0] if cameras else framing.default_camera(geometry, tracer)
+    scene.viewpoints = dict(zip(names[1:], cameras[1:], strict=True))  # the others, offered by name
+    return scene
 
 
 def scene_names(folder: Path = SCENES_DIR) -> list[str]:

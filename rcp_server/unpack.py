@@ -340,12 +340,13 @@ def check_model(model: Path, folder: Path, limits: Limits) -> None:
 # ---- reading, and the arrays handed back ----
 
 
-def read_upload(upload: Path, filename: str, folder: Path, limits: Limits) -> list:
-    """The parts of an uploaded file (``filename`` gives its kind), unpacked and checked in ``folder``.
+def read_upload(upload: Path, filename: str, folder: Path, limits: Limits):
+    """The model of an uploaded file (``filename`` gives its kind), unpacked and checked in ``folder``.
 
-    Returns a list of :class:`meshes.Part`; raises :class:`Refused` with the reason.
+    Returns a :class:`meshes.Model` (its parts, a glTF's cameras and lights); raises :class:`Refused` with
+    the reason.
     """
-    from .meshes import MeshError, load_mesh_file
+    from .meshes import MeshError, load_model
 
     suffix = Path(filename).suffix.lower()
     if suffix not in UPLOAD_SUFFIXES:
@@ -362,40 +363,75 @@ def read_upload(upload: Path, filename: str, folder: Path, limits: Limits) -> li
     check_model(model, folder, limits)
     os.chdir(model.parent)  # messages name the model as the uploader knows it, not where it lies here
     try:
-        parts = load_mesh_file(Path(model.name), refuse_nonfinite=True)
+        loaded = load_model(Path(model.name), refuse_nonfinite=True)
     except MeshError as exc:
         if isinstance(exc.__context__, MemoryError):  # trimesh ran into the address-space limit
             raise MemoryError from None
         raise Refused(str(exc)) from None
+    parts = loaded.parts
     triangles = sum(len(p.faces) for p in parts)
     if triangles > limits.max_triangles:
         raise Refused(f"the model has {triangles:,} triangles; at most {limits.max_triangles:,} are taken")
     if len(parts) > limits.max_meshes:
         raise Refused(f"the model has {len(parts):,} separate meshes; at most {limits.max_meshes:,} are taken")
-    return parts
+    return loaded
 
 
-def write_parts(path: Path, parts: list) -> None:
-    """Parts as plain arrays in an ``.npz`` (no pickles): per part ``k`` its ``vertices_k`` (V, 3) float64,
-    ``faces_k`` (F, 3) int64, ``colors_k`` (F, 3, 3) float32, ``colored_k`` (), ``texture_k`` () int64 index
-    or -1 and ``uv_k`` (F, 3, 2) float32 when textured; each distinct texture once as ``image_j`` (h, w, 3)
-    uint8."""
+def write_parts(path: Path, model) -> None:
+    """A model (``meshes.Model``) as plain arrays in an ``.npz`` (no pickles): per part ``k`` its
+    ``vertices_k`` (V, 3) float64, ``faces_k`` (F, 3) int64, ``colors_k`` (F, 3, 3) float32, ``colored_k``
+    (), ``texture_k`` () int64 index or -1 and ``uv_k`` (F, 3, 2) float32 when textured or glowing through
+    a texture, and its material as ``material_k`` (5,) float64 (emission r, g, b, unlit, alpha cutoff) and
+    ``emission_texture_k`` () int64 index or -1, ``alpha_k`` () int64 index of its coverage or -1; each
+    distinct texture once as ``image_j`` (h, w, 3) uint8, each distinct coverage as ``coverage_j`` (h, w) uint8;
+    the file's cameras as ``viewpoints`` (n, 10) float64 (eye, forward, up, fov) with ``viewpoint_names``,
+    its lights as ``lights`` (n, 6) float64 (position, direction) with ``light_kinds`` and ``light_names``."""
+    parts = model.parts
     arrays: dict[str, np.ndarray] = {"parts": np.int64(len(parts))}
     images: dict[int, int] = {}
+    coverages: dict[int, int] = {}
+
+    def image_index(image) -> int:
+        if id(image) not in images:
+            images[id(image)] = len(images)
+            arrays[f"image_{len(images) - 1}"] = image
+        return images[id(image)]
+
     for k, part in enumerate(parts):
         arrays[f"vertices_{k}"] = part.vertices
         arrays[f"faces_{k}"] = part.faces
         arrays[f"colors_{k}"] = part.corner_colors
         arrays[f"colored_{k}"] = np.bool_(part.colored)
-        texture = -1
-        if part.texture is not None and part.corner_uv is not None:
-            if id(part.texture) not in images:
-                images[id(part.texture)] = len(images)
-                arrays[f"image_{len(images) - 1}"] = np.round(part.texture * 255).astype(np.uint8)
-            texture = images[id(part.texture)]
-            arrays[f"uv_{k}"] = part.corner_uv
+        texture = emission = -1
+        if part.corner_uv is not None:
+            if part.texture is not None:
+                texture = image_index(part.texture)
+            if part.material.emission_texture is not None:
+                emission = image_index(part.material.emission_texture)
+            if texture >= 0 or emission >= 0:
+                arrays[f"uv_{k}"] = part.corner_uv
         arrays[f"texture_{k}"] = np.int64(texture)
+        arrays[f"emission_texture_{k}"] = np.int64(emission)
+        alpha = -1
+        if texture >= 0 and part.material.alpha_texture is not None:
+            if id(part.material.alpha_texture) not in coverages:
+                coverages[id(part.material.alpha_texture)] = len(coverages)
+                arrays[f"coverage_{len(coverages) - 1}"] = part.material.alpha_texture
+            alpha = coverages[id(part.material.alpha_texture)]
+        arrays[f"alpha_{k}"] = np.int64(alpha)
+        m = part.material
+        arrays[f"material_{k}"] = np.array([*m.emission, float(m.unlit), m.alpha_cutoff], np.float64)
     arrays["images"] = np.int64(len(images))
+    arrays["coverages"] = np.int64(len(coverages))
+    arrays["viewpoints"] = np.array([[*v.eye, *v.forward, *v.up, v.fov] for v in model.viewpoints], np.float64).reshape(
+        -1, 10
+    )
+    arrays["viewpoint_names"] = np.array([v.name[:80] for v in model.viewpoints], dtype=np.str_).reshape(-1)
+    arrays["lights"] = np.array([[*light.position, *light.direction] for light in model.lights], np.float64).reshape(
+        -1, 6
+    )
+    arrays["light_kinds"] = np.array([light.kind for light in model.lights], dtype=np.str_).reshape(-1)
+    arrays["light_names"] = np.array([light.name[:80] for light in model.lights], dtype=np.str_).reshape(-1)
     np.savez(path, **arrays)
 
 
@@ -433,8 +469,8 @@ def _answer(work: Path, filename: str, limits: Limits) -> int:
     Image.MAX_IMAGE_PIXELS = limits.max_texture_pixels
     warnings.simplefilter("error", Image.DecompressionBombWarning)
     try:
-        parts = read_upload(work / "upload", filename, work / "files", limits)
-        write_parts(work / "parts.npz", parts)
+        model = read_upload(work / "upload", filename, work / "files", limits)
+        write_parts(work / "parts.npz", model)
         return 0
     except Refused as exc:
         message, status = str(exc), 2

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from . import unpack
-from .meshes import Part
+from .gltf import PunctualLight, Viewpoint
+from .meshes import PLAIN, Material, Model, Part, packed
 from .unpack import UPLOAD_SUFFIXES, Limits, Refused, check_kind
 
 __all__ = ["UPLOAD_SUFFIXES", "Limits", "Refused", "read_model"]
@@ -38,10 +39,10 @@ def _forks():
         return _context
 
 
-def read_model(work: Path, filename: str, limits: Limits) -> list[Part]:
-    """The parts of the model whose bytes are ``work/upload``; ``filename`` (as the uploader named it) gives
-    its kind. Blocking, for seconds: run it in a worker thread. ``work`` is a folder of its own that the
-    caller removes afterwards (the child unpacks there)."""
+def read_model(work: Path, filename: str, limits: Limits) -> Model:
+    """The model (its parts, a glTF's cameras and lights) whose bytes are ``work/upload``; ``filename`` (as
+    the uploader named it) gives its kind. Blocking, for seconds: run it in a worker thread. ``work`` is a
+    folder of its own that the caller removes afterwards (the child unpacks there)."""
     suffix = Path(filename).suffix.lower()
     if suffix not in UPLOAD_SUFFIXES:
         raise Refused(f"{filename[:80]!r} is not a kind of file this server reads ({', '.join(UPLOAD_SUFFIXES)})")
@@ -62,12 +63,13 @@ def read_model(work: Path, filename: str, limits: Limits) -> list[Part]:
     return parts_from_arrays(work / "parts.npz", limits)
 
 
-def parts_from_arrays(path: Path, limits: Limits) -> list[Part]:
-    """The child's ``.npz`` (:func:`unpack.write_parts`) as parts, every array checked: dtypes, shapes,
+def parts_from_arrays(path: Path, limits: Limits) -> Model:
+    """The child's ``.npz`` (:func:`unpack.write_parts`) as a model, every array checked: dtypes, shapes,
     face indices within the vertices, finite numbers, colors in [0, 1], and the limits."""
     try:
         with np.load(path, allow_pickle=False) as arrays:
-            return _parts(dict(arrays.items()), limits)
+            found = dict(arrays.items())
+            return Model(packed(_parts(found, limits)), *_cameras_and_lights(found))
     except (OSError, ValueError, KeyError) as exc:
         raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
 
@@ -84,9 +86,13 @@ def _array(arrays: dict, key: str, dtype, shape: tuple) -> np.ndarray:
 def _parts(arrays: dict, limits: Limits) -> list[Part]:
     count = int(_array(arrays, "images", np.int64, ()))
     images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 3)) for j in range(count)]
+    coverages = [
+        _array(arrays, f"coverage_{j}", np.uint8, (None, None))
+        for j in range(int(_array(arrays, "coverages", np.int64, ())))
+    ]
     if sum(im.shape[0] * im.shape[1] for im in images) > limits.max_texture_pixels:
         raise Refused(f"the model's images have more than {limits.max_texture_pixels:,} pixels")
-    textures = [im.astype(np.float32) / 255.0 for im in images]
+    textures = images  # 8-bit RGBA, as the shading reads them
     count = int(_array(arrays, "parts", np.int64, ()))
     if not 1 <= count <= limits.max_meshes:
         raise Refused(f"the model has {count:,} meshes; from 1 to {limits.max_meshes:,} are taken")
@@ -110,9 +116,66 @@ def _parts(arrays: dict, limits: Limits) -> list[Part]:
             uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0)
         triangles += len(faces)
         colored = bool(_array(arrays, f"colored_{k}", np.bool_, ()))
+        emission = int(_array(arrays, f"emission_texture_{k}", np.int64, ()))
+        if emission >= len(textures) or (emission >= 0 and uv is None):
+            if uv is None and 0 <= emission < len(textures):
+                uv = np.nan_to_num(
+                    _array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2)), nan=0.0, posinf=0.0, neginf=0.0
+                )
+            else:
+                raise ValueError(f"emission_texture_{k}: {emission} of {len(textures)}")
+        m = _array(arrays, f"material_{k}", np.float64, (5,))
+        alpha = int(_array(arrays, f"alpha_{k}", np.int64, ()))
+        if alpha >= len(coverages) or (
+            alpha >= 0 and (texture < 0 or coverages[alpha].shape != textures[texture].shape[:2])
+        ):
+            raise ValueError(f"alpha_{k}: {alpha} of {len(coverages)}")
+        if not np.isfinite(m).all():
+            raise Refused("the model has material values that are not finite numbers")
+        material = Material(
+            tuple(float(v) for v in np.clip(m[:3], 0.0, 1.0)),
+            textures[emission] if emission >= 0 else None,
+            bool(m[3]),
+            float(np.clip(m[4], 0.0, 1e6)) if alpha >= 0 else 0.0,
+            coverages[alpha] if alpha >= 0 else None,
+        )
         parts.append(
-            Part(vertices, faces, np.clip(colors, 0.0, 1.0), uv, textures[texture] if texture >= 0 else None, colored)
+            Part(
+                vertices,
+                faces,
+                np.clip(colors, 0.0, 1.0),
+                uv,
+                textures[texture] if texture >= 0 else None,
+                colored,
+                PLAIN if material.plain else material,
+            )
         )
     if triangles > limits.max_triangles:
         raise Refused(f"the model has {triangles:,} triangles; at most {limits.max_triangles:,} are taken")
     return parts
+
+
+def _cameras_and_lights(arrays: dict) -> tuple[list[Viewpoint], list[PunctualLight]]:
+    """The glTF's cameras and lights of the child's arrays, each checked (finite, unit directions, a fov)."""
+    views = _array(arrays, "viewpoints", np.float64, (None, 10))
+    names = _array(arrays, "viewpoint_names", arrays["viewpoint_names"].dtype, (len(views),))
+    lights = _array(arrays, "lights", np.float64, (None, 6))
+    kinds = _array(arrays, "light_kinds", arrays["light_kinds"].dtype, (len(lights),))
+    light_names = _array(arrays, "light_names", arrays["light_names"].dtype, (len(lights),))
+    if names.dtype.kind != "U" or kinds.dtype.kind != "U" or light_names.dtype.kind != "U":
+        raise ValueError("names are not text")
+    if not (np.isfinite(views).all() and np.isfinite(lights).all()):
+        raise Refused("the model's cameras or lights hold numbers that are not finite")
+    viewpoints = [
+        Viewpoint(
+            str(name)[:80], tuple(map(float, v[:3])), tuple(map(float, v[3:6])), tuple(map(float, v[6:9])), float(v[9])
+        )
+        for name, v in zip(names, views, strict=True)
+        if 0 < v[9] < 180 and np.linalg.norm(v[3:6]) > 0.5 and np.linalg.norm(v[6:9]) > 0.5
+    ]
+    found = [
+        PunctualLight(str(name)[:80], str(kind), tuple(map(float, v[:3])), tuple(map(float, v[3:6])))
+        for name, kind, v in zip(light_names, kinds, lights, strict=True)
+        if kind in ("directional", "point", "spot")
+    ]
+    return viewpoints, found

@@ -86,6 +86,13 @@ def _stability(args: argparse.Namespace) -> None:
     run(args.out, quick=args.quick)
 
 
+def _memory(args: argparse.Namespace) -> None:
+    from ..painting import default_threads
+    from .memory import bench_memory
+
+    bench_memory(args.models, args.width, args.height, args.threads or default_threads())
+
+
 def _cluster(args: argparse.Namespace) -> None:
     if not _findable("ray"):
         raise MissingExtra("rcp bench cluster needs Ray, which the cluster extra installs: pip install '.[cluster]'")
@@ -170,6 +177,15 @@ def add_bench_commands(subparsers) -> None:
     p = command("stability", "where each method breaks (needs the bench extra)")
     _out_and_quick(p)
     p.set_defaults(run_bench=_stability)
+
+    p = command("memory", "resident memory per loaded scene, and its peak once painted, over the interpreter")
+    p.add_argument(
+        "models", nargs="*", metavar="MODEL", help="model files (or scene files) measured after the shipped scenes"
+    )
+    p.add_argument("--width", type=positive_int, default=1280, help="pixels (default 1280)")
+    p.add_argument("--height", type=positive_int, default=720, help="pixels (default 720)")
+    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    p.set_defaults(run_bench=_memory)
 
     p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
     p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")

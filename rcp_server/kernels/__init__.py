@@ -3,7 +3,8 @@
 ``cast.py``: camera assignment (``cast_rays``, with the built-in mappings fused in, and ``fill_field``);
 ``shade.py``: hits -> per-pixel data (``shade``); ``triangle.py``: where a ray meets the triangle it hits
 (``place_hits``); ``iterate.py``: one traced iteration of a tile, the steps above chained in one call
-(``paint_iteration``); ``lookup.py``: the image-space method's lookup (``look_up``); ``seen.py`` and
+(``paint_iteration``); ``alpha.py``: rays through cut-outs (``pass_masked``); ``lookup.py``: the
+image-space method's lookup (``look_up``); ``seen.py`` and
 ``reuse.py``: the shortcuts of the ``fast`` setting (``resolve_seen`` finds the hit where the plain render
 already knows it, ``cover_thin`` where it may not; ``changed_pixels`` what must be painted again,
 ``carry`` what is kept). Each releases the GIL, so tiles run on threads side by side, and each has a plain
@@ -13,6 +14,7 @@ Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same
 other's place must be an error, not a wrong image.
 """
 
+from .alpha import masked_rays, pass_masked
 from .bundles import (
     Cast,
     Channels,
@@ -62,8 +64,10 @@ __all__ = [
     "channels",
     "fill_field",
     "look_up",
+    "masked_rays",
     "or_dummy",
     "paint_iteration",
+    "pass_masked",
     "place_hits",
     "resolve_seen",
     "shade",

@@ -65,10 +65,17 @@ class Surfaces(NamedTuple):
     colors: np.ndarray  # (F, 3, 3) float32 albedo per corner
     uv: np.ndarray  # (F, 3, 2) float32
     texture_id: np.ndarray  # (F,) int32, -1 none
-    texels: np.ndarray  # (T, 3) float32, every texture packed
+    texels: np.ndarray  # (T, 3) uint8 RGB display colors, every texture packed
     texture_offset: np.ndarray  # (K,) int64 first texel of each texture
     texture_width: np.ndarray  # (K,) int64
     texture_height: np.ndarray  # (K,) int64
+    alpha_texels: np.ndarray  # (A,) uint8 coverage of the textures that have one (``alpha.py`` reads it)
+    texture_alpha_offset: np.ndarray  # (K,) int64 where a texture's coverage starts in alpha_texels, -1 none
+    face_material: np.ndarray  # (F,) int32 row of the material tables; row 0 is plain
+    material_emission: np.ndarray  # (M, 3) float32 display color added after the light
+    material_emission_texture: np.ndarray  # (M,) int32, -1 none
+    material_unlit: np.ndarray  # (M,) bool
+    material_alpha_cutoff: np.ndarray  # (M,) float32, 0 opaque (``alpha.py`` reads it)
 
 
 class Cast(NamedTuple):
@@ -100,10 +107,13 @@ class Compare(NamedTuple):
 
 class Trace(NamedTuple):
     """The scene as intersection needs it: Embree's handle (``tracer.Embree``; scene 0 when there are no
-    triangles) and the triangles (F, 3, 3) float32 where hits are placed."""
+    triangles), the triangles (F, 3, 3) float32 where hits are placed, and whether some of them have cut-outs
+    that rays pass through (``alpha.pass_masked``, stepping at least ``floor`` scene units past a hit)."""
 
     embree: tuple
     triangles: np.ndarray
+    masked: bool
+    floor: float
 
 
 class Shading(NamedTuple):
@@ -132,6 +142,9 @@ class Scratch(NamedTuple):
     pending: np.ndarray  # (n*spp,) int64 rays left to Embree
     changed: np.ndarray  # (n,) int64 pixels painted again
     every: np.ndarray  # (n*spp,) int64 0, 1, 2, ...
+    starts: np.ndarray  # (n*spp, 3) float32 where rays through cut-outs go on (one row when none can)
+    todo: np.ndarray  # (n*spp,) int64 rays through cut-outs, two lists in turn (one entry when none can)
+    next_todo: np.ndarray
 
 
 class Seen(NamedTuple):

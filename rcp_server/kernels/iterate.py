@@ -7,6 +7,7 @@ of its own module, tested there against its numpy reference; this one only chain
 from __future__ import annotations
 
 from ..tracer import intersect_rays
+from .alpha import pass_masked
 from .cast import cast_rays
 from .clock import cycles
 from .jit import jit
@@ -91,6 +92,20 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
         place_hits(
             origins=scratch.origins, directions=scratch.directions, rays=traced, triangles=trace.triangles, hits=hits
         )
+        if trace.masked:  # ---- cut-outs let rays through, decided by the grid or by Embree alike ----
+            pass_masked(
+                embree=trace.embree,
+                triangles=trace.triangles,
+                surfaces=shading.surfaces,
+                origins=scratch.origins,
+                directions=scratch.directions,
+                rays=scratch.every[:rays],
+                hits=hits,
+                floor=trace.floor,
+                starts=scratch.starts,
+                todo=scratch.todo,
+                next_todo=scratch.next_todo,
+            )
     intersect_end = cycles()
     shade(
         origins=scratch.origins,

@@ -76,6 +76,69 @@ def _bilinear(texels, offset, width, height, x, y, wrap_y):
     )
 
 
+def _srgb_tables() -> tuple[np.ndarray, np.ndarray]:
+    """8-bit display value -> linear (256,) float64, and linear in 4096 steps -> display (4097,) float64."""
+    x = np.arange(256) / 255.0
+    decode = np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+    y = np.arange(4097) / 4096.0
+    encode = np.where(y <= 0.0031308, 12.92 * y, 1.055 * y ** (1 / 2.4) - 0.055)
+    return decode, encode
+
+
+_DECODE, _ENCODE = _srgb_tables()
+
+
+@numba.njit(inline="always")
+def _encode(linear):
+    """Linear [0, 1] -> display, from the table, interpolated (exact to 1e-4 where the curve is steep)."""
+    x = min(max(linear, 0.0), 1.0) * 4096.0
+    k = min(int(x), 4095)
+    w = x - k
+    return _ENCODE[k] + w * (_ENCODE[k + 1] - _ENCODE[k])
+
+
+@numba.njit(inline="always")
+def texel_color(texels, offset, width, height, u, v):
+    """A texture's display color at (u, v) (both wrap), an (r, g, b) tuple in [0, 1]: bilinear between its
+    four nearest 8-bit texels, filtered in linear light (a blend of display values darkens an edge
+    between light and dark texels) and encoded back. texels : (T, 3) uint8 RGB, every texture packed."""
+    x = u * width - 0.5
+    y = (1.0 - v) * height - 0.5
+    fx0 = math.floor(x)
+    fy0 = math.floor(y)
+    fx = x - fx0
+    fy = y - fy0
+    c0 = int(fx0) % width
+    c1 = c0 + 1 if c0 + 1 < width else 0
+    r0 = int(fy0) % height
+    r1 = r0 + 1 if r0 + 1 < height else 0
+    a = offset + r0 * width
+    b = offset + r1 * width
+    w00 = (1.0 - fx) * (1.0 - fy)
+    w01 = fx * (1.0 - fy)
+    w10 = (1.0 - fx) * fy
+    w11 = fx * fy
+    out_r = (
+        w00 * _DECODE[texels[a + c0, 0]]
+        + w01 * _DECODE[texels[a + c1, 0]]
+        + w10 * _DECODE[texels[b + c0, 0]]
+        + w11 * _DECODE[texels[b + c1, 0]]
+    )
+    out_g = (
+        w00 * _DECODE[texels[a + c0, 1]]
+        + w01 * _DECODE[texels[a + c1, 1]]
+        + w10 * _DECODE[texels[b + c0, 1]]
+        + w11 * _DECODE[texels[b + c1, 1]]
+    )
+    out_b = (
+        w00 * _DECODE[texels[a + c0, 2]]
+        + w01 * _DECODE[texels[a + c1, 2]]
+        + w10 * _DECODE[texels[b + c0, 2]]
+        + w11 * _DECODE[texels[b + c1, 2]]
+    )
+    return _encode(out_r), _encode(out_g), _encode(out_b)
+
+
 @jit
 def shade(
     origins,
@@ -110,6 +173,8 @@ def shade(
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
+    face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
+    material_emission, material_emission_texture = surfaces.material_emission, surfaces.material_emission_texture
     out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = len(pixels)
     env_h = environment.shape[0]
@@ -156,12 +221,12 @@ def shade(
                     g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
                     b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
                     tid = texture_id[f]
+                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
+                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
                     if tid >= 0:
-                        u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
-                        v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
                         tw = texture_width[tid]
                         th = texture_height[tid]
-                        tr, tg, tb = _bilinear(texels, texture_offset[tid], tw, th, u * tw, (1.0 - v) * th, True)
+                        tr, tg, tb = texel_color(texels, texture_offset[tid], tw, th, u, v)
                         r *= tr
                         g *= tg
                         b *= tb
@@ -173,7 +238,8 @@ def shade(
                         nx *= inv
                         ny *= inv
                         nz *= inv
-                    if lit:
+                    mat = face_material[f]
+                    if lit and not material_unlit[mat]:
                         # two-sided: light the side the ray sees
                         facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
                         lambert = -facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2])
@@ -181,6 +247,22 @@ def shade(
                         r *= k
                         g *= k
                         b *= k
+                    # ---- emission (glTF's emissiveFactor, times its texture): added after the light ----
+                    if mat > 0:
+                        er = material_emission[mat, 0]
+                        eg = material_emission[mat, 1]
+                        eb = material_emission[mat, 2]
+                        etid = material_emission_texture[mat]
+                        if etid >= 0:
+                            tw = texture_width[etid]
+                            th = texture_height[etid]
+                            tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, u, v)
+                            er *= tr
+                            eg *= tg
+                            eb *= tb
+                        r += er
+                        g += eg
+                        b += eb
                     if need_depth:
                         ts = t[s]
                         acc_z += (

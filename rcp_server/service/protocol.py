@@ -122,10 +122,18 @@ class PathCameras(BaseModel):
     scene_times: list[float]
 
 
+class Viewpoint(BaseModel):
+    """Another camera a scene offers by name (a glTF's cameras after its first, which is ``camera``)."""
+
+    name: str
+    camera: CameraModel
+
+
 class SceneInfo(BaseModel):
     name: str
     title: str
     camera: CameraModel
+    viewpoints: list[Viewpoint] = []
     paint: dict  # the scene's painting settings that differ from the engine's (client/protocol.js)
     animated: bool
     triangles: int

@@ -118,11 +118,14 @@ class Service:
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:
-    camera = scene.camera
+    def wire(camera) -> protocol.CameraModel:
+        return protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov)
+
     return protocol.SceneInfo(
         name=scene.name,
         title=scene.title,
-        camera=protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov),
+        camera=wire(scene.camera),
+        viewpoints=[protocol.Viewpoint(name=name, camera=wire(c)) for name, c in scene.viewpoints.items()],
         paint=scene.paint.non_defaults(),
         animated=scene.animated,
         triangles=scene.geometry(0.0)[0].face_count,

@@ -19,8 +19,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO
 
+import numpy as np
+
 from ..scene import Scene
-from ..scenefile import parts_scene
+from ..scenefile import model_scene
 from ..untrusted import Limits, Refused, read_model
 from . import protocol
 
@@ -113,14 +115,30 @@ def title_of(filename: str) -> str:
 
 
 def weight_of(scene: Scene) -> int:
-    """Bytes an uploaded scene holds: its parts, its traced geometry and (roughly) Embree's tree over it."""
+    """Bytes an uploaded scene holds: its parts, its traced geometry and (roughly) Embree's tree over it;
+    an array that views another (a part's texture in the scene's one texture store) counts once, as that one."""
     geometry, _ = scene.geometry(0.0)
-    arrays = {id(a): a for a in vars(geometry).values() if hasattr(a, "nbytes")}
+    arrays: dict[int, np.ndarray] = {}
+
+    def count(a) -> None:
+        if isinstance(a, np.ndarray):
+            while isinstance(a.base, np.ndarray):
+                a = a.base
+            arrays[id(a)] = a
+
+    for a in vars(geometry).values():
+        count(a)
     for obj in scene.objects:
         for part in [obj.part, *(p for _, p in obj.instances)]:
-            for a in (part.vertices, part.faces, part.corner_colors, part.corner_uv, part.texture):
-                if a is not None:
-                    arrays[id(a)] = a
+            for a in (
+                part.vertices,
+                part.faces,
+                part.corner_colors,
+                part.corner_uv,
+                part.texture,
+                part.material.emission_texture,
+            ):
+                count(a)
     return sum(a.nbytes for a in arrays.values()) + BVH_BYTES_PER_TRIANGLE * geometry.face_count
 
 
@@ -131,11 +149,10 @@ def read_scene(body: BinaryIO, filename: str, limits: Limits) -> tuple[Scene, in
     try:
         with open(work / "upload", "wb") as sink:
             shutil.copyfileobj(body, sink, 1 << 20)
-        parts = read_model(work, filename, limits)
+        model = read_model(work, filename, limits)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    scene = parts_scene(parts, new_name(), title_of(filename))
-    scene.geometry(0.0)  # build its tree now, not on the first frame
+    scene = model_scene(model, new_name(), title_of(filename))  # builds its tree now, not on the first frame
     return scene, weight_of(scene)
 
 

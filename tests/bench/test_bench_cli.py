@@ -20,6 +20,7 @@ FLAGS = {
     "stability": {"--out", "--quick"},
     "levels": {"--width", "--height"},
     "cluster": {"--scene", "--width", "--height", "--frames", "--ray", "--gbps", "--cores"},
+    "memory": {"--width", "--height", "--threads"},
 }
 # what a plain install lacks: the test extra's packages (the bench extra's among them)
 NOT_PLAIN = ("httpx", "matplotlib", "skimage", "playwright", "schemathesis", "pytest", "xdist")
@@ -90,7 +91,19 @@ def test_a_missing_package_is_one_line_naming_the_extra(which, module, requireme
 
 
 def test_the_benchmarks_import_without_the_test_extra(tmp_path):
-    modules = ["cli", "harness", "speed", "latency", "soak", "metrics", "accuracy", "stability", "levels", "cluster"]
+    modules = [
+        "cli",
+        "harness",
+        "speed",
+        "latency",
+        "soak",
+        "metrics",
+        "accuracy",
+        "stability",
+        "levels",
+        "cluster",
+        "memory",
+    ]
     code = _blocked(NOT_PLAIN) + "".join(f"import rcp_server.bench.{name}\n" for name in modules)
     code += "assert not {'httpx', 'matplotlib'} & {m.split('.')[0] for m in sys.modules if sys.modules[m]}\n"
     run = _python(code, tmp_path)

@@ -242,6 +242,22 @@ def ref_bilinear(texels, offset, width, height, x, y, wrap_y):
     )
 
 
+def ref_srgb_decode(values):
+    x = values.astype(np.float64) / 255.0
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
+
+
+def ref_srgb_encode(x):
+    x = np.clip(x, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+def ref_texel_color(texels, offset, width, height, u, v):
+    """An 8-bit RGB texture's color at (u, v): bilinear in linear light, encoded back to display values."""
+    linear = ref_srgb_decode(texels)
+    return ref_srgb_encode(ref_bilinear(linear, offset, width, height, u * width, (1 - v) * height, True))
+
+
 def ref_shade(
     origins,
     directions,
@@ -258,6 +274,13 @@ def ref_shade(
     texture_offset,
     texture_width,
     texture_height,
+    face_material,
+    material_emission,
+    material_emission_texture,
+    material_unlit,
+    material_alpha_cutoff,
+    alpha_texels,
+    texture_alpha_offset,
     environment,
     light_dir,
     ambient,
@@ -283,17 +306,26 @@ def ref_shade(
     nr = np.where(length > 0, nr / np.where(length > 0, length, 1.0), nr)
     tid = texture_id[f]
     textured = tid >= 0
+    uvs = np.einsum("nc,nck->nk", w, uv[f].astype(np.float64))
     if textured.any():
-        uvs = np.einsum("nc,nck->nk", w[textured], uv[f][textured].astype(np.float64))
         k = tid[textured]
         tw, th = texture_width[k], texture_height[k]
-        albedo[textured] *= ref_bilinear(texels, texture_offset[k], tw, th, uvs[:, 0] * tw, (1 - uvs[:, 1]) * th, True)
+        albedo[textured] *= ref_texel_color(texels, texture_offset[k], tw, th, uvs[textured, 0], uvs[textured, 1])
     dh = d[hit]
+    mat = face_material[f]
     if lit:
         facing = np.where((nr * dh).sum(axis=1) > 0, -1.0, 1.0)
         lambert = -facing * (nr @ np.asarray(light_dir, np.float64))
-        albedo *= (ambient + (1 - ambient) * np.maximum(lambert, 0.0))[:, None]
-    rgb[hit] = albedo
+        k = ambient + (1 - ambient) * np.maximum(lambert, 0.0)
+        albedo *= np.where(material_unlit[mat], 1.0, k)[:, None]
+    emission = material_emission[mat].astype(np.float64)
+    etid = material_emission_texture[mat]
+    glows = etid >= 0
+    if glows.any():
+        k = etid[glows]
+        tw, th = texture_width[k], texture_height[k]
+        emission[glows] *= ref_texel_color(texels, texture_offset[k], tw, th, uvs[glows, 0], uvs[glows, 1])
+    rgb[hit] = albedo + emission
     nrm[hit] = nr
     z[hit] = (o[hit] + t[hit].astype(np.float64)[:, None] * dh - eye) @ forward
     # ---- misses ----
@@ -334,8 +366,8 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
     colors = rng.uniform(-0.1, 1.4, (n_faces, 3, 3)).astype(np.float32)  # clamping is exercised
     uv = rng.uniform(-1.5, 2.5, (n_faces, 3, 2)).astype(np.float32)  # tiling in both directions
     texture_id = np.array([-1, 0, 1, 0, -1, 1, 0, -1, 1], np.int32)
-    tex_a = rng.uniform(0, 1, (3, 5, 3)).astype(np.float32)  # h x w
-    tex_b = rng.uniform(0, 1, (4, 2, 3)).astype(np.float32)
+    tex_a = rng.integers(0, 256, (3, 5, 3)).astype(np.uint8)  # h x w, 8-bit RGB
+    tex_b = rng.integers(0, 256, (4, 2, 3)).astype(np.uint8)
     texels = np.concatenate([tex_a.reshape(-1, 3), tex_b.reshape(-1, 3)])
     texture_offset = np.array([0, 15], np.int64)
     texture_width = np.array([5, 2], np.int64)
@@ -375,6 +407,14 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
         texture_offset=texture_offset,
         texture_width=texture_width,
         texture_height=texture_height,
+        alpha_texels=np.zeros(1, np.uint8),
+        texture_alpha_offset=np.full(2, -1, np.int64),
+        # materials: 0 plain, 1 glowing (a color), 2 glowing through texture 1, 3 unlit
+        face_material=np.array([0, 1, 2, 3, 0, 3, 2, 1, 0], np.int32),
+        material_emission=np.array([[0, 0, 0], [0.2, 0.1, 0.05], [0.5, 0.9, 0.3], [0, 0, 0]], np.float32),
+        material_emission_texture=np.array([-1, -1, 1, -1], np.int32),
+        material_unlit=np.array([False, False, False, True]),
+        material_alpha_cutoff=np.zeros(4, np.float32),
         environment=env,
         light_dir=light / np.linalg.norm(light),
         ambient=0.25,
@@ -423,8 +463,9 @@ def test_shade_matches_numpy_reference(seed, spp, lit):
     inputs["lit"] = lit
     color, depth, normal, direction = _run_shade(inputs)
     ref = ref_shade(**inputs)
-    # the panorama's longitude and latitude come from an atan2 good to 1e-5 rad: 1e-5 texels here
-    np.testing.assert_allclose(color, ref[0], rtol=0, atol=2e-5)
+    # the panorama's longitude and latitude come from an atan2 good to 1e-5 rad: 1e-5 texels here; a
+    # texture's display value is encoded through a 4096-step table, interpolated: within 2e-4
+    np.testing.assert_allclose(color, ref[0], rtol=0, atol=2e-4)
     np.testing.assert_allclose(depth, ref[1], rtol=1e-6, atol=1e-5)
     np.testing.assert_allclose(normal, ref[2], rtol=0, atol=1e-6)
     np.testing.assert_allclose(direction, ref[3], rtol=0, atol=1e-6)
@@ -441,6 +482,10 @@ def test_shade_textured_faces_really_are_textured_and_the_sky_really_is_sampled(
     inputs = _shade_inputs(0, spp=1)
     plain = dict(inputs, texture_id=np.full_like(inputs["texture_id"], -1))
     assert not np.allclose(_run_shade(inputs)[0], _run_shade(plain)[0], atol=1e-3)
+    dark = dict(inputs, material_emission=np.zeros_like(inputs["material_emission"]))
+    assert not np.allclose(_run_shade(inputs)[0], _run_shade(dark)[0], atol=1e-3)
+    lit_everywhere = dict(inputs, material_unlit=np.zeros_like(inputs["material_unlit"]))
+    assert not np.allclose(_run_shade(inputs)[0], _run_shade(lit_everywhere)[0], atol=1e-3)
     flat_sky = dict(
         inputs, environment=np.ascontiguousarray(np.broadcast_to(inputs["environment"][:1, :1], (6, 10, 3)))
     )
@@ -451,7 +496,7 @@ def test_shade_constant_environment_and_channels_not_needed_are_not_written():
     inputs = _shade_inputs(2, spp=2, env_shape=(1, 1))
     color, depth, normal, direction = _run_shade(inputs, need=(False, False, False))
     ref = ref_shade(**inputs)
-    np.testing.assert_allclose(color, ref[0], rtol=0, atol=1e-6)
+    np.testing.assert_allclose(color, ref[0], rtol=0, atol=2e-4)
     assert np.all(depth == -9.0) and np.all(normal == -9.0) and np.all(direction == -9.0)
     sky_only = (inputs["face"].reshape(-1, 2) < 0).all(axis=1) & np.isfinite(inputs["directions"]).all(axis=1).reshape(
         -1, 2

@@ -168,9 +168,10 @@ def test_obj_with_texture_loads_uv_and_image(tmp_path):
         "mtllib tex.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\n",
     )
     part = load_mesh_file(path)[0]
-    assert part.texture is not None and part.texture.shape == (2, 2, 3)
-    np.testing.assert_array_equal(part.texture[0, 0], [1, 0, 0])
-    np.testing.assert_array_equal(part.texture[1, 1], [1, 1, 1])
+    assert part.texture is not None and part.texture.shape == (2, 2, 3) and part.texture.dtype == np.uint8
+    np.testing.assert_array_equal(part.texture[0, 0], [255, 0, 0])  # 8-bit as the file holds it
+    np.testing.assert_array_equal(part.texture[1, 1], [255, 255, 255])
+    assert part.material.alpha_texture is None  # opaque: no coverage kept
     corners = part.vertices[part.faces[0]]
     # each corner's uv is its vertex's position (that is how the file pairs them)
     np.testing.assert_allclose(part.corner_uv[0], corners[:, :2], atol=1e-6)
@@ -218,4 +219,4 @@ def test_a_file_of_many_meshes_shares_its_textures_and_skips_unusable_meshes(tmp
     objects = [SceneObject(f"m{k}", p, [(np.eye(4), p)]) for k, p in enumerate(parts)]
     geometry = build_geometry(objects, 0.0)
     assert len(geometry.texture_width) == 1 and geometry.texels.shape == (16, 3)  # one image, not one per mesh
-    np.testing.assert_allclose(geometry.texels[0], np.array([200, 30, 60]) / 255.0, atol=1e-6)
+    np.testing.assert_array_equal(geometry.texels[0], [200, 30, 60])

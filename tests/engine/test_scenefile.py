@@ -287,12 +287,13 @@ def test_glb_with_embedded_texture_round_trips_and_renders_the_texture_color(tmp
     scene = load_scene(str(path))
     geometry, _ = scene.geometry()
     assert len(geometry.texture_width) == 1 and geometry.texture_width[0] == 4 and np.all(geometry.texture_id == 0)
-    np.testing.assert_allclose(geometry.texels, np.broadcast_to(texel / 255.0, (16, 3)), atol=1e-6)
+    np.testing.assert_array_equal(geometry.texels, np.broadcast_to(texel, (16, 3)))  # 8 bits, as the file has them
     scene.light = None  # unlit: a pixel shows the surface's color itself
     camera = Camera((0.0, 0.0, 6.0), (0.0, 0.0, 0.0), fov=30)
     result = paint(scene, camera, 32, 24, PaintParams(iterations=1))
-    # glTF's base color factor defaults to 1: the face shows the texture's own color
-    np.testing.assert_allclose(result.image[12, 16], texel / 255.0, atol=1e-5)
+    # glTF's base color factor defaults to 1: the face shows the texture's own color (filtered in linear light
+    # and encoded back through a table: within 2e-4)
+    np.testing.assert_allclose(result.image[12, 16], texel / 255.0, atol=2e-4)
 
 
 def test_placement_rotates_scales_and_translates(tmp_path):

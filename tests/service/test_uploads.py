@@ -215,3 +215,34 @@ def test_an_uploaded_scene_makes_a_video(server):
     assert status["state"] == "done" and status["done_frames"] == 3, status
     assert httpx.get(f"{server.url}/api/videos/{video}/file", timeout=30).content[4:8] == b"ftyp"  # an MP4
     assert delete(server, name).status_code == 204
+
+
+def test_a_gltf_arrives_as_authored_its_cameras_offered_and_its_cut_outs_seen_through(server):
+    """Through the sandbox: the file's first camera is the scene's, the second a viewpoint; its cut-out shows
+    the wall behind it."""
+    from engine.gltf_helpers import GltfBuilder
+
+    b = GltfBuilder()
+    b.quad(
+        [[-3, -2, -2], [3, -2, -2], [3, 2, -2], [-3, 2, -2]],
+        material=b.material(
+            extensions={"KHR_materials_unlit": {}}, pbrMetallicRoughness={"baseColorFactor": [1, 0, 0, 1]}
+        ),
+    )
+    texels = np.zeros((8, 8, 4), np.uint8)
+    texels[:, :4] = (0, 0, 255, 0)
+    texels[:, 4:] = (0, 255, 0, 255)
+    cut = {"baseColorTexture": {"index": b.texture(texels)}}
+    b.quad(
+        [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+        material=b.material(pbrMetallicRoughness=cut, alphaMode="MASK", extensions={"KHR_materials_unlit": {}}),
+    )
+    b.camera("Front", (0, 0, 4), yfov_degrees=40)
+    b.camera("Far", (0, 0, 9), yfov_degrees=30)
+    info = uploaded(server, "authored.glb", b.glb())
+    assert info["camera"]["eye"] == [0, 0, 4] and info["camera"]["fov"] == pytest.approx(40)
+    assert [v["name"] for v in info["viewpoints"]] == ["Far"] and info["viewpoints"][0]["camera"]["eye"] == [0, 0, 9]
+    image = decode(render(server, info["name"], width=64, height=48, paint={"iterations": 1}).content)
+    assert image[24, 23, 0] > 200 and image[24, 23, 1:].max() < 60  # the red wall, through the cut-out
+    assert image[24, 40, 1] > 200 and image[24, 40, [0, 2]].max() < 60  # the quad's green half
+    delete(server, info["name"])

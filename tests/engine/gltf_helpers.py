@@ -1,0 +1,115 @@
+"""glTF files built in code, byte for byte: meshes, materials with their extensions, cameras and lights,
+exactly as a test wants them (trimesh's exporter writes none of the cameras, lights or extensions)."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import struct
+
+import numpy as np
+from PIL import Image
+
+
+def quaternion(axis, degrees: float) -> list[float]:
+    """A rotation of ``degrees`` about ``axis`` as glTF's (x, y, z, w)."""
+    a = np.asarray(axis, np.float64) / np.linalg.norm(axis)
+    half = math.radians(degrees) / 2
+    return [*(a * math.sin(half)).tolist(), math.cos(half)]
+
+
+class GltfBuilder:
+    def __init__(self):
+        self.gltf: dict = {"asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": []}], "nodes": []}
+        self.binary = bytearray()
+
+    def _list(self, key: str) -> list:
+        return self.gltf.setdefault(key, [])
+
+    def _view(self, data: bytes) -> int:
+        self.binary += b"\0" * (-len(self.binary) % 4)
+        self._list("bufferViews").append({"buffer": 0, "byteOffset": len(self.binary), "byteLength": len(data)})
+        self.binary += data
+        return len(self.gltf["bufferViews"]) - 1
+
+    def _accessor(self, array: np.ndarray, kind: str) -> int:
+        component = {np.dtype(np.float32): 5126, np.dtype(np.uint32): 5125}[array.dtype]
+        accessor = {
+            "bufferView": self._view(array.tobytes()),
+            "componentType": component,
+            "count": len(array),
+            "type": kind,
+        }
+        if kind == "VEC3" and array.dtype == np.float32:
+            accessor["min"], accessor["max"] = array.min(axis=0).tolist(), array.max(axis=0).tolist()
+        self._list("accessors").append(accessor)
+        return len(self.gltf["accessors"]) - 1
+
+    def _node(self, node: dict) -> int:
+        self.gltf["nodes"].append(node)
+        index = len(self.gltf["nodes"]) - 1
+        self.gltf["scenes"][0]["nodes"].append(index)
+        return index
+
+    def texture(self, rgba: np.ndarray) -> int:
+        """An embedded PNG of ``rgba`` (h, w, 4) uint8; nearest filtering is not asked: the renderer is bilinear."""
+        png = io.BytesIO()
+        Image.fromarray(np.asarray(rgba, np.uint8)).save(png, format="PNG")
+        self._list("images").append({"bufferView": self._view(png.getvalue()), "mimeType": "image/png"})
+        self._list("textures").append({"source": len(self.gltf["images"]) - 1})
+        return len(self.gltf["textures"]) - 1
+
+    def material(self, **material) -> int:
+        self._list("materials").append(material)
+        return len(self.gltf["materials"]) - 1
+
+    def mesh(self, positions, indices, uv=None, colors=None, material=None, translation=None, name="mesh") -> int:
+        attributes = {"POSITION": self._accessor(np.asarray(positions, np.float32), "VEC3")}
+        if uv is not None:
+            attributes["TEXCOORD_0"] = self._accessor(np.asarray(uv, np.float32), "VEC2")
+        if colors is not None:
+            attributes["COLOR_0"] = self._accessor(np.asarray(colors, np.float32), "VEC3")
+        primitive = {
+            "attributes": attributes,
+            "indices": self._accessor(np.asarray(indices, np.uint32).ravel(), "SCALAR"),
+        }
+        if material is not None:
+            primitive["material"] = material
+        self._list("meshes").append({"name": name, "primitives": [primitive]})
+        node = {"mesh": len(self.gltf["meshes"]) - 1}
+        if translation is not None:
+            node["translation"] = list(translation)
+        return self._node(node)
+
+    def quad(self, corners, uv=((0, 1), (1, 1), (1, 0), (0, 0)), **kwargs) -> int:
+        """Two triangles over four corners, counter-clockwise seen from the front; ``uv`` glTF's (v down)."""
+        return self.mesh(corners, [[0, 1, 2], [0, 2, 3]], uv=uv, **kwargs)
+
+    def camera(self, name: str, translation, rotation=(0, 0, 0, 1), yfov_degrees: float = 50.0) -> int:
+        self._list("cameras").append(
+            {"name": name, "type": "perspective", "perspective": {"yfov": math.radians(yfov_degrees), "znear": 0.01}}
+        )
+        return self._node(
+            {"camera": len(self.gltf["cameras"]) - 1, "translation": list(translation), "rotation": list(rotation)}
+        )
+
+    def light(self, name: str, kind: str, translation=(0, 0, 0), rotation=(0, 0, 0, 1)) -> int:
+        lights = self.gltf.setdefault("extensions", {}).setdefault("KHR_lights_punctual", {"lights": []})["lights"]
+        lights.append({"name": name, "type": kind, "color": [1, 1, 1], "intensity": 3})
+        self.gltf.setdefault("extensionsUsed", []).append("KHR_lights_punctual")
+        return self._node(
+            {
+                "translation": list(translation),
+                "rotation": list(rotation),
+                "extensions": {"KHR_lights_punctual": {"light": len(lights) - 1}},
+            }
+        )
+
+    def glb(self) -> bytes:
+        gltf = dict(self.gltf, buffers=[{"byteLength": len(self.binary)}])
+        text = json.dumps(gltf).encode()
+        text += b" " * (-len(text) % 4)
+        binary = bytes(self.binary) + b"\0" * (-len(self.binary) % 4)
+        body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(binary), 0x004E4942) + binary
+        return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
