@@ -22,6 +22,7 @@ from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 from .sequence import paint_sequence
 from .styles import STYLE, STYLES, with_style
+from .tracer import EmbreeMissing
 
 log = logging.getLogger("rcp")
 
@@ -322,6 +323,9 @@ def main(argv: list[str] | None = None) -> int:
     except (UsageError, MissingExtra, SceneError, CameraError, PathError, ClusterError, ValueError) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
+    except EmbreeMissing as exc:  # the machine, not the arguments: one line, and the usual failure status
+        print(f"rcp: error: {exc}", file=sys.stderr)
+        return 1
     except MemoryError:
         print("rcp: error: not enough memory for this image size and sample count", file=sys.stderr)
         return 2
