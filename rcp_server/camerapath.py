@@ -40,7 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.interpolate import PchipInterpolator
 from scipy.spatial.transform import Rotation, RotationSpline
 
-from .camera import COORDINATE_LIMIT, Camera, CameraError
+from .camera import COORDINATE_LIMIT, Camera, CameraError, camera_faults
 from .scenefile import one_line
 
 MAX_FRAMES = 100_000
@@ -48,6 +48,9 @@ MAX_FRAMES = 100_000
 MAX_KEYFRAMES = 10_000
 MAX_FPS = 240.0
 MAX_DURATION = 24 * 3600.0  # seconds along a path
+MIN_GAP = 1e-3
+"""Seconds between consecutive keyframes, at least: closer ones are no view a video could show (a frame at the
+highest fps lasts 4 ms), and a curve's slopes through them overflow."""
 
 
 class PathError(ValueError):
@@ -84,12 +87,13 @@ class PathSpec(_Model):
 
     def resolve(self, scene_camera: Camera) -> CameraPath:
         """The path with every default filled in (``up`` and ``fov`` from ``scene_camera`` where no earlier
-        keyframe gives them), checked as a whole: increasing ``t``, valid cameras, a bounded frame count.
-        Raises :class:`PathError`."""
+        keyframe gives them), checked as a whole, for everything a video of it will ask: increasing ``t`` at
+        least :data:`MIN_GAP` apart, valid cameras, a bounded frame count, curves that fit, and a valid camera
+        at every frame (:meth:`CameraPath.check`). Raises :class:`PathError`."""
         for k in range(1, len(self.keyframes)):
-            if not self.keyframes[k].t > self.keyframes[k - 1].t:
+            if not self.keyframes[k].t >= self.keyframes[k - 1].t + MIN_GAP:
                 raise PathError(
-                    f"keyframes.{k}.t: must be greater than the previous keyframe's t "
+                    f"keyframes.{k}.t: must be greater than the previous keyframe's t, by {MIN_GAP:g} s at least "
                     f"({self.keyframes[k].t:g} after {self.keyframes[k - 1].t:g})"
                 )
         up, fov = scene_camera.up, scene_camera.fov
@@ -112,6 +116,7 @@ class PathSpec(_Model):
                 f"keyframes: {path.duration:g} s at {self.fps:g} fps is {path.frame_count:,} frames, "
                 f"more than the {MAX_FRAMES:,} a path may have"
             )
+        path.check()
         return path
 
 
@@ -217,6 +222,29 @@ class CameraPath:
         if self.loop:
             return max(1, math.ceil(steps - 1e-9))
         return math.floor(steps + 1e-9) + 1
+
+    def check(self) -> None:
+        """Fits the curves and checks the camera of every frame, all at once (a fraction of a second for the
+        longest path): a path that passes paints every one of its frames. Raises :class:`PathError` naming the
+        first frame whose camera is not valid (the curves between keyframes near the coordinate limit can
+        reach past it)."""
+        try:
+            with np.errstate(all="ignore"):
+                curves = self._curves()
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise PathError(f"keyframes: no smooth path passes through them ({one_line(exc)})") from None
+        times = self.frame_times()
+        with np.errstate(all="ignore"):
+            eye, look_at, up = curves.view(times)
+            fov, scene_time = curves.fov(times), curves.scene_time(times)
+        bad, reason = camera_faults(eye, look_at, up, fov)
+        if reason is None and not np.isfinite(scene_time).all():
+            bad, reason = ~np.isfinite(scene_time), "its scene_time is not a finite number"
+        if reason is not None:
+            k = int(np.argmax(bad))
+            raise PathError(
+                f"keyframes: the camera of frame {k} (t = {times[k]:g} s), between them, is not valid: {reason}"
+            )
 
     def frame_times(self) -> np.ndarray:
         """Seconds along the path of every frame, ``(frame_count,)`` float64."""
