@@ -232,7 +232,7 @@ class CameraPath:
             with np.errstate(all="ignore"):
                 curves = self._curves()
         except (ValueError, np.linalg.LinAlgError) as exc:
-            raise PathError(f"keyframes: no smooth path passes through them ({one_line(exc)})") from None
+            raise PathError(f"keyframes: no smooth path passes through them ({' '.join(str(exc).split())})") from None
         times = self.frame_times()
         with np.errstate(all="ignore"):
             eye, look_at, up = curves.view(times)

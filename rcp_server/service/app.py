@@ -15,7 +15,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Mount
 
 from .faults import InternalErrors
-from .guard import Capacity
+from .guard import BodyLimit, Capacity
 from .routes import rest, scenes, styles, videos, walk
 from .settings import Settings
 from .state import Service
@@ -37,9 +37,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         title="rcp",
         summary="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.",
         lifespan=lifespan,
-        max_body_size=settings.max_body_bytes,
     )
-    app.add_middleware(InternalErrors)
+    # every body's limit, uploads' their own (larger) one: a JSON 413 naming it
+    uploads = (settings.upload_max_bytes, "the file", "RCP_UPLOAD_MAX_BYTES")
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes, larger={"/api/scenes": uploads})
+    app.add_middleware(InternalErrors)  # outside the body limit: a 413 is an answer, not a fault
     app.add_middleware(Capacity, limit=settings.max_requests)  # inside CORS: a 503 keeps its CORS headers
     if settings.cors_origins:  # off unless configured: only the client served here calls the API
         app.add_middleware(
@@ -56,7 +58,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(videos.router)
     app.include_router(videos.paths)
     app.include_router(walk.router)
-    app.include_router(scenes.router, max_body_size=settings.upload_max_bytes)  # uploads: their own body limit
+    app.include_router(scenes.router)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app

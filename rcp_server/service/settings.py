@@ -75,14 +75,15 @@ class Settings(BaseSettings):
     def _comma_separated(cls, value):
         return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
 
-    def upload_limits(self) -> Limits:
-        """What the sandbox lets one upload take."""
+    def upload_limits(self, room_bytes: int | None = None) -> Limits:
+        """What the sandbox lets one upload take; ``room_bytes``, the memory the uploaded scenes have left."""
         return Limits(
             max_triangles=self.upload_max_triangles,
             max_texture_pixels=self.upload_max_texture_pixels,
             max_unpacked_bytes=8 * self.upload_max_bytes,  # zipped OBJ text shrinks about 4x; never more than 8
             memory_bytes=self.upload_memory_bytes,
             seconds=self.upload_read_s,
+            room_bytes=room_bytes,
         )
 
     def check_painting(self, width: int, height: int, params: PaintParams) -> None:

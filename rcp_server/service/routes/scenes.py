@@ -15,7 +15,7 @@ from ...scenefile import SCENE_NAME
 from .. import protocol
 from ..access import require_token
 from ..state import Service, ServiceDep, scene_info
-from ..uploads import Full, Refused, read_scene
+from ..uploads import MEMORY_RETRY_S, Full, NoRoom, Refused, read_scene
 from .rest import NO_TOKEN
 
 router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
@@ -50,13 +50,14 @@ async def upload(file: UploadFile, response: Response, service: ServiceDep) -> p
         uploads.queued += 1
         try:
             async with uploads.reading:
-                scene, weight = await run_in_threadpool(
-                    read_scene, file.file, file.filename or "", settings.upload_limits()
-                )
+                limits = settings.upload_limits(room_bytes=settings.upload_total_bytes - uploads.weight)
+                scene, weight = await run_in_threadpool(read_scene, file.file, file.filename or "", limits)
         finally:
             uploads.queued -= 1
         info = scene_info(scene).model_copy(update={"uploaded": True})
         uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes)
+    except NoRoom as exc:  # what the file declares would not fit in the memory left: refused before it is built
+        raise HTTPException(503, str(exc), headers={"Retry-After": str(MEMORY_RETRY_S)}) from None
     except Refused as exc:
         raise HTTPException(422, str(exc)) from None
     except Full as full:
