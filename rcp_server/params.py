@@ -3,8 +3,8 @@
 Each field of :class:`PaintParams` declares its default, a line of help and its bounds (:func:`setting`).
 Everything else that names a painting setting is derived from :data:`PAINT_SETTINGS`: the wire model
 (``service/protocol.py``), the options of ``rcp render`` (``cli.py``) and the client's defaults (the
-generated ``client/protocol.js``). A new setting is one new field; ``tests/test_params.py`` fails until
-it reaches every caller. A frozen dataclass, not a pydantic model: ``dataclasses.replace`` validates (an
+generated ``client/protocol.js``). A new setting is one new field; ``tests/service/test_params.py`` fails
+until it reaches every caller. A frozen dataclass, not a pydantic model: ``dataclasses.replace`` validates (an
 override is a ``replace``), the engine keeps its one-line errors, and the wire adds only what it needs
 (every field optional, ``null`` for the scene's value).
 """

@@ -1,11 +1,11 @@
 """The app factory, wiring only: settings in, the service opened by the lifespan, the middleware, one router
-per surface, the client's files at ``/``."""
+per surface (the token, where it is needed, given once, here), the client's files at ``/``."""
 
 from __future__ import annotations
 
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
@@ -14,9 +14,10 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Mount
 
+from .access import NO_TOKEN, HostCheck, require_token
 from .faults import InternalErrors
 from .guard import BodyLimit, Capacity
-from .routes import rest, scenes, styles, videos, walk
+from .routes import docs, rest, scenes, styles, videos, walk
 from .settings import Settings
 from .state import Service
 
@@ -37,6 +38,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         title="rcp",
         summary="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.",
         lifespan=lifespan,
+        openapi_url=None,  # the schema and its pages are routes.docs, behind the token like the rest
+        docs_url=None,
+        redoc_url=None,
     )
     # every body's limit, uploads' their own (larger) one: a JSON 413 naming it
     uploads = (settings.upload_max_bytes, "the file", "RCP_UPLOAD_MAX_BYTES")
@@ -50,15 +54,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
+    app.add_middleware(HostCheck, settings=settings)  # outermost: a name the server is not served under, nothing
     app.add_exception_handler(RequestValidationError, _invalid)
     app.add_exception_handler(StarletteHTTPException, _http_error)
-    app.include_router(rest.public)
-    app.include_router(rest.router)
-    app.include_router(styles.router)
-    app.include_router(videos.router)
-    app.include_router(videos.paths)
-    app.include_router(walk.router)
-    app.include_router(scenes.router)
+    app.include_router(rest.public)  # /api/health: open to all
+    for router in (rest.router, scenes.router, styles.router, videos.router, videos.paths, docs.router):
+        app.include_router(router, dependencies=[Depends(require_token)], responses=NO_TOKEN)
+    app.include_router(walk.router)  # the walk-through checks the token as it opens (walk.py)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app
@@ -76,7 +78,7 @@ class _ClientFiles(Mount):
 
 async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
     """FastAPI's answer, except that a 405's ``Allow`` names the methods of every route at the path, not only
-    those of the first (``GET /api/scenes`` lists and ``POST /api/scenes`` uploads, from two routers)."""
+    those of the first (``GET`` and ``DELETE /api/videos/{id}`` are two routes): the one place it is set."""
     if exc.status_code == 405:
         allowed = [
             method

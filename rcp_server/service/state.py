@@ -22,7 +22,7 @@ from .uploads import Upload, Uploads
 from .videos import Videos
 from .workshop import Workshop
 
-if TYPE_CHECKING:  # Ray is an extra: the cluster module is imported only when a server is told to use it
+if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
     from ..cluster import RayPainter
 
 log = logging.getLogger("rcp.service")

@@ -63,7 +63,7 @@ def api(server):
             },
         }
     )
-    schema = schemathesis.openapi.from_url(f"{server.url}/openapi.json", config=config, timeout=TIMEOUT)
+    schema = schemathesis.openapi.from_url(f"{server.url}/openapi.json", config=config, timeout=TIMEOUT, headers=AUTH)
 
     return schema
 
@@ -94,7 +94,10 @@ def test_a_body_that_is_not_json_text_gets_the_documented_400(server):
         timeout=TIMEOUT,
     )
     assert response.status_code == 400 and response.json() == PARSE_ERROR
-    assert "400" in httpx.get(f"{server.url}/openapi.json").json()["paths"]["/api/render"]["post"]["responses"]
+    assert (
+        "400"
+        in httpx.get(f"{server.url}/openapi.json", headers=AUTH).json()["paths"]["/api/render"]["post"]["responses"]
+    )
 
 
 def test_a_method_render_does_not_take_gets_405_with_post_allowed(server):

@@ -1,26 +1,31 @@
-"""Visitors' own scenes over REST: upload a model (``POST /api/scenes``), describe one by name, delete one.
+"""Scenes over REST: the operator's listed (``GET /api/scenes``); visitors' own uploaded (``POST /api/scenes``);
+any described by name, an uploaded one deleted.
 
-The app includes this router with its own body limit (``RCP_UPLOAD_MAX_BYTES``), larger than the JSON
-routes' ``RCP_MAX_BODY_BYTES``.
+Uploads have their own body limit (``RCP_UPLOAD_MAX_BYTES``, app.py), larger than the JSON routes'
+``RCP_MAX_BODY_BYTES``.
 """
 
 from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, Path, Response, UploadFile
+from fastapi import APIRouter, HTTPException, Path, Response, UploadFile
 from starlette.concurrency import run_in_threadpool
 
 from ...scenefile import SCENE_NAME
 from .. import protocol
-from ..access import require_token
 from ..state import Service, ServiceDep, scene_info
 from ..uploads import MEMORY_RETRY_S, Full, NoRoom, Refused, read_scene
-from .rest import NO_TOKEN
 
-router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
+router = APIRouter(prefix="/api")
 NamePath = Annotated[str, Path(pattern=f"^{SCENE_NAME.pattern}$")]
 MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (each reading takes a core)
+
+
+@router.get("/scenes")
+async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
+    """The operator's scenes (uploaded ones are not listed: their names are their holders' secret)."""
+    return list(service.infos.values())
 
 
 @router.post(
