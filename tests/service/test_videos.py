@@ -18,6 +18,8 @@ from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camerapath import parse_path
 from rcp_server.painting import paint
 from rcp_server.scenefile import load_scene
+from rcp_server.service import videos
+from rcp_server.service.videos import video_bytes
 
 PATH = {
     "fps": 6,
@@ -158,7 +160,29 @@ def test_bad_bodies_and_unknown_ids_are_4xx(server):
     assert server.delete("/api/videos/nothing").status_code == 404
 
 
-def test_a_full_disk_budget_fails_the_job_and_finished_jobs_expire(scenes, tmp_path):
+def test_a_video_past_the_disk_budget_is_refused_at_submission_with_507(scenes, tmp_path):
+    """The 507 comes when the job is submitted (it was accepted and failed halfway), with the estimate and the
+    room left, the estimates of the jobs in progress counted: of two that fit one at a time, the second waits."""
+    path = {**PATH, "fps": 60}  # 61 frames: the first job is still painting when the second comes
+    body = {"scene": "tiny", "path": path, "width": 32, "height": 32}
+    estimate = video_bytes(32, 32, parse_path(path).resolve(load_scene("tiny", scenes).camera).frame_count)
+    settings = {"scenes": scenes, "video_disk_bytes": estimate * 3 // 2, "video_dir": tmp_path}
+    with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
+        first = client.post("/api/videos", json=body)
+        second = client.post("/api/videos", json=body)
+        assert first.status_code == 202
+        said = one_line(second, 507)
+        assert (
+            f"about {estimate:,} bytes" in said
+            and f"have {estimate // 2:,} of their {estimate * 3 // 2:,} left" in said
+        )
+        assert wait_until(client, first.json()["id"])["state"] == "done"
+    with BackgroundServer(scenes=scenes, video_disk_bytes=1) as live, httpx.Client(base_url=live.url) as client:
+        assert "have 1 of their 1 left" in one_line(client.post("/api/videos", json=body), 507)
+
+
+def test_a_video_larger_than_its_estimate_fails_at_the_budget_and_finished_jobs_expire(scenes, tmp_path, monkeypatch):
+    monkeypatch.setattr(videos, "video_bytes", lambda width, height, frames: 0)  # the estimate falls short
     settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "video_dir": tmp_path}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
         created = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 32, "height": 32}).json()

@@ -70,7 +70,9 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
         **SCENE_BODY,
         422: {"description": "a path or setting the painting cannot take, or one over a limit"},
         503: {"description": "every place in the video queue is taken; see Retry-After"},
-        507: {"description": "the stored videos use all the disk allowed to them (RCP_VIDEO_DISK_BYTES)"},
+        507: {
+            "description": "the video's estimated size does not fit in the disk left to videos (RCP_VIDEO_DISK_BYTES)"
+        },
     },
 )
 async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.VideoCreated:
