@@ -5,10 +5,11 @@ The one JSON format of the client, ``rcp render --path`` and ``POST /api/videos`
     {"fps": 24, "loop": false, "keyframes": [
         {"t": 0.0, "eye": [x, y, z], "look_at": [x, y, z], "up": [0, 1, 0], "fov": 60, "scene_time": 0.0}, ...]}
 
-``t`` is seconds along the path and increases from keyframe to keyframe, by :data:`MIN_GAP` at least (the first
-at ``t >= 0``; before it the camera holds). ``up`` and ``fov`` may be left out: the previous keyframe's, and for the first one the scene
-camera's. ``scene_time`` (seconds of the scene's animation) may be left out: the scene's clock then runs on
-with ``t`` from the previous keyframe's (so a path that gives none has ``scene_time = t``).
+``t`` is seconds along the path and increases from keyframe to keyframe, by :data:`MIN_GAP` at least (the
+first at ``t >= 0``; before it the camera holds). ``up`` and ``fov`` may be left out: the previous keyframe's,
+and for the first one the scene camera's. ``scene_time`` (seconds of the scene's animation) may be left out:
+the scene's clock then runs on with ``t`` from the previous keyframe's (so a path that gives none has
+``scene_time = t``).
 
 Frames are taken every ``1 / fps`` seconds from ``t = 0`` to the last keyframe's ``t``, both included (the
 last one when it falls on that grid). With ``loop``, the path closes: after the last keyframe it returns to
