@@ -150,6 +150,30 @@ def test_bad_jobs_are_refused_in_one_line(server, body, status, says):
     assert says in one_line(answer, status)
 
 
+AT_THE_LIMIT = [  # keyframes at the coordinate limit, whose curve carries the look-at just past it between them
+    {"t": 0, "eye": [0, 0, 5], "look_at": [-1e9, 0, 0]},
+    {"t": 1, "eye": [0, 0, 6], "look_at": [-1e9, 1e9, 0]},
+    {"t": 2, "eye": [0, 0, 6], "look_at": [-1e9, 0, -1e9]},
+]
+CLOSE = [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 1e-300}]  # scipy: "`dydx` must contain only finite"
+
+
+@pytest.mark.parametrize(
+    ("path", "says"),
+    [
+        ({**PATH, "keyframes": CLOSE}, "keyframes.1.t: must be greater than the previous keyframe's t, by 0.001 s"),
+        ({**PATH, "loop": True, "keyframes": [CLOSE[0], {**CLOSE[1], "t": 5e-324}]}, "by 0.001 s at least"),
+        ({**PATH, "keyframes": AT_THE_LIMIT}, "frame 3 (t = 0.5 s), between them, is not valid: look_at must lie"),
+    ],
+)
+def test_a_path_that_would_fail_later_is_refused_when_it_is_given(server, path, says):
+    """Its preview was a 500, its video a 202 and then a failed job: every camera a path will ask of its curves
+    is checked when the path is given."""
+    assert says in one_line(server.post("/api/paths", json={"scene": "tiny", "path": path}), 422)
+    video = server.post("/api/videos", json={"scene": "tiny", "path": path, "width": 32, "height": 32})
+    assert says in one_line(video, 422)
+
+
 def test_bad_bodies_and_unknown_ids_are_4xx(server):
     assert server.post("/api/videos", json={"scene": "tiny"}).status_code == 422  # no path
     text = '{"scene": "tiny", "path": {"keyframes": [{"t": NaN, "eye": [0,0,0], "look_at": [0,0,1]}]}}'
