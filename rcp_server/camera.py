@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 
 import numpy as np
@@ -71,12 +71,16 @@ def camera_faults(
         (~(up_length >= 1e-9), "up must not be the zero vector"),
         (~(side >= 1e-6), "up is parallel to the view direction: the camera has no right vector"),
     ):
-        faults.append((broken, lambda k, reason=reason: reason))
+        faults.append((broken, partial(_fixed, reason)))
     bad = np.logical_or.reduce([broken for broken, _ in faults])
     if not bad.any():
         return bad, None
     first = int(np.argmax(bad))
     return bad, next(say(first) for broken, say in faults if broken[first])
+
+
+def _fixed(reason: str, k: int) -> str:
+    return reason
 
 
 def _reason(what: str, values: np.ndarray, k: int) -> str:
@@ -119,8 +123,7 @@ class Camera:
         return 2.0 * self.half_height() / height
 
     def moved(self, **changes) -> Camera:
-        values = {"eye": self.eye, "look_at": self.look_at, "up": self.up, "fov": self.fov} | changes
-        return Camera(**values)
+        return replace(self, **changes)  # validated again, in __post_init__
 
 
 @dataclass(frozen=True)

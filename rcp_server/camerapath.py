@@ -98,7 +98,9 @@ class PathSpec(_Model):
                     f"({self.keyframes[k].t:g} after {self.keyframes[k - 1].t:g})"
                 )
         up, fov = scene_camera.up, scene_camera.fov
-        times, cameras, scene_times = [], [], []
+        times: list[float] = []
+        cameras: list[Camera] = []
+        scene_times: list[float] = []
         for k, key in enumerate(self.keyframes):
             up = key.up if key.up is not None else up
             fov = key.fov if key.fov is not None else fov
@@ -154,7 +156,7 @@ def load_path(file, scene_camera: Camera, fps: float | None = None) -> CameraPat
 class PathFrame(NamedTuple):
     """One frame of a path: its index, seconds along the path, the camera, and the scene's time."""
 
-    index: int
+    index: int  # type: ignore[assignment]  # the frame's number, in place of tuple.index (which nobody calls)
     t: float
     camera: Camera
     scene_time: float

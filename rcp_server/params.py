@@ -148,13 +148,14 @@ class PaintSetting:
         whole = self.kind is int
         if isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real):
             raise ValueError(f"{self.name} must be a {'whole ' if whole else ''}number, got {value!r}")
-        if not math.isfinite(value):
+        number = float(value)  # for the comparisons (the messages show the value as given)
+        if not math.isfinite(number):
             raise ValueError(f"{self.name} must be a finite number, got {value}")
-        if self.ge is not None and value < self.ge:
+        if self.ge is not None and number < self.ge:
             raise ValueError(f"{self.name} must be at least {self.ge}, got {value}")
-        if self.gt is not None and value <= self.gt:
+        if self.gt is not None and number <= self.gt:
             raise ValueError(f"{self.name} must be more than {self.gt}, got {value}")
-        if self.le is not None and value > self.le:
+        if self.le is not None and number > self.le:
             raise ValueError(f"{self.name} must be at most {self.le}, got {value}")
 
 

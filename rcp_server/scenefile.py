@@ -89,7 +89,8 @@ class Placement(_Model):
     scale: Annotated[float, Field(gt=0)] | tuple[Finite, Finite, Finite] = 1.0
 
     def matrix(self) -> np.ndarray:
-        m = trimesh.transformations.euler_matrix(*np.radians(self.rotate), axes="sxyz")
+        rx, ry, rz = np.radians(self.rotate)
+        m = trimesh.transformations.euler_matrix(rx, ry, rz, axes="sxyz")
         m[:3, :3] = m[:3, :3] * np.broadcast_to(np.asarray(self.scale, dtype=np.float64), (3,))
         m[:3, 3] = self.translate
         return m
@@ -221,6 +222,7 @@ def _parts(spec: ObjectSpec, folder: Path, where: str) -> list[Part]:
     if spec.mesh is not None:
         return load_mesh_file(folder / spec.mesh)
     p = spec.primitive
+    assert p is not None  # one of the two, checked above
     return [primitive(p.type, **{k: v for k, v in p.model_dump().items() if k != "type" and v is not None})]
 
 

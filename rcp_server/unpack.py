@@ -23,6 +23,7 @@ import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Any
 from urllib.parse import unquote
 
 import numpy as np
@@ -304,16 +305,16 @@ def gltf_images(gltf: dict, binary: bytes, model: Path, folder: Path, name: str)
             _inside(folder, model.parent, unquote(uri), label)
             _inside(folder, model.parent, uri, label)
         elif isinstance(image.get("bufferView"), int):
-            view = views[image["bufferView"]] if 0 <= image["bufferView"] < len(views) else None
-            buffer = view.get("buffer") if view else None
-            if not isinstance(buffer, int) or not 0 <= buffer < len(buffers):
+            view: dict | None = views[image["bufferView"]] if 0 <= image["bufferView"] < len(views) else None
+            held = view.get("buffer") if view else None
+            if view is None or not isinstance(held, int) or not 0 <= held < len(buffers):
                 raise Refused(f"{label}: its bufferView does not exist")
             start, length = view.get("byteOffset", 0), view.get("byteLength")
             if not isinstance(start, int) or not isinstance(length, int) or start < 0 or length < 0:
                 raise Refused(f"{label}: its bufferView has no valid byteOffset and byteLength")
-            if start + length > len(buffers[buffer]):
+            if start + length > len(buffers[held]):
                 raise Refused(f"{label}: its bufferView reaches past the end of its buffer")
-            embedded.append((label, buffers[buffer][start : start + length]))
+            embedded.append((label, buffers[held][start : start + length]))
     return embedded
 
 
@@ -365,7 +366,8 @@ def gltf_declared(gltf: dict, name: str) -> tuple[int, int]:
         if "mesh" not in node:
             continue
         copies = 1  # or as many as EXT_mesh_gpu_instancing's attributes give
-        instancing = (node.get("extensions") or {}).get("EXT_mesh_gpu_instancing")
+        extensions = node.get("extensions")
+        instancing = extensions.get("EXT_mesh_gpu_instancing") if isinstance(extensions, dict) else None
         if isinstance(instancing, dict) and isinstance(instancing.get("attributes"), dict):
             copies = max([count(a) for a in instancing["attributes"].values()] or [1])
         triangles += copies * mesh_triangles(node["mesh"])
@@ -443,7 +445,8 @@ def check_model(model: Path, folder: Path, limits: Limits) -> None:
     check_kind(model, name)
     embedded: list[tuple[str, bytes]] = []
     suffix = model.suffix.lower()
-    instances = None
+    instances: int | None = None
+    triangles: int | None
     if suffix in (".glb", ".gltf"):
         gltf, binary = (
             glb_chunks(model.read_bytes(), name) if suffix == ".glb" else (_json(model.read_bytes(), name), b"")
@@ -517,7 +520,7 @@ def write_parts(path: Path, parts: list) -> None:
     ``faces_k`` (F, 3) int64, ``colors_k`` (F, 3, 3) float32, ``colored_k`` (), ``texture_k`` () int64 index
     or -1 and ``uv_k`` (F, 3, 2) float32 when textured; each distinct texture once as ``image_j`` (h, w, 3)
     uint8."""
-    arrays: dict[str, np.ndarray] = {"parts": np.int64(len(parts))}
+    arrays: dict[str, Any] = {"parts": np.int64(len(parts))}  # arrays and numpy scalars, by name
     images: dict[int, int] = {}
     for k, part in enumerate(parts):
         arrays[f"vertices_{k}"] = part.vertices

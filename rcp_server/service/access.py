@@ -16,7 +16,7 @@ import ipaddress
 import logging
 import re
 import secrets
-from typing import Annotated
+from typing import Annotated, Any
 from urllib.parse import urlsplit
 
 from fastapi import HTTPException, Request, Security
@@ -33,7 +33,9 @@ BEARER = HTTPBearer(auto_error=False, description="the token of RCP_TOKEN, when 
 QUERY = APIKeyQuery(name="token", auto_error=False, description="the same token, for browsers' WebSockets")
 
 NEEDS_TOKEN = "this server needs a token: send 'Authorization: Bearer <token>' or add ?token=<token> to the address"
-NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
+NO_TOKEN: dict[int | str, dict[str, Any]] = {
+    401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}
+}
 """The answer :func:`require_token` adds to a route's, declared where the routers are included (app.py)."""
 
 

@@ -76,9 +76,10 @@ class _ClientFiles(Mount):
         return super().matches(scope)
 
 
-async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
+async def _http_error(request: Request, exc: Exception) -> Response:
     """FastAPI's answer, except that a 405's ``Allow`` names the methods of every route at the path, not only
     those of the first (``GET`` and ``DELETE /api/videos/{id}`` are two routes): the one place it is set."""
+    assert isinstance(exc, StarletteHTTPException)  # the handler of that class (Starlette types handlers loosely)
     if exc.status_code == 405:
         allowed = [
             method
@@ -94,7 +95,8 @@ def app_routes(request: Request) -> list:
     return [route for route in request.app.routes if not isinstance(route, _ClientFiles)]
 
 
-async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+async def _invalid(request: Request, exc: Exception) -> Response:
     """FastAPI's 422, without echoing the input: a NaN or an infinity in it could not be written as JSON."""
+    assert isinstance(exc, RequestValidationError)  # the handler of that class
     errors = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
     return JSONResponse({"detail": errors}, 422)

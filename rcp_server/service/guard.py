@@ -123,7 +123,7 @@ class GuardedHttp(HttpToolsProtocol):
         others = [c for c in self.connections if isinstance(c, GuardedHttp) and c is not self]
         idle = [c for c in others if c.idle_since is not None]
         if idle:
-            min(idle, key=lambda c: c.idle_since).transport.close()
+            min(idle, key=lambda c: c.idle_since or 0.0).transport.close()
             return
         limit = self.settings.max_connections
         detail = f"the server has its {limit} connections busy; try again shortly"

@@ -33,7 +33,10 @@ class Walkthrough(Protocol):
 
     scene: Scene | None
 
-    walking: bool  # it has said hello: it holds one of the max_sessions places
+    @property
+    def walking(self) -> bool:
+        """It has said hello: it holds one of the ``max_sessions`` places."""
+        ...
 
     def close(self) -> None: ...
 

@@ -110,7 +110,7 @@ class Videos:
         self.workshop = workshop
         self.painter = painter  # a cluster.RayPainter (the service closes it), or None: the workshop's shared pool
         own = settings.video_dir is None
-        self.folder = Path(tempfile.mkdtemp(prefix="rcp-videos-")) if own else Path(settings.video_dir)
+        self.folder = Path(tempfile.mkdtemp(prefix="rcp-videos-")) if settings.video_dir is None else settings.video_dir
         self.folder.mkdir(parents=True, exist_ok=True)
         self._own_folder = own
         self._jobs: dict[str, VideoJob] = {}

@@ -75,8 +75,9 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
 
     def job() -> bytes:
         size = (body.width, body.height)
-        if service.on_cluster(*size, params):  # a large render: Ray paints it, the cores here stay with the walks
-            image = service.cluster.render(scene, camera, *size, params, body.time, stop)
+        cluster = service.cluster if service.on_cluster(*size, params) else None
+        if cluster is not None:  # a large render: Ray paints it, the cores here stay with the walks
+            image = cluster.render(scene, camera, *size, params, body.time, stop)
         else:
             image = workshop.paint(scene, camera, *size, params, time=body.time, should_stop=stop).image
         return images.encode(image, fmt, body.quality)

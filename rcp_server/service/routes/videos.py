@@ -13,10 +13,10 @@ from .. import protocol
 from ..state import ServiceDep
 from ..videos import VideoJob, VideoRefused
 from ..workshop import Busy
-from . import SCENE_BODY
+from . import SCENE_BODY, Responses
 
 router = APIRouter(prefix="/api/videos", tags=["videos"])
-UNKNOWN = {404: {"description": "no such video (never made, deleted, or expired)"}}
+UNKNOWN: Responses = {404: {"description": "no such video (never made, deleted, or expired)"}}
 
 
 def _status(job: VideoJob) -> protocol.VideoStatus:
