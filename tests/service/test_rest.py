@@ -97,3 +97,13 @@ def test_render_with_the_image_method_and_its_refusal_of_eye_moves(live_server):
     np.testing.assert_array_equal(decode(response.content), images.to_uint8(expected))
     refused = post(live_server, {**body, "paint": {"method": "image", "lambda_e": 0.1}})
     assert refused.status_code == 422 and "eye displacement" in refused.json()["detail"]
+
+
+@pytest.mark.parametrize(
+    ("path", "allow"),
+    [("/api/scenes", "GET, POST"), ("/api/videos/some-id", "GET, DELETE"), ("/api/scenes/default", "GET, DELETE")],
+)
+def test_a_method_a_path_lacks_gets_405_naming_every_method_of_its_routes(live_server, path, allow):
+    """One mechanism sets Allow (app._http_error), for paths whose methods are several routes."""
+    answer = httpx.put(live_server.url + path, timeout=30)
+    assert answer.status_code == 405 and answer.headers["allow"] == allow and "detail" in answer.json()
