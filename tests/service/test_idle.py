@@ -17,6 +17,8 @@ from rcp_server.bench.harness import BackgroundServer
 
 SMALL = {"scene": "sky", "width": 32, "height": 18}
 BOUND_S = 10  # generous: what a real client may wait for an answer on two busy cores
+HALF_A_BODY = b"POST /api/render HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+HALF_A_BODY += b"Content-Length: 200\r\n\r\n{"  # 1 of its 200 bytes
 
 
 def until(condition, seconds: float, what: str) -> None:
@@ -77,7 +79,7 @@ def test_half_open_requests_neither_starve_health_and_renders_nor_stay_open():
 
 def test_a_slow_body_is_cut_off_at_the_deadline():
     with BackgroundServer(header_timeout_s=1.0) as server:
-        head = b"POST /api/render HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\nContent-Length: 200\r\n\r\n{"
+        head = HALF_A_BODY
         with half_requests(server.settings.port, 1, head) as (sock,):
             clock = time.monotonic()
             assert read_to_end(sock, BOUND_S) == b""  # the app saw a disconnect: no answer, the socket closed
@@ -85,7 +87,7 @@ def test_a_slow_body_is_cut_off_at_the_deadline():
 
 
 def test_requests_past_the_capacity_get_a_json_503_with_retry_after_until_the_stalled_ones_are_cut():
-    head = b"POST /api/render HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\nContent-Length: 200\r\n\r\n{"
+    head = HALF_A_BODY
     with BackgroundServer(max_requests=3, header_timeout_s=2.0) as server:
         with half_requests(server.settings.port, 3, head):  # three requests in progress, waiting on their bodies
             responses = []
