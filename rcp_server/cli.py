@@ -211,7 +211,7 @@ def _render(args: argparse.Namespace) -> None:
 
 def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base: Camera) -> None:
     """Paint a camera path or an orbit and walk, into a video, a folder of PNGs or numbered images."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # type: ignore[import-untyped]
 
     if args.save_iterations is not None and args.ray is not None:
         raise UsageError("--save-iterations paints here: leave out --ray")
@@ -225,6 +225,7 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
             PathFrame(k, k / fps, camera_path(base, k / max(count - 1, 1), args.orbit, args.walk), args.time + k / fps)
             for k in range(count)
         )
+    writer: video.FrameWriter
     if count == 1 and args.path is None:  # a still, painted on Ray
         writer = video.ImageFrames(lambda index: args.out, args.quality)
     elif video.is_video(args.out) or video.is_folder(args.out):

@@ -138,7 +138,7 @@ class Painter:
     def __init__(self, threads: int):
         self.threads = threads
         self.scenes: OrderedDict[str, Scene] = OrderedDict()
-        self.previous: dict[tuple[str, Region], PaintState] = {}
+        self.previous: dict[tuple[str | None, Region], PaintState] = {}
 
     def _scene(self, held: Held) -> Scene:
         scene = self.scenes.get(held.key)
@@ -203,7 +203,9 @@ class Painter:
             previous=previous,
             region=region,
             threads=self.threads,
-            seen=kernels.Seen.joined(seen) if seen and seen[0] is not None else None,
+            seen=kernels.Seen.joined([part for part in seen if part is not None])
+            if seen and seen[0] is not None
+            else None,
         )
         if job is not None:
             self.previous[(job, region)] = result.state

@@ -35,7 +35,7 @@ class FramePainter(Protocol):
     """Paints one frame: ``(camera, scene_time, params, previous) -> PaintResult`` (``painting.paint`` with the
     scene, the size and where the tiles run already bound)."""
 
-    def __call__(self, camera: Camera, scene_time: float, params: PaintParams, previous: PaintState | None): ...
+    def __call__(self, camera: Camera, scene_time: float, params: PaintParams, previous: PaintState | None, /): ...
 
 
 def frame_params(params: PaintParams, temporal: int | None, index: int) -> PaintParams:

@@ -17,6 +17,7 @@ EXTRA = "pip install '.[bench]' in the rcp source folder"
 # (module to find, requirement to name): what the bench extra adds to a plain install
 MATPLOTLIB = ("matplotlib", "matplotlib")
 WEBSOCKETS = ("websockets.asyncio.client", "websockets>=14")  # a plain install has it through uvicorn[standard]
+SCHEMATHESIS = ("schemathesis", "schemathesis>=4.32,<5")  # the test extra's: pip install -e ".[test]"
 
 
 class MissingExtra(Exception):
@@ -70,6 +71,17 @@ def _soak(args: argparse.Namespace) -> None:
     from .soak import bench_soak
 
     bench_soak(args.seconds, args.clients, args.rest)
+
+
+def _fuzz(args: argparse.Namespace) -> None:
+    if not _findable(SCHEMATHESIS[0]):
+        raise MissingExtra(
+            f"rcp bench fuzz needs {SCHEMATHESIS[1]}, which the test extra installs: pip install -e '.[test]'"
+        )
+    from .fuzz import fuzz
+
+    if fuzz(args.examples, args.seed):
+        raise SystemExit(1)
 
 
 def _accuracy(args: argparse.Namespace) -> None:
@@ -161,6 +173,11 @@ def add_bench_commands(subparsers) -> None:
         help="REST callers posting renders back to back (default 2)",
     )
     p.set_defaults(run_bench=_soak)
+
+    p = command("fuzz", "the REST API fuzzed from its OpenAPI schema with a random seed; prints what it finds")
+    p.add_argument("--examples", type=positive_int, default=300, help="examples an operation (default 300)")
+    p.add_argument("--seed", type=int, help="the seed of an earlier run, to repeat it (default: a random one)")
+    p.set_defaults(run_bench=_fuzz)
 
     p = command("accuracy", "time per frame against error, both methods (needs the bench extra)")
     _out_and_quick(p)

@@ -74,7 +74,7 @@ class BackgroundServer:
     def __init__(self, **settings):
         self.settings = Settings(host="127.0.0.1", port=free_port(), **settings)
         self.server = Server(self.settings, log_level="warning")
-        self.app = self.server.config.app
+        self.app = self.server.app
         self.url = f"http://127.0.0.1:{self.settings.port}"
         self.ws_url = f"ws://127.0.0.1:{self.settings.port}/ws"
         self._thread = threading.Thread(target=self.server.run, name="rcp-server", daemon=True)

@@ -48,8 +48,9 @@ class Server(uvicorn.Server):
     GRACE_S = PAINTING_GRACE_S + 4  # uvicorn's: time for the stopped paintings to answer
 
     def __init__(self, settings: Settings, **options):
+        self.app = create_app(settings)
         config = uvicorn.Config(
-            create_app(settings),
+            self.app,
             host=settings.host,
             port=settings.port,
             ws=CappedWebSockets,
@@ -77,7 +78,7 @@ class Server(uvicorn.Server):
 
     def _stop_paintings(self) -> bool:
         """Stop the paintings, unless they are stopped already or the app has not started: True if it did."""
-        service = service_of(self.config.app)
+        service = service_of(self.app)
         if service is None or service.workshop.stopping:
             return False
         log.info("stopping the paintings in progress (%d)", service.workshop.in_progress)

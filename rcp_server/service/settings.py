@@ -30,6 +30,9 @@ class Settings(BaseSettings):
     # ---- access ----
     token: SecretStr | None = None  # when set, REST and WebSocket callers must present it
     cors_origins: Annotated[list[str], NoDecode] = []  # origins other pages may call from (comma-separated)
+    # names the server answers to besides loopback's (comma-separated; "*": any); none given, a server bound to
+    # a loopback address answers only to loopback names, one bound elsewhere to any (access.py)
+    allowed_hosts: Annotated[list[str], NoDecode] = []
     # ---- capacity ----
     threads: int = Field(default_factory=default_threads, ge=1, le=256)  # tile workers shared by all renders
     max_renders: int = Field(4, ge=1)  # paintings in progress at once; more wait their turn
@@ -70,19 +73,20 @@ class Settings(BaseSettings):
     upload_read_s: float = Field(60.0, gt=0)  # the reader of one upload: wall-clock seconds
     upload_memory_bytes: int = Field(2 << 30, ge=64 << 20)  # the reader of one upload: address space it may add
 
-    @field_validator("cors_origins", mode="before")
+    @field_validator("cors_origins", "allowed_hosts", mode="before")
     @classmethod
     def _comma_separated(cls, value):
         return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
 
-    def upload_limits(self) -> Limits:
-        """What the sandbox lets one upload take."""
+    def upload_limits(self, room_bytes: int | None = None) -> Limits:
+        """What the sandbox lets one upload take; ``room_bytes``, the memory the uploaded scenes have left."""
         return Limits(
             max_triangles=self.upload_max_triangles,
             max_texture_pixels=self.upload_max_texture_pixels,
             max_unpacked_bytes=8 * self.upload_max_bytes,  # zipped OBJ text shrinks about 4x; never more than 8
             memory_bytes=self.upload_memory_bytes,
             seconds=self.upload_read_s,
+            room_bytes=room_bytes,
         )
 
     def check_painting(self, width: int, height: int, params: PaintParams) -> None:

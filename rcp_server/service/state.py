@@ -22,7 +22,7 @@ from .uploads import Upload, Uploads
 from .videos import Videos
 from .workshop import Workshop
 
-if TYPE_CHECKING:  # Ray is an extra: the cluster module is imported only when a server is told to use it
+if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
     from ..cluster import RayPainter
 
 log = logging.getLogger("rcp.service")
@@ -33,7 +33,10 @@ class Walkthrough(Protocol):
 
     scene: Scene | None
 
-    walking: bool  # it has said hello: it holds one of the max_sessions places
+    @property
+    def walking(self) -> bool:
+        """It has said hello: it holds one of the ``max_sessions`` places."""
+        ...
 
     def close(self) -> None: ...
 

@@ -20,12 +20,13 @@ from pathlib import Path
 from typing import BinaryIO
 
 from ..scene import Scene
-from ..scenefile import parts_scene
-from ..untrusted import Limits, Refused, read_model
+from ..scenefile import SceneError, parts_scene
+from ..untrusted import Limits, NoRoom, Refused, read_model
 from . import protocol
 
 NAME_PREFIX = "u-"  # then 22 characters of a 128-bit random token: a valid scene name, never a guessable one
 BVH_BYTES_PER_TRIANGLE = 64  # Embree's tree over a triangle, roughly: counted with the arrays
+MEMORY_RETRY_S = 60  # a caller turned away for the uploads' memory: scenes expire, or are deleted, in minutes
 
 
 class Full(Exception):
@@ -97,7 +98,7 @@ class Uploads:
             raise Full(
                 f"the scene needs {weight >> 20} MiB and the uploaded scenes may take {total_bytes >> 20} MiB "
                 f"together, {self.weight >> 20} MiB of which are taken; try again later, or a smaller model",
-                60,
+                MEMORY_RETRY_S,
             )
         self.scenes[scene.name] = Upload(scene, info, weight, time.monotonic())
 
@@ -134,9 +135,23 @@ def read_scene(body: BinaryIO, filename: str, limits: Limits) -> tuple[Scene, in
         parts = read_model(work, filename, limits)
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    scene = parts_scene(parts, new_name(), title_of(filename))
+    try:
+        scene = parts_scene(parts, new_name(), title_of(filename))
+    except SceneError as exc:  # a model no camera can frame (far from the origin, or too large)
+        raise Refused(str(exc)) from None
     scene.geometry(0.0)  # build its tree now, not on the first frame
     return scene, weight_of(scene)
 
 
-__all__ = ["Full", "Refused", "Upload", "Uploads", "new_name", "read_scene", "title_of", "weight_of"]
+__all__ = [
+    "MEMORY_RETRY_S",
+    "Full",
+    "NoRoom",
+    "Refused",
+    "Upload",
+    "Uploads",
+    "new_name",
+    "read_scene",
+    "title_of",
+    "weight_of",
+]

@@ -8,12 +8,16 @@ are painted on Ray instead (``cluster.py``) and the local cores stay with the wa
 
 Limits (``settings.py``): the work of one job (pixels x samples x iterations, summed over its frames), the
 jobs at once, the disk the videos may use, how long a finished video is kept. A job over a limit is refused
-at the door (4xx, or 503 when it is only a matter of waiting); one that runs out of disk fails with a message.
+at the door (4xx, or 503 when it is only a matter of waiting): a job whose estimated size
+(:func:`video_bytes`) does not fit in the disk left, after the finished videos and the estimates of the jobs
+queued and running, gets 507 at once. One that still runs out of disk (a video larger than its estimate)
+fails with a message.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import secrets
 import shutil
 import tempfile
@@ -40,6 +44,10 @@ log = logging.getLogger("rcp.service")
 State = Literal["queued", "running", "done", "failed", "cancelled"]
 FINISHED = ("done", "failed", "cancelled")
 RETRY_AFTER_S = 30  # a full queue of videos frees a place in minutes, not seconds: a fair first guess
+BYTES_PER_PIXEL = 0.25
+"""An H.264 frame's bytes per pixel at CRF 18, estimated: about three times what a moving painting takes
+(0.08 at 320x180); the noisiest styles may take more, which the check while writing still catches."""
+MP4_BYTES = 64 * 1024  # the container and the encoder's headers, at most, for the estimate
 
 
 class VideoRefused(ValueError):
@@ -55,6 +63,11 @@ def job_work(width: int, height: int, params: PaintParams, temporal: int | None,
     iterations = sum(frame_params(params, temporal, k).iterations for k in range(min(frames, 2)))
     iterations += max(frames - 2, 0) * frame_params(params, temporal, 1).iterations
     return width * height * params.spp * iterations
+
+
+def video_bytes(width: int, height: int, frames: int) -> int:
+    """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk."""
+    return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames)
 
 
 @dataclass
@@ -80,6 +93,11 @@ class VideoJob:
     def frames(self) -> int:
         return self.path.frame_count
 
+    @property
+    def estimate(self) -> int:
+        """Bytes its video is estimated to take (:func:`video_bytes`)."""
+        return video_bytes(self.width, self.height, self.frames)
+
     def finish(self, state: State, message: str = "") -> None:
         self.state, self.message, self.finished = state, message, time.monotonic()
 
@@ -92,7 +110,7 @@ class Videos:
         self.workshop = workshop
         self.painter = painter  # a cluster.RayPainter (the service closes it), or None: the workshop's shared pool
         own = settings.video_dir is None
-        self.folder = Path(tempfile.mkdtemp(prefix="rcp-videos-")) if own else Path(settings.video_dir)
+        self.folder = Path(tempfile.mkdtemp(prefix="rcp-videos-")) if settings.video_dir is None else settings.video_dir
         self.folder.mkdir(parents=True, exist_ok=True)
         self._own_folder = own
         self._jobs: dict[str, VideoJob] = {}
@@ -116,18 +134,20 @@ class Videos:
                 "frames, pixels, samples or iterations"
             )
         self.sweep()
-        used = self.disk_used()
-        if used >= settings.video_disk_bytes:
-            raise VideoRefused(
-                f"the stored videos use {used:,} bytes of the {settings.video_disk_bytes:,} allowed: delete some "
-                f"(DELETE /api/videos/ID) or wait until they expire ({settings.video_keep_s:g} s after they finish)",
-                507,
-            )
         job_id = secrets.token_hex(8)
         job = VideoJob(job_id, scene, path, width, height, params, temporal, self.folder / f"{job_id}.mp4")
         with self._lock:
-            waiting = sum(1 for j in self._jobs.values() if j.state in ("queued", "running"))
-            if waiting >= settings.max_videos + settings.max_videos_waiting:
+            waiting = [j for j in self._jobs.values() if j.state in ("queued", "running")]
+            room = settings.video_disk_bytes - self.disk_used() - sum(j.estimate for j in waiting)
+            if job.estimate > room:
+                raise VideoRefused(
+                    f"the video would take about {job.estimate:,} bytes and the videos have {max(room, 0):,} of "
+                    f"their {settings.video_disk_bytes:,} left (RCP_VIDEO_DISK_BYTES, with the videos in progress): "
+                    f"ask for fewer frames or pixels, delete videos (DELETE /api/videos/ID) or wait until they "
+                    f"expire ({settings.video_keep_s:g} s after they finish)",
+                    507,
+                )
+            if len(waiting) >= settings.max_videos + settings.max_videos_waiting:
                 raise Busy(RETRY_AFTER_S)
             self._jobs[job_id] = job
         self._runners.submit(self._run, job)

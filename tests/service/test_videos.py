@@ -18,6 +18,8 @@ from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camerapath import parse_path
 from rcp_server.painting import paint
 from rcp_server.scenefile import load_scene
+from rcp_server.service import videos
+from rcp_server.service.videos import video_bytes
 
 PATH = {
     "fps": 6,
@@ -148,6 +150,30 @@ def test_bad_jobs_are_refused_in_one_line(server, body, status, says):
     assert says in one_line(answer, status)
 
 
+AT_THE_LIMIT = [  # keyframes at the coordinate limit, whose curve carries the look-at just past it between them
+    {"t": 0, "eye": [0, 0, 5], "look_at": [-1e9, 0, 0]},
+    {"t": 1, "eye": [0, 0, 6], "look_at": [-1e9, 1e9, 0]},
+    {"t": 2, "eye": [0, 0, 6], "look_at": [-1e9, 0, -1e9]},
+]
+CLOSE = [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 1e-300}]  # scipy: "`dydx` must contain only finite"
+
+
+@pytest.mark.parametrize(
+    ("path", "says"),
+    [
+        ({**PATH, "keyframes": CLOSE}, "keyframes.1.t: must be greater than the previous keyframe's t, by 0.001 s"),
+        ({**PATH, "loop": True, "keyframes": [CLOSE[0], {**CLOSE[1], "t": 5e-324}]}, "by 0.001 s at least"),
+        ({**PATH, "keyframes": AT_THE_LIMIT}, "frame 3 (t = 0.5 s), between them, is not valid: look_at must lie"),
+    ],
+)
+def test_a_path_that_would_fail_later_is_refused_when_it_is_given(server, path, says):
+    """Its preview was a 500, its video a 202 and then a failed job: every camera a path will ask of its curves
+    is checked when the path is given."""
+    assert says in one_line(server.post("/api/paths", json={"scene": "tiny", "path": path}), 422)
+    video = server.post("/api/videos", json={"scene": "tiny", "path": path, "width": 32, "height": 32})
+    assert says in one_line(video, 422)
+
+
 def test_bad_bodies_and_unknown_ids_are_4xx(server):
     assert server.post("/api/videos", json={"scene": "tiny"}).status_code == 422  # no path
     text = '{"scene": "tiny", "path": {"keyframes": [{"t": NaN, "eye": [0,0,0], "look_at": [0,0,1]}]}}'
@@ -158,7 +184,29 @@ def test_bad_bodies_and_unknown_ids_are_4xx(server):
     assert server.delete("/api/videos/nothing").status_code == 404
 
 
-def test_a_full_disk_budget_fails_the_job_and_finished_jobs_expire(scenes, tmp_path):
+def test_a_video_past_the_disk_budget_is_refused_at_submission_with_507(scenes, tmp_path):
+    """The 507 comes when the job is submitted (it was accepted and failed halfway), with the estimate and the
+    room left, the estimates of the jobs in progress counted: of two that fit one at a time, the second waits."""
+    path = {**PATH, "fps": 60}  # 61 frames: the first job is still painting when the second comes
+    body = {"scene": "tiny", "path": path, "width": 32, "height": 32}
+    estimate = video_bytes(32, 32, parse_path(path).resolve(load_scene("tiny", scenes).camera).frame_count)
+    settings = {"scenes": scenes, "video_disk_bytes": estimate * 3 // 2, "video_dir": tmp_path}
+    with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
+        first = client.post("/api/videos", json=body)
+        second = client.post("/api/videos", json=body)
+        assert first.status_code == 202
+        said = one_line(second, 507)
+        assert (
+            f"about {estimate:,} bytes" in said
+            and f"have {estimate // 2:,} of their {estimate * 3 // 2:,} left" in said
+        )
+        assert wait_until(client, first.json()["id"])["state"] == "done"
+    with BackgroundServer(scenes=scenes, video_disk_bytes=1) as live, httpx.Client(base_url=live.url) as client:
+        assert "have 1 of their 1 left" in one_line(client.post("/api/videos", json=body), 507)
+
+
+def test_a_video_larger_than_its_estimate_fails_at_the_budget_and_finished_jobs_expire(scenes, tmp_path, monkeypatch):
+    monkeypatch.setattr(videos, "video_bytes", lambda width, height, frames: 0)  # the estimate falls short
     settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "video_dir": tmp_path}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
         created = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 32, "height": 32}).json()
