@@ -159,12 +159,12 @@ def test_bad_bodies_and_unknown_ids_are_4xx(server):
 
 
 def test_a_full_disk_budget_fails_the_job_and_finished_jobs_expire(scenes, tmp_path):
-    settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "video_dir": tmp_path}
+    settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "data": tmp_path}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
         created = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 32, "height": 32}).json()
         status = wait_until(client, created["id"])
         assert status["state"] == "failed"
         assert status["message"] == "cannot write the video: the videos would use more than the 1 bytes allowed"
-        assert list(tmp_path.iterdir()) == []  # the partial video is gone
+        assert list((tmp_path / "videos").iterdir()) == []  # its frames and the video are gone
         time.sleep(1.2)
         assert client.get(f"/api/videos/{created['id']}").status_code == 404  # expired

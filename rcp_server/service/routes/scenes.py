@@ -8,12 +8,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, Path, Response, UploadFile
+from fastapi import APIRouter, Depends, HTTPException, Path, Request, Response, UploadFile
 from starlette.concurrency import run_in_threadpool
 
 from ...scenefile import SCENE_NAME
 from .. import protocol
-from ..access import require_token
+from ..access import presented, require_token
 from ..state import Service, ServiceDep, scene_info
 from ..uploads import Full, Refused, read_scene
 from .rest import NO_TOKEN
@@ -35,7 +35,7 @@ MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (eac
     },
     form_limits={"max_files": 1, "max_fields": 16},  # fields beside `file` are ignored; a flood of them is a 400
 )
-async def upload(file: UploadFile, response: Response, service: ServiceDep) -> protocol.SceneInfo:
+async def upload(file: UploadFile, request: Request, response: Response, service: ServiceDep) -> protocol.SceneInfo:
     """A model as a new scene: a `.glb`; a `.gltf` with its files in a `.zip`; an `.obj` alone or in a `.zip`
     with its `.mtl` and textures; a `.ply` or an `.stl`. The answer describes it as `GET /api/scenes` does
     (`uploaded` true), under a new name that only the uploader knows; use it wherever a scene name goes."""
@@ -51,12 +51,17 @@ async def upload(file: UploadFile, response: Response, service: ServiceDep) -> p
         try:
             async with uploads.reading:
                 scene, weight = await run_in_threadpool(
-                    read_scene, file.file, file.filename or "", settings.upload_limits()
+                    read_scene, file.file, file.filename or "", settings.upload_limits(), service.store.uploads_dir
                 )
         finally:
             uploads.queued -= 1
         info = scene_info(scene).model_copy(update={"uploaded": True})
-        uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes)
+        owner = presented(request.headers, request.query_params) if settings.token is not None else None
+        try:
+            uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes, owner)
+        except Full:
+            service.store.remove_upload(scene.name)  # its files, kept by read_scene
+            raise
     except Refused as exc:
         raise HTTPException(422, str(exc)) from None
     except Full as full:
