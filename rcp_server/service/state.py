@@ -129,6 +129,7 @@ class Service:
         if self.cluster is not None:
             self.cluster.close()
         self.workshop.close()
+        self.uploads.flush()
         self.store.close()
 
     def on_cluster(self, width: int, height: int, params: PaintParams) -> bool:

@@ -109,6 +109,12 @@ class Store:
         self._db.executescript(SCHEMA)
         self._mutex = threading.Lock()
 
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
     def close(self) -> None:
         with self._mutex:
             self._db.close()

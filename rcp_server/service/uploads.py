@@ -77,6 +77,14 @@ class Uploads:
             upload.recorded = now
             self.store.touch_upload(upload.scene.name, now)
 
+    def flush(self) -> None:
+        """Writes every last use the store does not hold yet (a clean stop loses none; a crash, at most
+        ``RECORD_USE_S`` of them)."""
+        for upload in self.scenes.values():
+            if self.store is not None and upload.used != upload.recorded:
+                upload.recorded = upload.used
+                self.store.touch_upload(upload.scene.name, upload.used)
+
     def remove(self, name: str) -> bool:
         if self.scenes.pop(name, None) is None:
             return False

@@ -177,7 +177,7 @@ class Videos:
                 continue
             job.state = "queued"
             self.store.update_video(job.id, state="queued")
-            log.info("video %s resumes at frame %d of %d", job.id, job.done_frames, job.frames)
+            log.info("video %s queued again, %d of its %d frames written", job.id, job.done_frames, job.frames)
             self._runners.submit(self._run, job)
 
     # ---- the door ----
@@ -255,6 +255,8 @@ class Videos:
         try:
             job.frames_dir.mkdir(parents=True, exist_ok=True)
             start, previous = self._resume_point(job)
+            if start > 0:
+                log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
             job.done_frames = start
             for image, state in self._paintings(job, start, previous):
                 frame = frame_file(job, job.done_frames)
@@ -270,7 +272,7 @@ class Videos:
                 raise OSError(f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed")
             self._finish(job, "done", f"{job.frames} frames, {size:,} bytes")
         except Exception as exc:
-            if self._closing:  # recorded as queued or running: the next start goes on from the last frame
+            if self._closing or self.workshop.stopping:  # recorded as it was: the next start goes on from here
                 return
             if isinstance(exc, Abandoned) or job.cancelled.is_set():
                 self._finish(job, "cancelled", "cancelled")
