@@ -133,9 +133,10 @@ class Service:
         self.store.close()
 
     def on_cluster(self, width: int, height: int, params: PaintParams) -> bool:
-        """Whether a REST render of this size goes to Ray: with a cluster, from ``ray_min_work`` rays on."""
+        """Whether a REST render of this size goes to Ray: with a cluster, from ``ray_min_work`` rays on, unless
+        Ray failed a moment ago (it backs off: meanwhile the render is painted here rather than refused)."""
         work = width * height * params.spp * params.iterations
-        return self.cluster is not None and work >= self.settings.ray_min_work
+        return self.cluster is not None and work >= self.settings.ray_min_work and self.cluster.ready()
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 import secrets
 import shutil
 import threading
@@ -53,6 +54,7 @@ State = Literal["queued", "running", "done", "failed", "cancelled"]
 FINISHED = ("done", "failed", "cancelled")
 ANY_CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0))
 RETRY_AFTER_S = 30  # a full queue of videos frees a place in minutes, not seconds: a fair first guess
+RAY_ATTEMPTS = 8  # Ray failures a job outlives, waiting each time as Ray backs off (a quarter of an hour in all)
 
 
 class VideoRefused(ValueError):
@@ -254,17 +256,19 @@ class Videos:
         self.store.update_video(job.id, state="running")
         try:
             job.frames_dir.mkdir(parents=True, exist_ok=True)
-            start, previous = self._resume_point(job)
-            if start > 0:
-                log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
-            job.done_frames = start
-            for image, state in self._paintings(job, start, previous):
-                frame = frame_file(job, job.done_frames)
-                write_whole(frame, lambda partial: Image.fromarray(image).save(partial, "PNG", compress_level=1))
-                if state is not None:
-                    save_state(job.frames_dir / "state.npz", job.done_frames, state)
-                job.done_frames += 1
-                self.store.update_video(job.id, done_frames=job.done_frames)
+            for attempt in itertools.count(1):
+                try:
+                    self._paint_frames(job)
+                    break
+                except ClusterError as exc:  # Ray failed: it backs off, and the job goes on from its last frame
+                    if attempt >= RAY_ATTEMPTS:
+                        raise
+                    wait = self.painter.backoff.wait_s()
+                    job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
+                    self.store.update_video(job.id, message=job.message)
+                    if job.cancelled.wait(wait):
+                        raise Abandoned from None
+                    job.message = ""
             self._assemble(job)
             size = job.file.stat().st_size
             if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
@@ -282,6 +286,20 @@ class Videos:
                 self._finish(job, "failed", str(exc))
             else:
                 self._finish(job, "failed", fault_message(report_fault(f"video {job.id}: {exc}")))
+
+    def _paint_frames(self, job: VideoJob) -> None:
+        """Paints the frames not on disk yet, keeping each as it finishes (and a temporal job's state)."""
+        start, previous = self._resume_point(job)
+        if start > 0:
+            log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
+        job.done_frames = start
+        for image, state in self._paintings(job, start, previous):
+            frame = frame_file(job, job.done_frames)
+            write_whole(frame, lambda partial: Image.fromarray(image).save(partial, "PNG", compress_level=1))
+            if state is not None:
+                save_state(job.frames_dir / "state.npz", job.done_frames, state)
+            job.done_frames += 1
+            self.store.update_video(job.id, done_frames=job.done_frames)
 
     def _resume_point(self, job: VideoJob) -> tuple[int, PaintState | None]:
         """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
