@@ -322,7 +322,16 @@ def main(argv: list[str] | None = None) -> int:
             _serve(args)
         elif args.command == "bench":
             args.run_bench(args)
-    except (UsageError, MissingExtra, SceneError, CameraError, PathError, ClusterError, DataFolderInUse, ValueError) as exc:
+    except (
+        UsageError,
+        MissingExtra,
+        SceneError,
+        CameraError,
+        PathError,
+        ClusterError,
+        DataFolderInUse,
+        ValueError,
+    ) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
     except MemoryError:

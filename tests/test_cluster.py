@@ -310,6 +310,8 @@ def test_a_server_whose_ray_failed_paints_here_meanwhile_and_says_so_at_once(pai
             clock = time.monotonic()
             here = client.post("/api/render", json=large)
             assert here.status_code == 200 and here.content == on_ray.content
-            with pytest.raises(ClusterError, match=r"^a Ray worker was lost mid-job: gone \(Ray is tried again in 5 s\)$"):
+            with pytest.raises(
+                ClusterError, match=r"^a Ray worker was lost mid-job: gone \(Ray is tried again in 5 s\)$"
+            ):
                 cluster.render(busy_scene, busy_scene.camera, W, H, PaintParams(iterations=2))
             assert time.monotonic() - clock < 5

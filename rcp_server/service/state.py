@@ -77,7 +77,9 @@ class Service:
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
             store.remove_strays()
-            service = cls(settings, scenes, infos, workshop, videos, store, cluster, uploads=load_uploads(settings, store))
+            service = cls(
+                settings, scenes, infos, workshop, videos, store, cluster, uploads=load_uploads(settings, store)
+            )
             videos.resume(service.scene)
             return service
         except BaseException:
@@ -156,7 +158,7 @@ def load_uploads(settings: Settings, store: Store) -> Uploads:
     passes while a server is down) or past the count and memory budgets (the most recently used kept first)
     are removed, as are any that no longer load."""
     uploads = Uploads(store=store)
-    now, weight = time.time(), 0
+    now, weight, clock = time.time(), 0, time.monotonic()
     for record in sorted(store.uploads(), key=lambda r: r.used, reverse=True):
         over = len(uploads.scenes) >= settings.upload_max_scenes or weight + record.weight > settings.upload_total_bytes
         if now - record.used > settings.upload_idle_s or over:
@@ -172,7 +174,9 @@ def load_uploads(settings: Settings, store: Store) -> Uploads:
         uploads.keep(scene, scene_info(scene).model_copy(update={"uploaded": True}), record)
         weight += record.weight
     if uploads.scenes:
-        log.info("%d uploaded scenes kept from the last run", len(uploads.scenes))
+        log.info(
+            "%d uploaded scenes kept from the last run, loaded in %.2f s", len(uploads.scenes), time.monotonic() - clock
+        )
     return uploads
 
 

@@ -204,8 +204,7 @@ def _lock(path: Path):
         holder = handle.read().strip() or "unknown"
         handle.close()
         raise DataFolderInUse(
-            f"the data folder {path.parent} is in use by another server (pid {holder}); give this one its own "
-            "RCP_DATA"
+            f"the data folder {path.parent} is in use by another server (pid {holder}); give this one its own RCP_DATA"
         ) from None
     handle.seek(0)
     handle.truncate()

@@ -28,6 +28,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Literal
 
@@ -294,8 +295,7 @@ class Videos:
             log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
         job.done_frames = start
         for image, state in self._paintings(job, start, previous):
-            frame = frame_file(job, job.done_frames)
-            write_whole(frame, lambda partial: Image.fromarray(image).save(partial, "PNG", compress_level=1))
+            write_whole(frame_file(job, job.done_frames), partial(_save_png, image))
             if state is not None:
                 save_state(job.frames_dir / "state.npz", job.done_frames, state)
             job.done_frames += 1
@@ -413,6 +413,10 @@ class Videos:
         for job in list(self._jobs.values()):
             job.cancelled.set()
         self._runners.shutdown(wait=True, cancel_futures=True)
+
+
+def _save_png(image: np.ndarray, path: Path) -> None:
+    Image.fromarray(image).save(path, "PNG", compress_level=1)  # lossless, and fast: a frame waits for it
 
 
 def frame_file(job: VideoJob, index: int) -> Path:

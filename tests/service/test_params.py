@@ -111,6 +111,7 @@ def test_a_setting_reaches_the_walk_through(walk, scene, name):
 def test_a_setting_reaches_the_command_line(tmp_path, scene, name):
     without, given = _settings(name)
     out = tmp_path / "still.png"
+
     def flag(key: str, value) -> list[str]:
         name = key.replace("_", "-")
         if isinstance(value, bool):

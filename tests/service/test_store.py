@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 from conftest import CAMERA, SPINNING_BOX
 
+from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camerapath import PathSpec, parse_path
 from rcp_server.painting import paint
 from rcp_server.params import PaintParams
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.service.store import DataFolderInUse, Store, load_state, save_state
 from rcp_server.service.videos import ANY_CAMERA, path_spec
 
@@ -139,7 +139,10 @@ def test_uploads_outlive_a_restart_within_their_budgets_and_expire_when_idle(tmp
         time.sleep(0.01)
         assert client.post("/api/render", json={"scene": names[0], **render}).status_code == 200  # used last
     assert sorted(p.name for p in (data / "uploads").iterdir()) == sorted(names)
-    with BackgroundServer(data=data, upload_max_scenes=2) as live, httpx.Client(base_url=live.url, timeout=60) as client:
+    with (
+        BackgroundServer(data=data, upload_max_scenes=2) as live,
+        httpx.Client(base_url=live.url, timeout=60) as client,
+    ):
         # the two used last are kept (the first one, used after the third was uploaded, and the third)
         for name in (names[0], names[2]):
             assert client.post("/api/render", json={"scene": name, **render}).content == images[name]
