@@ -45,8 +45,8 @@ def film(client: httpx.Client, video_id: str) -> list[np.ndarray]:
 
 def test_a_restart_after_kill_9_keeps_the_upload_and_finishes_the_film_frame_for_frame(tmp_path):
     data = tmp_path / "data"
-    video = {"path": PATH, "width": 96, "height": 72, "temporal": 2, "paint": {"lambda_p": 6.0, "lambda_e": 0.02}}
-    with rcp_serve(tmp_path, data=str(data), max_videos_waiting="2") as first:
+    video = {"path": PATH, "width": 128, "height": 96, "temporal": 2, "paint": {"lambda_p": 6.0, "lambda_e": 0.02}}
+    with rcp_serve(tmp_path, data=str(data), threads="1") as first:  # one thread: the film takes a while
         with httpx.Client(base_url=first.url, timeout=60) as client:
             info = client.post("/api/scenes", files={"file": ("Box.glb", files.glb())}).json()
             name = info["name"]
@@ -58,7 +58,10 @@ def test_a_restart_after_kill_9_keeps_the_upload_and_finishes_the_film_frame_for
         first.process.kill()  # kill -9, mid-film
         first.process.wait()
     assert seen["state"] == "running" and seen["done_frames"] < 41
-    with rcp_serve(tmp_path, data=str(data)) as again, httpx.Client(base_url=again.url, timeout=60) as client:
+    with (
+        rcp_serve(tmp_path, data=str(data), threads="1") as again,
+        httpx.Client(base_url=again.url, timeout=60) as client,
+    ):
         assert client.get(f"/api/scenes/{name}").json() == info
         after = client.post("/api/render", json={"scene": name, **RENDER})
         assert after.status_code == 200 and after.content == before.content

@@ -92,8 +92,11 @@ def decoded(data: bytes) -> list[np.ndarray]:
 def test_a_film_stopped_mid_way_resumes_and_a_finished_one_is_still_served(tmp_path, scenes, caplog):
     caplog.set_level("INFO", "rcp.service")
     data = tmp_path / "data"
-    body = {"scene": "tiny", "path": PATH, "width": 96, "height": 72, "paint": {"spp": 2}}
-    with BackgroundServer(scenes=scenes, data=data) as live, httpx.Client(base_url=live.url, timeout=60) as client:
+    body = {"scene": "tiny", "path": PATH, "width": 128, "height": 96, "paint": {"spp": 2}}
+    with (
+        BackgroundServer(scenes=scenes, data=data, threads=1) as live,
+        httpx.Client(base_url=live.url, timeout=60) as client,
+    ):
         job = client.post("/api/videos", json=body).json()
         seen = wait_for(client, job["id"], lambda s: s["done_frames"] >= 2)
     assert seen["state"] == "running" and seen["done_frames"] < job["frames"] == 21
