@@ -21,7 +21,7 @@ from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 from .sequence import paint_sequence
-from .service.store import DataFolderInUse
+from .service.store import DataFolderError
 from .styles import STYLE, STYLES, with_style
 
 log = logging.getLogger("rcp")
@@ -329,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
         CameraError,
         PathError,
         ClusterError,
-        DataFolderInUse,
+        DataFolderError,
         ValueError,
     ) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)

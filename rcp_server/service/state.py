@@ -57,7 +57,7 @@ class Service:
 
     @classmethod
     def open(cls, settings: Settings) -> Service:
-        """Blocking: take the data folder (:class:`~.store.DataFolderInUse` if another server has it), join Ray
+        """Blocking: take the data folder (:class:`~.store.DataFolderError` if another server has it), join Ray
         when told to (:class:`~rcp_server.cluster.ClusterError` if it does not answer in bounded time), load the
         scenes of ``settings.scenes``, compile the kernels, open the workshop, load the stored uploads and
         resume the stored video jobs."""

@@ -60,8 +60,9 @@ CREATE TABLE IF NOT EXISTS videos (
 """
 
 
-class DataFolderInUse(RuntimeError):
-    """Another server holds the data folder; one line, said at start-up."""
+class DataFolderError(RuntimeError):
+    """The data folder cannot be used (another server holds it, or it cannot be written); one line, said at
+    start-up."""
 
 
 @dataclass(frozen=True)
@@ -101,12 +102,16 @@ class Store:
             for path in (self.folder, self.uploads_dir, self.videos_dir):
                 path.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise DataFolderInUse(f"cannot use the data folder {self.folder}: {exc.strerror or exc}") from None
+            raise DataFolderError(f"cannot use the data folder {self.folder}: {exc.strerror or exc}") from None
         self._lock_file = _lock(self.folder / "lock")
-        self._db = sqlite3.connect(self.folder / "rcp.sqlite", check_same_thread=False, isolation_level=None)
-        self._db.execute("PRAGMA journal_mode=WAL")
-        self._db.execute("PRAGMA synchronous=NORMAL")  # WAL: a power cut may lose the last records, never corrupt
-        self._db.executescript(SCHEMA)
+        try:
+            self._db = sqlite3.connect(self.folder / "rcp.sqlite", check_same_thread=False, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")  # WAL: a power cut may lose the last records, not corrupt
+            self._db.executescript(SCHEMA)
+        except sqlite3.Error as exc:
+            self._lock_file.close()
+            raise DataFolderError(f"cannot use the records in {self.folder / 'rcp.sqlite'}: {exc}") from None
         self._mutex = threading.Lock()
 
     def __enter__(self) -> Store:
@@ -194,7 +199,7 @@ def _marks(record_type) -> str:
 
 
 def _lock(path: Path):
-    """The folder's lock, held for as long as the returned file is open; :class:`DataFolderInUse` if another
+    """The folder's lock, held for as long as the returned file is open; :class:`DataFolderError` if another
     process holds it (a lock the kernel drops with its holder: a ``kill -9`` leaves nothing stale)."""
     handle = open(path, "a+")  # noqa: SIM115 (held open for the server's lifetime)
     try:
@@ -203,7 +208,7 @@ def _lock(path: Path):
         handle.seek(0)
         holder = handle.read().strip() or "unknown"
         handle.close()
-        raise DataFolderInUse(
+        raise DataFolderError(
             f"the data folder {path.parent} is in use by another server (pid {holder}); give this one its own RCP_DATA"
         ) from None
     handle.seek(0)

@@ -20,7 +20,7 @@ from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camerapath import PathSpec, parse_path
 from rcp_server.painting import paint
 from rcp_server.params import PaintParams
-from rcp_server.service.store import DataFolderInUse, Store, load_state, save_state
+from rcp_server.service.store import DataFolderError, Store, load_state, save_state
 from rcp_server.service.videos import ANY_CAMERA, path_spec
 
 from . import upload_files as files
@@ -36,7 +36,7 @@ PATH = {
 
 def test_a_data_folder_takes_one_server_at_a_time(tmp_path):
     store = Store(tmp_path)
-    with pytest.raises(DataFolderInUse) as refused:
+    with pytest.raises(DataFolderError) as refused:
         Store(tmp_path)
     assert str(refused.value) == (
         f"the data folder {tmp_path} is in use by another server (pid {__import__('os').getpid()}); give this one "
@@ -44,6 +44,9 @@ def test_a_data_folder_takes_one_server_at_a_time(tmp_path):
     )
     store.close()
     Store(tmp_path).close()  # let go of, it takes the next one
+    (tmp_path / "a file").write_text("")
+    with pytest.raises(DataFolderError, match=f"^cannot use the data folder {tmp_path}/a file: File exists$"):
+        Store(tmp_path / "a file")
 
 
 def test_the_state_a_temporal_video_continues_from_comes_back_exactly(tmp_path, busy_scene):
