@@ -50,6 +50,7 @@ IN_FLIGHT_PER_ACTOR = 2  # frames (or bands) queued on each actor: one painting,
 WARM_SCENES = 4  # scenes each actor keeps built (and the driver keeps in the object store)
 RESTARTS = 3  # times Ray restarts a dead worker and retries its calls before a job fails
 STOP_POLL_S = 0.1  # how often a wait on Ray checks whether the painting is still wanted
+JOIN_RETRY_S = 1.0  # joining at start-up: how often an address that does not answer yet is asked again
 REPAINTS = 8  # times one sequence replaces lost workers and repaints their frames before it fails
 KEPT_STATES = 4  # temporal states each band keeps (frames in flight and the one before): a frame can be asked again
 PROBE_S = 30.0  # how long a worker may take to say how far it got before it counts as lost
@@ -87,6 +88,10 @@ class Backoff:
         return max(0.0, self.until - self.clock())
 
 
+class Unanswered(ClusterError):
+    """Nothing answers at the address (yet: a head that is starting answers in a moment)."""
+
+
 def _ray():
     try:
         import ray
@@ -110,7 +115,7 @@ def check_address(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
             pass
     except OSError as exc:
         reason = f"no answer within {timeout_s:g} s" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
-        raise ClusterError(f"Ray address {address} does not answer ({reason})") from None
+        raise Unanswered(f"Ray address {address} does not answer ({reason})") from None
 
 
 def connect(address: str | None = None, num_cpus: int | None = None, **local_options) -> bool:
@@ -300,8 +305,10 @@ class RayPainter:
         self._serial = itertools.count(1)  # names the scenes held and the jobs
 
     def start(self, timeout_s: float | None = None) -> None:
-        """Join (or start) Ray now, rather than with the first painting; raises :class:`ClusterError`, also
-        when it has not joined within ``timeout_s`` (an address that takes connections but is not Ray's)."""
+        """Join (or start) Ray now, rather than with the first painting; raises :class:`ClusterError`. With
+        ``timeout_s``, an address that does not answer is asked again every ``JOIN_RETRY_S`` (a head starting
+        beside us answers in a moment) until then, and one that takes connections but never joins (not Ray's)
+        is given up then."""
         if timeout_s is None:
             with self._lock:
                 self._start()
@@ -309,11 +316,25 @@ class RayPainter:
         # joined on a thread of its own, so that it can be given up; Ray then leaves SIGTERM to us (a server stops
         # gracefully on it) and says so in a warning that is no news: filtered out
         logging.getLogger("ray._private.worker").addFilter(_NoSigtermNote())
+        deadline = time.monotonic() + timeout_s
         outcome: list[BaseException | None] = []
-        joiner = threading.Thread(target=lambda: outcome.append(_failure(self.start)), name="rcp-ray-join", daemon=True)
+        unanswered: list[Unanswered] = []
+
+        def join() -> None:
+            while True:  # an address nobody answers at yet (a head pod starting beside us) is asked again
+                failure = _failure(self.start)
+                if not isinstance(failure, Unanswered) or time.monotonic() + JOIN_RETRY_S > deadline:
+                    outcome.append(failure)
+                    return
+                unanswered[:] = [failure]
+                time.sleep(JOIN_RETRY_S)
+
+        joiner = threading.Thread(target=join, name="rcp-ray-join", daemon=True)
         joiner.start()
-        joiner.join(timeout_s)
+        joiner.join(max(0.0, deadline - time.monotonic()))
         if not outcome:
+            if unanswered:
+                raise unanswered[0]
             raise ClusterError(f"Ray at {self.address} was not joined within {timeout_s:g} s (RCP_RAY_JOIN_S)")
         if outcome[0] is not None:
             raise outcome[0]
