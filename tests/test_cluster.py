@@ -240,6 +240,51 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
     assert ray_png == here_png
 
 
+def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_path, caplog):
+    """A server painting on Ray stops mid-film; started again on the same data folder, it goes on from the last
+    frame written (a temporal job paints up to there again on the actors), and the film is the threads' one."""
+    import av
+    import httpx
+
+    from rcp_server.bench.harness import BackgroundServer
+
+    caplog.set_level("INFO", "rcp.service")
+    (tmp_path / "tiny.toml").write_text(TINY)
+    data = tmp_path / "data"
+    path = long_path(1.0)
+    painter.close()  # the server's actors need the runtime's CPUs
+    films = {}
+    for temporal in (None, 1):
+        body = {"scene": "tiny", "path": path, "width": 32, "height": 24, "temporal": temporal}
+        with BackgroundServer(scenes=tmp_path, data=data, ray_address="local") as live:
+            with httpx.Client(base_url=live.url, timeout=60) as client:
+                job = client.post("/api/videos", json=body).json()
+                deadline = time.monotonic() + 60
+                while (status := client.get(f"/api/videos/{job['id']}").json())["done_frames"] < 2:
+                    assert time.monotonic() < deadline
+                    time.sleep(0.02)
+        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 31
+        for where in ({"ray_address": "local"}, {}):  # resumed on Ray; then the same film on threads
+            with BackgroundServer(scenes=tmp_path, data=data, **where) as live:
+                with httpx.Client(base_url=live.url, timeout=60) as client:
+                    if where:
+                        video_id = job["id"]
+                    else:
+                        video_id = client.post("/api/videos", json=body).json()["id"]
+                    deadline = time.monotonic() + 120
+                    while (status := client.get(f"/api/videos/{video_id}").json())["state"] in ("queued", "running"):
+                        assert time.monotonic() < deadline
+                        time.sleep(0.05)
+                    assert status["state"] == "done", status
+                    if where:
+                        assert any(m.startswith(f"video {job['id']} resumes at frame ") for m in caplog.messages)
+                    data_file = client.get(f"/api/videos/{video_id}/file").content
+            with av.open(io.BytesIO(data_file)) as container:
+                films[temporal, bool(where)] = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+        for resumed, here in zip(films[temporal, True], films[temporal, False], strict=True):
+            np.testing.assert_array_equal(resumed, here)
+
+
 @pytest.mark.parametrize("listening", [False, True])
 def test_rcp_serve_with_a_ray_that_does_not_answer_fails_to_start_in_one_line(tmp_path, listening):
     """``RCP_RAY_ADDRESS`` is joined at start-up: an address nobody listens at, or one that takes connections

@@ -101,16 +101,19 @@ def test_a_film_stopped_mid_way_resumes_and_a_finished_one_is_still_served(tmp_p
         httpx.Client(base_url=live.url, timeout=60) as client,
     ):
         job = client.post("/api/videos", json=body).json()
+        queued = client.post("/api/videos", json={**body, "width": 32, "height": 24}).json()  # waits its turn
         seen = wait_for(client, job["id"], lambda s: s["done_frames"] >= 2)
     assert seen["state"] == "running" and seen["done_frames"] < job["frames"] == 21
     with Store(data) as store:
-        (record,) = store.videos()
+        record, waiting = store.videos()
         assert record.state == "running" and record.done_frames >= 2  # a stop is not a failure
+        assert waiting.id == queued["id"] and waiting.state == "queued"
         assert len(list(store.frames_dir(job["id"]).glob("frame_*.png"))) == record.done_frames
     with BackgroundServer(scenes=scenes, data=data) as live, httpx.Client(base_url=live.url, timeout=60) as client:
         done = wait_for(client, job["id"], lambda s: s["state"] not in ("queued", "running"))
         assert f"video {job['id']} resumes at frame {record.done_frames} of 21" in caplog.messages
         assert done == {**seen, "state": "done", "done_frames": 21, "message": done["message"]}
+        assert wait_for(client, queued["id"], lambda s: s["state"] not in ("queued", "running"))["state"] == "done"
         resumed = client.get(f"/api/videos/{job['id']}/file").content
         fresh = client.post("/api/videos", json=body).json()
         wait_for(client, fresh["id"], lambda s: s["state"] == "done")
@@ -122,7 +125,8 @@ def test_a_film_stopped_mid_way_resumes_and_a_finished_one_is_still_served(tmp_p
         assert client.get(f"/api/videos/{job['id']}").json() == done
         kept = client.get(f"/api/videos/{job['id']}/file")
         assert kept.status_code == 200 and kept.content == resumed
-        assert client.delete(f"/api/videos/{fresh['id']}").status_code == 200
+        for other in (fresh, queued):
+            assert client.delete(f"/api/videos/{other['id']}").status_code == 200
     assert sorted(p.name for p in (data / "videos").iterdir()) == [f"{job['id']}.mp4"]
     time.sleep(1.1)
     with BackgroundServer(scenes=scenes, data=data, video_keep_s=1.0) as live:
