@@ -5,6 +5,7 @@ frame written and is, frame for frame, the uninterrupted run's; two servers cann
 from __future__ import annotations
 
 import io
+import os
 import subprocess
 import sys
 import time
@@ -13,7 +14,7 @@ import av
 import httpx
 import numpy as np
 
-from rcp_server.bench.harness import free_port, rcp_serve
+from rcp_server.bench.harness import PACKAGE_ROOT, free_port, rcp_serve
 
 from . import upload_files as files
 
@@ -68,7 +69,7 @@ def test_a_restart_after_kill_9_keeps_the_upload_and_finishes_the_film_frame_for
         # a second server on the same data folder is refused at once, in one line
         second = subprocess.run(
             [sys.executable, "-m", "rcp_server.cli", "serve", "--port", str(free_port())],
-            env={**subprocess_env(), "RCP_DATA": str(data)},
+            env={**os.environ, "PYTHONPATH": str(PACKAGE_ROOT), "RCP_DATA": str(data)},
             capture_output=True,
             text=True,
             timeout=60,
@@ -91,12 +92,3 @@ def test_a_restart_after_kill_9_keeps_the_upload_and_finishes_the_film_frame_for
     for got, want in zip(resumed_film, expected, strict=True):
         np.testing.assert_array_equal(got, want)
     assert not np.array_equal(expected[0], expected[-1])
-
-
-def subprocess_env() -> dict:
-    import os
-
-    from rcp_server.bench.harness import PACKAGE_ROOT
-
-    path = os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")]))
-    return {**os.environ, "PYTHONPATH": path}

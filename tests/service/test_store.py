@@ -5,6 +5,7 @@ uploads outlive a restart within their budgets and expire when idle."""
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import time
@@ -167,3 +168,21 @@ def test_uploads_outlive_a_restart_within_their_budgets_and_expire_when_idle(tmp
     with BackgroundServer(data=data, upload_idle_s=1.0) as live:
         assert httpx.get(f"{live.url}/api/scenes/{names[2]}").status_code == 404  # idle while the server was down
     assert list((data / "uploads").iterdir()) == []
+
+
+def test_an_upload_is_recorded_with_its_sizes_and_the_hash_of_the_token_it_came_with(tmp_path):
+    data = tmp_path / "data"
+    with BackgroundServer(data=data, token="sesame") as live:
+        auth = {"authorization": "Bearer sesame"}
+        with httpx.Client(base_url=live.url, timeout=60, headers=auth) as client:
+            clock = time.time()
+            name = upload(client, "Box.glb")
+    with Store(data) as store:
+        (record,) = store.uploads()
+    folder = data / "uploads" / name
+    assert sorted(p.name for p in folder.iterdir()) == ["original", "parts.npz"]
+    assert (folder / "original").read_bytes() == files.glb()
+    assert record.name == name and record.title == "Box"
+    assert record.owner == hashlib.sha256(b"sesame").hexdigest()
+    assert record.file_bytes == sum(p.stat().st_size for p in folder.iterdir())
+    assert record.weight > 0 and clock <= record.created <= record.used <= time.time()
