@@ -10,14 +10,20 @@ import av
 import httpx
 import numpy as np
 import pytest
-from conftest import SPINNING_BOX
+from conftest import CAMERA, SPINNING_BOX, make_scene
 from PIL import Image
 
 from rcp_server import images
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camerapath import parse_path
+from rcp_server.cluster import Backoff, ClusterError
 from rcp_server.painting import paint
+from rcp_server.params import PaintParams
 from rcp_server.scenefile import load_scene
+from rcp_server.service.settings import Settings
+from rcp_server.service.store import Store
+from rcp_server.service.videos import Videos
+from rcp_server.service.workshop import Workshop
 
 PATH = {
     "fps": 6,
@@ -168,3 +174,46 @@ def test_a_full_disk_budget_fails_the_job_and_finished_jobs_expire(scenes, tmp_p
         assert list((tmp_path / "videos").iterdir()) == []  # its frames and the video are gone
         time.sleep(1.2)
         assert client.get(f"/api/videos/{created['id']}").status_code == 404  # expired
+
+
+class FlakyRay:
+    """A painter in place of Ray's: its frames are flat colours by index, and its first sequence fails after
+    three frames, as Ray does when a head goes away (Ray then backs off)."""
+
+    def __init__(self):
+        self.backoff = Backoff(first_s=0.2)
+        self.asked: list[int] = []  # the first frame index of each sequence asked for
+
+    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
+        shots = list(shots)
+        self.asked.append(shots[0].index)
+        for n, shot in enumerate(shots):
+            if len(self.asked) == 1 and n == 3:
+                self.backoff.failed("Ray went away")
+                raise ClusterError("Ray went away")
+            yield np.full((height, width, 3), 20 * shot.index, np.uint8)
+
+
+def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(tmp_path):
+    settings = Settings(data=tmp_path, threads=1)
+    workshop = Workshop(1, 1)
+    painter = FlakyRay()
+    with Store(tmp_path) as store:
+        videos = Videos(settings, workshop, store, painter)
+        try:
+            job = videos.submit(make_scene(), parse_path(PATH).resolve(CAMERA), 32, 32, PaintParams(), None)
+            deadline = time.monotonic() + 30
+            messages = set()
+            while job.state not in ("done", "failed", "cancelled"):
+                messages.add(job.message)
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            assert job.state == "done", job.message
+            assert painter.asked == [0, 3]  # the three frames written were not asked for again
+            assert "Ray went away; going on from frame 3 in 1 s" in messages
+            with av.open(str(job.file)) as container:
+                frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+            np.testing.assert_allclose([np.median(f) for f in frames], [20 * k for k in range(7)], atol=2)  # H.264
+        finally:
+            videos.close()
+            workshop.close()
