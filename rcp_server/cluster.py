@@ -88,6 +88,10 @@ class Backoff:
         return max(0.0, self.until - self.clock())
 
 
+class PaintingFailed(ClusterError):
+    """A painting raised on a worker: a fault of the painting, not of Ray (asking again would fail again)."""
+
+
 class Unanswered(ClusterError):
     """Nothing answers at the address (yet: a head that is starting answers in a moment)."""
 
@@ -419,7 +423,8 @@ class RayPainter:
                 self._drop()
                 raise ClusterError(str(lost)) from None
         except ClusterError as exc:
-            self.backoff.failed(str(exc))
+            if not isinstance(exc, PaintingFailed):
+                self.backoff.failed(str(exc))
             raise
 
     def images(
@@ -441,7 +446,8 @@ class RayPainter:
         try:
             yield from self._images(scene, shots, width, height, params, temporal, should_stop)
         except ClusterError as exc:
-            self.backoff.failed(str(exc))
+            if not isinstance(exc, PaintingFailed):  # Ray's failure: not tried again for a while
+                self.backoff.failed(str(exc))
             raise
 
     def _images(self, scene, shots, width, height, params, temporal, should_stop) -> Iterator[np.ndarray]:
@@ -552,7 +558,7 @@ class RayPainter:
         except ray.exceptions.RayTaskError as exc:
             if isinstance(exc.cause, LostState):
                 raise _Lost(str(exc.cause)) from None
-            raise ClusterError(f"a painting failed on Ray: {_first_line(exc)}") from None
+            raise PaintingFailed(f"a painting failed on Ray: {_first_line(exc)}") from None
         self.backoff.succeeded()
         return values
 

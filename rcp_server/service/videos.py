@@ -38,7 +38,7 @@ from PIL import Image
 from .. import images
 from ..camera import Camera
 from ..camerapath import CameraPath, PathSpec
-from ..cluster import ClusterError
+from ..cluster import ClusterError, PaintingFailed
 from ..painting import Abandoned, PaintState
 from ..params import PaintParams
 from ..scene import Scene
@@ -262,7 +262,7 @@ class Videos:
                     self._paint_frames(job)
                     break
                 except ClusterError as exc:  # Ray failed: it backs off, and the job goes on from its last frame
-                    if attempt >= RAY_ATTEMPTS:
+                    if attempt >= RAY_ATTEMPTS or isinstance(exc, PaintingFailed):  # the latter would fail again
                         raise
                     wait = self.painter.backoff.wait_s()
                     job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
