@@ -122,8 +122,14 @@ def test_a_film_stopped_mid_way_resumes_and_a_finished_one_is_still_served(tmp_p
     assert len(decoded(resumed)) == 21
     for got, want in zip(decoded(resumed), decoded(expected), strict=True):
         np.testing.assert_array_equal(got, want)
-    with BackgroundServer(scenes=scenes, data=data) as live, httpx.Client(base_url=live.url, timeout=60) as client:
+    size = len(resumed)
+    with (
+        BackgroundServer(scenes=scenes, data=data, video_disk_bytes=size) as live,
+        httpx.Client(base_url=live.url, timeout=60) as client,
+    ):
         assert client.get(f"/api/videos/{job['id']}").json() == done
+        refused = client.post("/api/videos", json=body)  # the stored videos count against the disk budget
+        assert refused.status_code == 507 and refused.json()["detail"].startswith("the stored videos use ")
         kept = client.get(f"/api/videos/{job['id']}/file")
         assert kept.status_code == 200 and kept.content == resumed
         for other in (fresh, queued):
