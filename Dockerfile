@@ -24,8 +24,8 @@ ARG EXTRAS=""
 RUN if [ -n "$EXTRAS" ]; then apt-get update && apt-get install -y --no-install-recommends wget \
     && rm -rf /var/lib/apt/lists/*; fi
 # fixed ids, so that a mounted volume can be given to the group (Kubernetes: securityContext.fsGroup 10001)
-RUN groupadd --system --gid 10001 rcp \
- && useradd --system --uid 10001 --gid rcp --create-home --home-dir /home/rcp rcp \
+RUN groupadd --gid 10001 rcp \
+ && useradd --uid 10001 --gid rcp --create-home --home-dir /home/rcp rcp \
  && mkdir -p /var/cache/rcp/numba /var/lib/rcp && chown -R rcp:rcp /var/cache/rcp /var/lib/rcp
 # a login shell's /etc/profile sets PATH anew (KubeRay starts Ray with `bash -lc`): it finds the venv here too
 RUN echo 'PATH=/opt/venv/bin:$PATH' >/etc/profile.d/venv.sh

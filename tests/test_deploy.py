@@ -95,7 +95,7 @@ def test_the_service_keeps_its_data_on_a_claim_its_user_may_write(documents):
     assert volume["persistentVolumeClaim"]["claimName"] == claim["metadata"]["name"]
     assert claim["spec"]["accessModes"] == ["ReadWriteOnce"]  # one server per data folder: it holds a lock
     dockerfile = (ROOT / "Dockerfile").read_text()
-    gid = re.search(r"groupadd --system --gid (\d+) rcp", dockerfile).group(1)
+    gid = re.search(r"groupadd --gid (\d+) rcp", dockerfile).group(1)
     assert head["securityContext"]["fsGroup"] == int(gid)
     assert re.search(rf"^\s*RCP_DATA={re.escape(data)} ", dockerfile, re.M)  # the image's default is the same folder
     assert f'VOLUME ["{data}"]' in dockerfile
