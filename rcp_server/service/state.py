@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Protocol
 
@@ -156,10 +156,13 @@ def scene_info(scene: Scene) -> protocol.SceneInfo:
 def load_uploads(settings: Settings, store: Store) -> Uploads:
     """The uploads the store keeps, loaded from their parsed arrays; those idle past ``upload_idle_s`` (time
     passes while a server is down) or past the count and memory budgets (the most recently used kept first)
-    are removed, as are any that no longer load."""
+    are removed, as are any that no longer load. A scene that a stored video job still paints is in use."""
     uploads = Uploads(store=store)
     now, weight, clock = time.time(), 0, time.monotonic()
-    for record in sorted(store.uploads(), key=lambda r: r.used, reverse=True):
+    filming = {r.scene for r in store.videos() if r.state in ("queued", "running")}  # in use: a film goes on
+    for record in sorted(store.uploads(), key=lambda r: (r.name in filming, r.used), reverse=True):
+        if record.name in filming:
+            record = replace(record, used=now)
         over = len(uploads.scenes) >= settings.upload_max_scenes or weight + record.weight > settings.upload_total_bytes
         if now - record.used > settings.upload_idle_s or over:
             log.info("upload %s removed: %s", record.name, "over a budget" if over else "idle")

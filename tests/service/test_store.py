@@ -192,3 +192,24 @@ def test_an_upload_is_recorded_with_its_sizes_and_the_hash_of_the_token_it_came_
     assert record.owner == hashlib.sha256(b"sesame").hexdigest()
     assert record.file_bytes == sum(p.stat().st_size for p in folder.iterdir())
     assert record.weight > 0 and clock <= record.created <= record.used <= time.time()
+
+
+def test_an_upload_a_stored_film_still_paints_is_in_use_however_long_the_server_was_down(tmp_path):
+    data = tmp_path / "data"
+    body = {"path": PATH, "width": 128, "height": 96, "paint": {"spp": 2}}
+    with (
+        BackgroundServer(data=data, threads=1) as live,
+        httpx.Client(base_url=live.url, timeout=60) as client,
+    ):
+        name = upload(client, "Box.glb")
+        job = client.post("/api/videos", json={"scene": name, **body}).json()
+        seen = wait_for(client, job["id"], lambda s: s["done_frames"] >= 1)
+    assert seen["state"] == "running"
+    time.sleep(1.1)
+    with (
+        BackgroundServer(data=data, upload_idle_s=1.0) as live,
+        httpx.Client(base_url=live.url, timeout=60) as client,
+    ):
+        done = wait_for(client, job["id"], lambda s: s["state"] not in ("queued", "running"))
+        assert done["state"] == "done", done
+        assert client.get(f"/api/scenes/{name}").status_code == 200
