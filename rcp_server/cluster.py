@@ -503,28 +503,33 @@ class RayPainter:
                     actor.forget.remote(job)
 
     def _repaint_frames(self, actors: list, held: Held, width: int, height: int, pending: deque[_Frame]) -> None:
-        """Per frame: the frames in flight that failed go again, those of a worker gone for good to its
-        replacement (``actors`` is updated)."""
+        """Per frame: the frames in flight that failed, and those of a worker gone for good (to its replacement:
+        ``actors`` is updated), go again; the others are left to arrive."""
+        replaced = set()
         for k, actor in enumerate(actors):
             if self._painted(actor, None, None) is None:
                 actors[k] = self._replace(actor)
+                replaced.add(k)
         for frame in pending:
-            if _failed(frame.refs):
+            if frame.actor in replaced or _broken(frame.refs):
                 frame.refs = [actors[frame.actor].frame.remote(held, frame.shot, width, height, frame.params)]
 
     def _repaint_bands(self, workers: list, held: Held, job: str, pending: deque[_Frame], history: list) -> None:
-        """Temporal: each band whose frames in flight did not all arrive is painted again from the last frame
-        its worker still holds (its replacement's, a worker gone for good: from the first frame), then every
-        frame in flight; the other bands keep what they painted. ``workers`` is updated."""
+        """Temporal: each band that was lost (its worker gone for good, restarted without its states, or a
+        frame of it failed) is painted again from the last frame its worker still holds (from the first frame
+        when it holds none; a worker gone for good is replaced: ``workers`` is updated), then every frame in
+        flight; the other bands go on as they were."""
         first = pending[0].index
         for b, (actor, region) in enumerate(workers):
-            if not any(_failed([frame.refs[b]]) for frame in pending):
-                continue
             holds = self._painted(actor, job, region)
             if holds is None:
                 actor = self._replace(actor)
                 workers[b] = (actor, region)
                 holds = []
+            elif not (0 < first and max(holds, default=-1) < first - 1) and not any(
+                _broken([frame.refs[b]]) for frame in pending
+            ):
+                continue  # it holds what it goes on from, and nothing of it failed
             start = next((k + 1 for k in reversed(holds) if k < first), 0)  # the frame to go on from
             for k in range(start, first):  # results not needed: they only bring the band's state up to date
                 actor.band.remote(held, job, region, k, *history[k])
@@ -594,16 +599,15 @@ def _failure(call: Callable[[], Any]) -> BaseException | None:
     return None
 
 
-def _failed(refs: list) -> bool:
-    """Whether any of ``refs`` is ready with an error, or is not ready yet (it may be doomed: painted again)."""
+def _broken(refs: list) -> bool:
+    """Whether any of ``refs`` has arrived as an error (one still on its way is not known to be)."""
     ray = _ray()
-    ready, waiting = ray.wait(refs, num_returns=len(refs), timeout=0)
-    if waiting:
-        return True
-    try:
-        ray.get(ready, timeout=0)
-    except Exception:
-        return True
+    ready, _ = ray.wait(refs, num_returns=len(refs), timeout=0)
+    for ref in ready:
+        try:
+            ray.get(ref, timeout=0)
+        except Exception:
+            return True
     return False
 
 
