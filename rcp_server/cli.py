@@ -21,6 +21,7 @@ from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 from .sequence import paint_sequence
+from .service.store import DataFolderError
 from .styles import STYLE, STYLES, with_style
 from .tracer import EmbreeMissing
 
@@ -300,7 +301,9 @@ def _serve(args: argparse.Namespace) -> None:
     # a stop asked for and carried out is exit status 0
     signal.signal(signal.SIGTERM, _stopped)
     signal.signal(signal.SIGINT, _stopped)
-    Server(settings, log_level="info").run()
+    server = Server(settings, log_level="info")
+    server.open_service()  # the data folder and Ray first: either failing is one line, before the port is taken
+    server.run()
 
 
 def _stopped(signum, frame) -> None:
@@ -321,7 +324,16 @@ def main(argv: list[str] | None = None) -> int:
             _serve(args)
         elif args.command == "bench":
             args.run_bench(args)
-    except (UsageError, MissingExtra, SceneError, CameraError, PathError, ClusterError, ValueError) as exc:
+    except (
+        UsageError,
+        MissingExtra,
+        SceneError,
+        CameraError,
+        PathError,
+        ClusterError,
+        DataFolderError,
+        ValueError,
+    ) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
     except EmbreeMissing as exc:  # the machine, not the arguments: one line, and the usual failure status

@@ -106,6 +106,12 @@ def _cluster(args: argparse.Namespace) -> None:
     bench_cluster(args.scene, args.width, args.height, args.frames, args.ray, args.gbps, args.cores)
 
 
+def _restart(args: argparse.Namespace) -> None:
+    from .restart import bench_restart
+
+    bench_restart(args.model, args.triangles, args.width, args.height)
+
+
 # ---- the subcommands ----
 
 
@@ -187,6 +193,18 @@ def add_bench_commands(subparsers) -> None:
     p = command("stability", "where each method breaks (needs the bench extra)")
     _out_and_quick(p)
     p.set_defaults(run_bench=_stability)
+
+    p = command("restart", "rcp serve killed and started again: how soon it serves a stored upload")
+    p.add_argument("--model", type=Path, help="a model file to upload (default: a sphere built in code)")
+    p.add_argument(
+        "--triangles",
+        type=positive_int,
+        default=330_000,
+        help="about as many triangles in the built sphere (default 330,000)",
+    )
+    p.add_argument("--width", type=positive_int, default=640, help="first frames' pixels (default 640)")
+    p.add_argument("--height", type=positive_int, default=360, help="first frames' pixels (default 360)")
+    p.set_defaults(run_bench=_restart)
 
     p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
     p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")

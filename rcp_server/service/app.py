@@ -19,7 +19,7 @@ from .faults import InternalErrors
 from .guard import BodyLimit, Capacity
 from .routes import docs, rest, scenes, styles, videos, walk
 from .settings import Settings
-from .state import Service
+from .state import Service, service_of
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -27,7 +27,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        service = Service.open(settings)
+        service = service_of(app) or Service.open(settings)  # opened already by `rcp serve`, or now
         app.state.service = service  # read back through state.get_service
         try:
             yield

@@ -14,7 +14,7 @@ from .access import HideTokens
 from .app import create_app
 from .guard import SEND_BUFFER, guarded_http
 from .settings import Settings
-from .state import service_of
+from .state import Service, service_of
 
 log = logging.getLogger("rcp.service")
 
@@ -62,7 +62,13 @@ class Server(uvicorn.Server):
         )
         for name in ("uvicorn.error", "uvicorn.access"):
             logging.getLogger(name).addFilter(HideTokens())
+        self.settings = settings
         super().__init__(config)
+
+    def open_service(self) -> None:
+        """Open the service now, before listening (else the app's lifespan opens it): a data folder in use or a
+        Ray that does not answer is then an error before any port is taken, and nothing reports healthy first."""
+        self.app.state.service = Service.open(self.settings)
 
     def handle_exit(self, sig, stack) -> None:  # stack: where the signal interrupted the program
         if self.should_exit and self._stop_paintings():

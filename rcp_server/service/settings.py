@@ -5,6 +5,7 @@ Every limit a caller can run into is here, with a default that keeps one 2-core 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +21,11 @@ CLIENT_DIR = REPOSITORY / "client"
 BUNDLED_SCENES = REPOSITORY / "scenes"  # RCP_SCENES names another folder: the service reads it once, below
 
 
+def default_data() -> Path:
+    """The user's data directory (XDG): ``$XDG_DATA_HOME/rcp``, else ``~/.local/share/rcp``."""
+    return Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share") / "rcp"
+
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="RCP_")
 
@@ -27,6 +33,7 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=0, le=65535)
     scenes: Path = BUNDLED_SCENES  # the folder scene names resolve in (RCP_SCENES)
     client: Path = CLIENT_DIR  # the browser client's static files
+    data: Path = Field(default_factory=default_data)  # uploads, videos and their records (store.py)
     # ---- access ----
     token: SecretStr | None = None  # when set, REST and WebSocket callers must present it
     cors_origins: Annotated[list[str], NoDecode] = []  # origins other pages may call from (comma-separated)
@@ -56,8 +63,8 @@ class Settings(BaseSettings):
     max_video_work: int = Field(1 << 34, ge=1)  # pixels x samples x iterations over every frame of one video
     video_disk_bytes: int = Field(2 << 30, ge=1)  # disk the finished videos may use together
     video_keep_s: float = Field(3600.0, gt=0)  # a finished video is kept this long, then deleted
-    video_dir: Path | None = None  # where videos are written (default: a temporary folder, removed at stop)
     ray_address: str | None = None  # paint on Ray: "local" (a runtime here), "auto", host:port, ray://... (below)
+    ray_join_s: float = Field(60.0, gt=0)  # with ray_address, start-up fails if Ray has not been joined by then
     ray_min_work: int = Field(1 << 24, ge=1)  # with ray_address, REST renders of this many rays or more go to Ray
     # ---- walking ----
     frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)

@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Response, UploadFile
+from fastapi import APIRouter, HTTPException, Path, Request, Response, UploadFile
 from starlette.concurrency import run_in_threadpool
 
 from ...scenefile import SCENE_NAME
 from .. import protocol
+from ..access import presented
 from ..state import Service, ServiceDep, scene_info
 from ..uploads import MEMORY_RETRY_S, Full, NoRoom, Refused, read_scene
 
@@ -40,7 +41,7 @@ async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
     },
     form_limits={"max_files": 1, "max_fields": 16},  # fields beside `file` are ignored; a flood of them is a 400
 )
-async def upload(file: UploadFile, response: Response, service: ServiceDep) -> protocol.SceneInfo:
+async def upload(file: UploadFile, request: Request, response: Response, service: ServiceDep) -> protocol.SceneInfo:
     """A model as a new scene: a `.glb`; a `.gltf` with its files in a `.zip`; an `.obj` alone or in a `.zip`
     with its `.mtl` and textures; a `.ply` or an `.stl`. The answer describes it as `GET /api/scenes` does
     (`uploaded` true), under a new name that only the uploader knows; use it wherever a scene name goes."""
@@ -56,11 +57,18 @@ async def upload(file: UploadFile, response: Response, service: ServiceDep) -> p
         try:
             async with uploads.reading:
                 limits = settings.upload_limits(room_bytes=settings.upload_total_bytes - uploads.weight)
-                scene, weight = await run_in_threadpool(read_scene, file.file, file.filename or "", limits)
+                scene, weight = await run_in_threadpool(
+                    read_scene, file.file, file.filename or "", limits, service.store.uploads_dir
+                )
         finally:
             uploads.queued -= 1
         info = scene_info(scene).model_copy(update={"uploaded": True})
-        uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes)
+        owner = presented(request.headers, request.query_params) if settings.token is not None else None
+        try:
+            uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes, owner)
+        except Full:
+            service.store.remove_upload(scene.name)  # its files, kept by read_scene
+            raise
     except NoRoom as exc:  # what the file declares would not fit in the memory left: refused before it is built
         raise HTTPException(503, str(exc), headers={"Retry-After": str(MEMORY_RETRY_S)}) from None
     except Refused as exc:

@@ -123,4 +123,4 @@ async def file(video_id: str, service: ServiceDep) -> Response:
     job = _job(service, video_id)
     if job.state != "done":
         raise HTTPException(409, f"video {video_id} is {job.state}, not done: {job.message or 'wait for it'}")
-    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene.name}-{job.id}.mp4")
+    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene_name}-{job.id}.mp4")
