@@ -143,7 +143,7 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             tris.append(tri)
             normals.append(n)
             colors.append(part.corner_colors)
-            if part.texture is not None:
+            if part.texture is not None and part.corner_uv is not None:  # a textured part has both
                 index, _ = textures.setdefault(id(part.texture), (len(textures), part.texture))
                 uvs.append(part.corner_uv)
                 tex_ids.append(np.full(len(tri), index, np.int32))

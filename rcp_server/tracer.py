@@ -141,7 +141,10 @@ def _check(device: int, doing: str) -> None:
 
 
 def _address(name: str) -> int:
-    return ctypes.cast(getattr(_library(), name), ctypes.c_void_p).value
+    address = ctypes.cast(getattr(_library(), name), ctypes.c_void_p).value
+    if not address:  # a function the library exports is never at address 0 (None, for ctypes)
+        raise EmbreeMissing(f"Embree's library has no {name}")
+    return address
 
 
 # ---- calling Embree from compiled kernels --------------------------------------------------------------
