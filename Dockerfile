@@ -1,5 +1,6 @@
 # rcp serve in a container: the walk-through client at /, REST renders under /api, the WebSocket at /ws.
 #   docker build -t rcp . && docker run --rm -p 8000:8000 rcp
+# Uploads and videos live in the volume at /var/lib/rcp (RCP_DATA): `-v rcp-data:/var/lib/rcp` keeps them.
 # Settings are RCP_* environment variables (rcp_server/service/settings.py), e.g. -e RCP_THREADS=4.
 # With Ray (deploy/raycluster.yaml runs it on KubeRay): docker build --build-arg EXTRAS=cluster-node -t rcp:ray .
 
@@ -22,8 +23,10 @@ ARG EXTRAS=""
 # KubeRay's probes of a Ray pod call wget: only an image with Ray gets it
 RUN if [ -n "$EXTRAS" ]; then apt-get update && apt-get install -y --no-install-recommends wget \
     && rm -rf /var/lib/apt/lists/*; fi
-RUN groupadd --system rcp && useradd --system --gid rcp --create-home --home-dir /home/rcp rcp \
- && mkdir -p /var/cache/rcp/numba && chown -R rcp:rcp /var/cache/rcp
+# fixed ids, so that a mounted volume can be given to the group (Kubernetes: securityContext.fsGroup 10001)
+RUN groupadd --gid 10001 rcp \
+ && useradd --uid 10001 --gid rcp --create-home --home-dir /home/rcp rcp \
+ && mkdir -p /var/cache/rcp/numba /var/lib/rcp && chown -R rcp:rcp /var/cache/rcp /var/lib/rcp
 # a login shell's /etc/profile sets PATH anew (KubeRay starts Ray with `bash -lc`): it finds the venv here too
 RUN echo 'PATH=/opt/venv/bin:$PATH' >/etc/profile.d/venv.sh
 COPY --from=builder /opt/venv /opt/venv
@@ -35,6 +38,7 @@ ENV PATH=/opt/venv/bin:$PATH \
     RCP_PORT=8000 \
     RCP_SCENES=/opt/rcp/scenes \
     RCP_CLIENT=/opt/rcp/client \
+    RCP_DATA=/var/lib/rcp \
     NUMBA_CACHE_DIR=/var/cache/rcp/numba
 USER rcp
 WORKDIR /home/rcp
@@ -42,6 +46,9 @@ WORKDIR /home/rcp
 # (The cache is keyed on the CPU: on a host of another CPU model they compile once more at start-up.)
 RUN rcp scenes && rcp render default --width 32 --height 18 --iterations 2 --out /tmp/warm.png \
  && rcp render default --width 32 --height 18 --iterations 2 --method image --out /tmp/warm.png && rm /tmp/warm.png
+# uploads, videos and their records (service/store.py): mount a volume here to keep them across containers
+#   docker run -v rcp-data:/var/lib/rcp -p 8000:8000 rcp
+VOLUME ["/var/lib/rcp"]
 EXPOSE 8000
 # the port comes from RCP_PORT when the check runs, so `-e RCP_PORT=9000` keeps the check right
 HEALTHCHECK --interval=30s --timeout=5s --start-period=120s --retries=3 \

@@ -21,7 +21,9 @@ coordinates, so a region renders exactly the pixels the full image has there.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from functools import partial
 
 import numpy as np
 
@@ -40,11 +42,51 @@ def _vec3(name: str, value) -> tuple[float, float, float]:
     arr = np.asarray(value, dtype=np.float64)
     if arr.shape != (3,):
         raise CameraError(f"{name} must be three numbers, got {value!r}")
-    if not np.all(np.isfinite(arr)):
-        raise CameraError(f"{name} must be finite, got {value!r}")
-    if not np.all(np.abs(arr) <= COORDINATE_LIMIT):  # past this, float32 rays and the basis's norms break down
-        raise CameraError(f"{name} must lie within +-{COORDINATE_LIMIT:g} scene units, got {value!r}")
     return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+def camera_faults(
+    eye: np.ndarray, look_at: np.ndarray, up: np.ndarray, fov: np.ndarray
+) -> tuple[np.ndarray, str | None]:
+    """The rules of a valid camera, written once and checked for ``m`` cameras at once (:class:`Camera` checks
+    itself with them, a camera path all of its frames): ``eye``, ``look_at``, ``up`` ``(m, 3)`` float64, scene
+    units; ``fov (m,)`` degrees. Returns ``bad (m,)`` bool and the one-line reason of the first bad camera
+    (None when all are valid)."""
+    faults: list[tuple[np.ndarray, Callable[[int], str]]] = []  # (m,) mask, the reason for camera k
+    with np.errstate(all="ignore"):
+        for name, v in (("eye", eye), ("look_at", look_at), ("up", up)):
+            faults.append((~np.isfinite(v).all(axis=1), partial(_reason, f"{name} must be finite, got", v)))
+            # past this, float32 rays and the basis's norms break down
+            outside = ~(np.abs(v) <= COORDINATE_LIMIT).all(axis=1)
+            limit = f"{name} must lie within +-{COORDINATE_LIMIT:g} scene units, got"
+            faults.append((outside, partial(_reason, limit, v)))
+        angle = "fov must be a vertical angle in degrees strictly between 0 and 180, got"
+        faults.append((~((fov > 0.0) & (fov < 180.0)), partial(_reason, angle, fov)))
+        view = look_at - eye
+        reach = np.linalg.norm(view, axis=1)
+        up_length = np.linalg.norm(up, axis=1)
+        side = np.linalg.norm(np.cross(view / reach[:, None], up / up_length[:, None]), axis=1)
+    for broken, reason in (
+        (~(reach >= 1e-9), "eye and look_at coincide: the camera has no view direction"),
+        (~(up_length >= 1e-9), "up must not be the zero vector"),
+        (~(side >= 1e-6), "up is parallel to the view direction: the camera has no right vector"),
+    ):
+        faults.append((broken, partial(_fixed, reason)))
+    bad = np.logical_or.reduce([broken for broken, _ in faults])
+    if not bad.any():
+        return bad, None
+    first = int(np.argmax(bad))
+    return bad, next(say(first) for broken, say in faults if broken[first])
+
+
+def _fixed(reason: str, k: int) -> str:
+    return reason
+
+
+def _reason(what: str, values: np.ndarray, k: int) -> str:
+    value = values[k]
+    shown = f"{float(value):g}" if value.ndim == 0 else "(" + ", ".join(f"{float(x)!r}" for x in value) + ")"
+    return f"{what} {shown}"
 
 
 @dataclass(frozen=True)
@@ -59,19 +101,10 @@ class Camera:
     def __post_init__(self):
         for name in ("eye", "look_at", "up"):
             object.__setattr__(self, name, _vec3(name, getattr(self, name)))
-        fov = float(self.fov)
-        if not math.isfinite(fov) or not 0.0 < fov < 180.0:
-            raise CameraError(f"fov must be a vertical angle in degrees strictly between 0 and 180, got {fov}")
-        object.__setattr__(self, "fov", fov)
-        view = np.subtract(self.look_at, self.eye)
-        if np.linalg.norm(view) < 1e-9:
-            raise CameraError("eye and look_at coincide: the camera has no view direction")
-        if np.linalg.norm(self.up) < 1e-9:
-            raise CameraError("up must not be the zero vector")
-        f = view / np.linalg.norm(view)
-        up = np.asarray(self.up) / np.linalg.norm(self.up)
-        if np.linalg.norm(np.cross(f, up)) < 1e-6:
-            raise CameraError("up is parallel to the view direction: the camera has no right vector")
+        object.__setattr__(self, "fov", float(self.fov))
+        _, reason = camera_faults(*(np.array([v]) for v in (self.eye, self.look_at, self.up, self.fov)))
+        if reason is not None:
+            raise CameraError(reason)
 
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(r, u, f)``: right, up and forward unit vectors, each (3,) float64."""
@@ -90,8 +123,7 @@ class Camera:
         return 2.0 * self.half_height() / height
 
     def moved(self, **changes) -> Camera:
-        values = {"eye": self.eye, "look_at": self.look_at, "up": self.up, "fov": self.fov} | changes
-        return Camera(**values)
+        return replace(self, **changes)  # validated again, in __post_init__
 
 
 @dataclass(frozen=True)

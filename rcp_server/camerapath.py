@@ -5,10 +5,11 @@ The one JSON format of the client, ``rcp render --path`` and ``POST /api/videos`
     {"fps": 24, "loop": false, "keyframes": [
         {"t": 0.0, "eye": [x, y, z], "look_at": [x, y, z], "up": [0, 1, 0], "fov": 60, "scene_time": 0.0}, ...]}
 
-``t`` is seconds along the path and increases from keyframe to keyframe (the first at ``t >= 0``; before it the
-camera holds). ``up`` and ``fov`` may be left out: the previous keyframe's, and for the first one the scene
-camera's. ``scene_time`` (seconds of the scene's animation) may be left out: the scene's clock then runs on
-with ``t`` from the previous keyframe's (so a path that gives none has ``scene_time = t``).
+``t`` is seconds along the path and increases from keyframe to keyframe, by :data:`MIN_GAP` at least (the
+first at ``t >= 0``; before it the camera holds). ``up`` and ``fov`` may be left out: the previous keyframe's,
+and for the first one the scene camera's. ``scene_time`` (seconds of the scene's animation) may be left out:
+the scene's clock then runs on with ``t`` from the previous keyframe's (so a path that gives none has
+``scene_time = t``).
 
 Frames are taken every ``1 / fps`` seconds from ``t = 0`` to the last keyframe's ``t``, both included (the
 last one when it falls on that grid). With ``loop``, the path closes: after the last keyframe it returns to
@@ -40,7 +41,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from scipy.interpolate import PchipInterpolator
 from scipy.spatial.transform import Rotation, RotationSpline
 
-from .camera import COORDINATE_LIMIT, Camera, CameraError
+from .camera import COORDINATE_LIMIT, Camera, CameraError, camera_faults
 from .scenefile import one_line
 
 MAX_FRAMES = 100_000
@@ -48,6 +49,9 @@ MAX_FRAMES = 100_000
 MAX_KEYFRAMES = 10_000
 MAX_FPS = 240.0
 MAX_DURATION = 24 * 3600.0  # seconds along a path
+MIN_GAP = 1e-3
+"""Seconds between consecutive keyframes, at least: closer ones are no view a video could show (a frame at the
+highest fps lasts 4 ms), and a curve's slopes through them overflow."""
 
 
 class PathError(ValueError):
@@ -84,16 +88,19 @@ class PathSpec(_Model):
 
     def resolve(self, scene_camera: Camera) -> CameraPath:
         """The path with every default filled in (``up`` and ``fov`` from ``scene_camera`` where no earlier
-        keyframe gives them), checked as a whole: increasing ``t``, valid cameras, a bounded frame count.
-        Raises :class:`PathError`."""
+        keyframe gives them), checked as a whole, for everything a video of it will ask: increasing ``t`` at
+        least :data:`MIN_GAP` apart, valid cameras, a bounded frame count, curves that fit, and a valid camera
+        at every frame (:meth:`CameraPath.check`). Raises :class:`PathError`."""
         for k in range(1, len(self.keyframes)):
-            if not self.keyframes[k].t > self.keyframes[k - 1].t:
+            if not self.keyframes[k].t >= self.keyframes[k - 1].t + MIN_GAP:
                 raise PathError(
-                    f"keyframes.{k}.t: must be greater than the previous keyframe's t "
+                    f"keyframes.{k}.t: must be greater than the previous keyframe's t, by {MIN_GAP:g} s at least "
                     f"({self.keyframes[k].t:g} after {self.keyframes[k - 1].t:g})"
                 )
         up, fov = scene_camera.up, scene_camera.fov
-        times, cameras, scene_times = [], [], []
+        times: list[float] = []
+        cameras: list[Camera] = []
+        scene_times: list[float] = []
         for k, key in enumerate(self.keyframes):
             up = key.up if key.up is not None else up
             fov = key.fov if key.fov is not None else fov
@@ -112,6 +119,7 @@ class PathSpec(_Model):
                 f"keyframes: {path.duration:g} s at {self.fps:g} fps is {path.frame_count:,} frames, "
                 f"more than the {MAX_FRAMES:,} a path may have"
             )
+        path.check()
         return path
 
 
@@ -148,7 +156,7 @@ def load_path(file, scene_camera: Camera, fps: float | None = None) -> CameraPat
 class PathFrame(NamedTuple):
     """One frame of a path: its index, seconds along the path, the camera, and the scene's time."""
 
-    index: int
+    index: int  # type: ignore[assignment]  # the frame's number, in place of tuple.index (which nobody calls)
     t: float
     camera: Camera
     scene_time: float
@@ -217,6 +225,29 @@ class CameraPath:
         if self.loop:
             return max(1, math.ceil(steps - 1e-9))
         return math.floor(steps + 1e-9) + 1
+
+    def check(self) -> None:
+        """Fits the curves and checks the camera of every frame, all at once (a fraction of a second for the
+        longest path): a path that passes paints every one of its frames. Raises :class:`PathError` naming the
+        first frame whose camera is not valid (the curves between keyframes near the coordinate limit can
+        reach past it)."""
+        try:
+            with np.errstate(all="ignore"):
+                curves = self._curves()
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise PathError(f"keyframes: no smooth path passes through them ({' '.join(str(exc).split())})") from None
+        times = self.frame_times()
+        with np.errstate(all="ignore"):
+            eye, look_at, up = curves.view(times)
+            fov, scene_time = curves.fov(times), curves.scene_time(times)
+        bad, reason = camera_faults(eye, look_at, up, fov)
+        if reason is None and not np.isfinite(scene_time).all():
+            bad, reason = ~np.isfinite(scene_time), "its scene_time is not a finite number"
+        if reason is not None:
+            k = int(np.argmax(bad))
+            raise PathError(
+                f"keyframes: the camera of frame {k} (t = {times[k]:g} s), between them, is not valid: {reason}"
+            )
 
     def frame_times(self) -> np.ndarray:
         """Seconds along the path of every frame, ``(frame_count,)`` float64."""

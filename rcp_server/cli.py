@@ -21,7 +21,9 @@ from .painting import PaintState, paint
 from .params import PAINT_SETTINGS, PaintParams
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 from .sequence import paint_sequence
+from .service.store import DataFolderError
 from .styles import STYLE, STYLES, with_style
+from .tracer import EmbreeMissing
 
 log = logging.getLogger("rcp")
 
@@ -210,7 +212,7 @@ def _render(args: argparse.Namespace) -> None:
 
 def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base: Camera) -> None:
     """Paint a camera path or an orbit and walk, into a video, a folder of PNGs or numbered images."""
-    from tqdm import tqdm
+    from tqdm import tqdm  # type: ignore[import-untyped]
 
     if args.save_iterations is not None and args.ray is not None:
         raise UsageError("--save-iterations paints here: leave out --ray")
@@ -224,6 +226,7 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
             PathFrame(k, k / fps, camera_path(base, k / max(count - 1, 1), args.orbit, args.walk), args.time + k / fps)
             for k in range(count)
         )
+    writer: video.FrameWriter
     if count == 1 and args.path is None:  # a still, painted on Ray
         writer = video.ImageFrames(lambda index: args.out, args.quality)
     elif video.is_video(args.out) or video.is_folder(args.out):
@@ -298,7 +301,9 @@ def _serve(args: argparse.Namespace) -> None:
     # a stop asked for and carried out is exit status 0
     signal.signal(signal.SIGTERM, _stopped)
     signal.signal(signal.SIGINT, _stopped)
-    Server(settings, log_level="info").run()
+    server = Server(settings, log_level="info")
+    server.open_service()  # the data folder and Ray first: either failing is one line, before the port is taken
+    server.run()
 
 
 def _stopped(signum, frame) -> None:
@@ -319,9 +324,21 @@ def main(argv: list[str] | None = None) -> int:
             _serve(args)
         elif args.command == "bench":
             args.run_bench(args)
-    except (UsageError, MissingExtra, SceneError, CameraError, PathError, ClusterError, ValueError) as exc:
+    except (
+        UsageError,
+        MissingExtra,
+        SceneError,
+        CameraError,
+        PathError,
+        ClusterError,
+        DataFolderError,
+        ValueError,
+    ) as exc:
         print(f"rcp: error: {exc}", file=sys.stderr)
         return 2
+    except EmbreeMissing as exc:  # the machine, not the arguments: one line, and the usual failure status
+        print(f"rcp: error: {exc}", file=sys.stderr)
+        return 1
     except MemoryError:
         print("rcp: error: not enough memory for this image size and sample count", file=sys.stderr)
         return 2

@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from .camera import RAY_DTYPE, Camera
-from .gltf import PunctualLight, Viewpoint
+from .gltf import PunctualLight, Viewpoint, triple
 from .scene import Geometry, Light
 from .tracer import Tracer
 
@@ -143,7 +143,7 @@ def default_light(geometry: Geometry) -> Light:
     direction = np.asarray(DEFAULT_LIGHT, np.float64) / np.linalg.norm(DEFAULT_LIGHT)
     if geometry.face_count and facing_sign(geometry) < 0:
         direction = direction * [-1.0, 1.0, -1.0]
-    return Light(tuple(float(v) for v in direction), DEFAULT_AMBIENT)
+    return Light(triple(direction), DEFAULT_AMBIENT)
 
 
 def light_of(lights: list[PunctualLight], geometry: Geometry, world_from_model=None) -> Light:
@@ -162,4 +162,4 @@ def light_of(lights: list[PunctualLight], geometry: Geometry, world_from_model=N
     length = float(np.linalg.norm(direction))
     if not length > 1e-12:
         direction, length = np.asarray(DEFAULT_LIGHT, np.float64), float(np.linalg.norm(DEFAULT_LIGHT))
-    return Light(tuple(float(v) for v in direction / length), DEFAULT_AMBIENT)
+    return Light(triple(direction / length), DEFAULT_AMBIENT)

@@ -107,6 +107,11 @@ def _object(value) -> dict:
     return value
 
 
+def _dict_or_empty(value) -> dict:
+    """A JSON object, or {} for anything else (a file's optional fields are read past when malformed)."""
+    return value if isinstance(value, dict) else {}
+
+
 def joined(gltf: dict, binary: bytes, glb: bool) -> bytes:
     """The file's bytes again, with ``gltf`` as its JSON."""
     text = json.dumps(gltf, separators=(",", ":")).encode()
@@ -198,7 +203,8 @@ def _unit(v: np.ndarray) -> np.ndarray | None:
     return v / length if length > 1e-12 and math.isfinite(length) else None
 
 
-def _floats(v) -> tuple[float, float, float]:
+def triple(v) -> tuple[float, float, float]:
+    """Three numbers of ``v`` as a typed 3-tuple of floats."""
     return (float(v[0]), float(v[1]), float(v[2]))
 
 
@@ -228,7 +234,7 @@ def extras(gltf: dict) -> GltfExtras:
             if isinstance(yfov, (int, float)) and 0 < yfov < math.pi:
                 name = str(cameras[cam].get("name") or node.get("name") or f"camera {len(out.viewpoints) + 1}")
                 out.viewpoints.append(
-                    Viewpoint(name, _floats(eye), _floats(forward), _floats(up), math.degrees(float(yfov)))
+                    Viewpoint(name, triple(eye), triple(forward), triple(up), math.degrees(float(yfov)))
                 )
         light = (
             node.get("extensions", {}).get("KHR_lights_punctual", {})
@@ -240,7 +246,7 @@ def extras(gltf: dict) -> GltfExtras:
             spec = lights[index]
             kind = spec.get("type") if spec.get("type") in ("directional", "point", "spot") else "point"
             name = str(spec.get("name") or node.get("name") or f"light {len(out.lights) + 1}")
-            out.lights.append(PunctualLight(name, kind, _floats(eye), _floats(forward)))
+            out.lights.append(PunctualLight(name, kind, triple(eye), triple(forward)))
     return out
 
 
@@ -248,11 +254,11 @@ def _material(material: dict) -> MaterialInfo:
     pbr = material.get("pbrMetallicRoughness")
     pbr = pbr if isinstance(pbr, dict) else {}
     factor = _numbers(pbr.get("baseColorFactor"), 4, (1.0, 1.0, 1.0, 1.0))
-    mode = material.get("alphaMode") if material.get("alphaMode") in ("OPAQUE", "MASK", "BLEND") else "OPAQUE"
+    mode = str(material.get("alphaMode")) if material.get("alphaMode") in ("OPAQUE", "MASK", "BLEND") else "OPAQUE"
     cutoff = material.get("alphaCutoff", 0.5)
     cutoff = float(cutoff) if isinstance(cutoff, (int, float)) and math.isfinite(cutoff) else 0.5
-    extensions = material.get("extensions") if isinstance(material.get("extensions"), dict) else {}
-    texture = pbr.get("baseColorTexture") if isinstance(pbr.get("baseColorTexture"), dict) else {}
+    extensions = _dict_or_empty(material.get("extensions"))
+    texture = _dict_or_empty(pbr.get("baseColorTexture"))
     transform = (
         texture.get("extensions", {}).get("KHR_texture_transform")
         if isinstance(texture.get("extensions"), dict)

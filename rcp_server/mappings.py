@@ -106,12 +106,14 @@ def color_mapping(data: MappingInput) -> np.ndarray:
 @register_mapping("depth", reads={"color", "depth"}, fused=FIELD_DEPTH)
 def depth_mapping(data: MappingInput) -> np.ndarray:
     """The color field times |z - z0|: sharp at the focus depth, smudged away from it (section 4)."""
+    assert data.depth is not None  # recorded: the mapping reads it
     return data.color_field() * np.abs(data.depth - np.float32(data.z0))[:, None]
 
 
 @register_mapping("normal", reads={"normal", "direction"}, fused=FIELD_NORMAL)
 def normal_mapping(data: MappingInput) -> np.ndarray:
     """C x N, the previous ray direction across the world normal: smudges along surfaces (section 5)."""
+    assert data.direction is not None and data.normal is not None  # recorded: the mapping reads them
     return np.cross(data.direction, data.normal)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -49,13 +50,11 @@ class PaintState:
     def empty(cls, region: Region, channels) -> PaintState:
         """Uninitialised buffers for color and every other channel named in ``channels``."""
         n = region.pixel_count
-        return cls(
-            region,
-            **{
-                name: np.empty(channel_shape(name, n), np.float32) if name == "color" or name in channels else None
-                for name in CHANNELS
-            },
-        )
+        arrays: dict[str, Any] = {  # PaintState's keyword arguments
+            name: np.empty(channel_shape(name, n), np.float32) if name == "color" or name in channels else None
+            for name in CHANNELS
+        }
+        return cls(region, **arrays)
 
     @classmethod
     def joined(cls, states: list[PaintState], region: Region) -> PaintState:
@@ -65,11 +64,12 @@ class PaintState:
             arrays = [getattr(s, name) for s in states]
             return None if arrays[0] is None else np.concatenate(arrays)
 
-        return cls(region, **{name: cat(name) for name in CHANNELS})
+        joined: dict[str, Any] = {name: cat(name) for name in CHANNELS}
+        return cls(region, **joined)
 
     def copy(self) -> PaintState:
         """A state of its own with this one's values."""
-        arrays = {name: None if (a := getattr(self, name)) is None else a.copy() for name in CHANNELS}
+        arrays: dict[str, Any] = {name: None if (a := getattr(self, name)) is None else a.copy() for name in CHANNELS}
         return PaintState(self.region, blank=self.blank, **arrays)
 
     def recorded(self) -> frozenset[str]:
@@ -106,7 +106,7 @@ class PaintState:
         pick = (y[:, None] * src.width + x[None, :]).ravel()
         return PaintState(Region(width, height), blank=self.blank, **self._pick(pick))
 
-    def _pick(self, index) -> dict[str, np.ndarray | None]:
+    def _pick(self, index) -> dict[str, Any]:  # channel -> its rows, or None: PaintState's keyword arguments
         return {name: None if getattr(self, name) is None else getattr(self, name)[index] for name in CHANNELS}
 
 

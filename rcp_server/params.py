@@ -3,8 +3,8 @@
 Each field of :class:`PaintParams` declares its default, a line of help and its bounds (:func:`setting`).
 Everything else that names a painting setting is derived from :data:`PAINT_SETTINGS`: the wire model
 (``service/protocol.py``), the options of ``rcp render`` (``cli.py``) and the client's defaults (the
-generated ``client/protocol.js``). A new setting is one new field; ``tests/test_params.py`` fails until
-it reaches every caller. A frozen dataclass, not a pydantic model: ``dataclasses.replace`` validates (an
+generated ``client/protocol.js``). A new setting is one new field; ``tests/service/test_params.py`` fails
+until it reaches every caller. A frozen dataclass, not a pydantic model: ``dataclasses.replace`` validates (an
 override is a ``replace``), the engine keeps its one-line errors, and the wire adds only what it needs
 (every field optional, ``null`` for the scene's value).
 """
@@ -148,13 +148,14 @@ class PaintSetting:
         whole = self.kind is int
         if isinstance(value, bool) or not isinstance(value, numbers.Integral if whole else numbers.Real):
             raise ValueError(f"{self.name} must be a {'whole ' if whole else ''}number, got {value!r}")
-        if not math.isfinite(value):
+        number = float(value)  # for the comparisons (the messages show the value as given)
+        if not math.isfinite(number):
             raise ValueError(f"{self.name} must be a finite number, got {value}")
-        if self.ge is not None and value < self.ge:
+        if self.ge is not None and number < self.ge:
             raise ValueError(f"{self.name} must be at least {self.ge}, got {value}")
-        if self.gt is not None and value <= self.gt:
+        if self.gt is not None and number <= self.gt:
             raise ValueError(f"{self.name} must be more than {self.gt}, got {value}")
-        if self.le is not None and value > self.le:
+        if self.le is not None and number > self.le:
             raise ValueError(f"{self.name} must be at most {self.le}, got {value}")
 
 

@@ -93,7 +93,7 @@ def read_radiance(path: Path) -> np.ndarray:
 
 def tonemap(radiance: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     """Display colors in [0, 1] from linear radiance: exponential tonemap, then gamma 2.2; (h, w, 3) float32."""
-    finite = np.nan_to_num(radiance, nan=0.0, posinf=np.finfo(np.float32).max, neginf=0.0)
+    finite = np.nan_to_num(radiance, nan=0.0, posinf=float(np.finfo(np.float32).max), neginf=0.0)
     with np.errstate(over="ignore"):
         exposed = np.float32(2.0**exposure) * finite
     return np.power(1.0 - np.exp(-np.maximum(exposed, 0.0)), 1.0 / 2.2).astype(np.float32)

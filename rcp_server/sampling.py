@@ -21,13 +21,13 @@ def _mix(x: np.ndarray) -> np.ndarray:
     """splitmix64's finalizer: a bijection on uint64 with full avalanche."""
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
     x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return x ^ (x >> np.uint64(31))
+    return np.asarray(x ^ (x >> np.uint64(31)))  # an array for numpy's stubs too (no copy)
 
 
 def uniform(seed: int, stream: int, *keys: np.ndarray) -> np.ndarray:
     """Uniform floats in [0, 1), one per element of the broadcast ``keys`` (non-negative integers)."""
     with np.errstate(over="ignore"):
-        h = _mix(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * _GOLDEN + np.uint64(stream))
+        h = _mix(np.asarray(np.uint64(seed & 0xFFFFFFFFFFFFFFFF) * _GOLDEN + np.uint64(stream)))
         for key in np.broadcast_arrays(*[np.asarray(k, dtype=np.uint64) for k in keys]):
             h = _mix(h ^ (key + _GOLDEN + (h << np.uint64(6)) + (h >> np.uint64(2))))
     return (h >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))

@@ -226,8 +226,9 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             index = packer.texture(part.texture)
             packer.alpha(index, part.material.alpha_texture)
             row = 0 if part.material.plain else packer.material(part.material)
-            keep_uv = part.corner_uv is not None and (index >= 0 or part.material.emission_texture is not None)
-            uvs.append(part.corner_uv if keep_uv else np.zeros((len(tri), 3, 2), np.float32))
+            corner_uv = part.corner_uv
+            keep_uv = corner_uv is not None and (index >= 0 or part.material.emission_texture is not None)
+            uvs.append(corner_uv if keep_uv and corner_uv is not None else np.zeros((len(tri), 3, 2), np.float32))
             tex_ids.append(np.full(len(tri), index, np.int32))
             face_materials.append(np.full(len(tri), row, np.int32))
     images = [image for _, image in sorted(packer.textures.values(), key=lambda item: item[0])]

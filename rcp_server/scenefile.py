@@ -23,7 +23,7 @@ import trimesh
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from . import framing
-from .camera import Camera, CameraError
+from .camera import COORDINATE_LIMIT, Camera, CameraError
 from .meshes import (
     DEFAULT_ALBEDO,
     MeshError,
@@ -100,7 +100,8 @@ class Placement(_Model):
     scale: Annotated[float, Field(gt=0)] | tuple[Finite, Finite, Finite] = 1.0
 
     def matrix(self) -> np.ndarray:
-        m = trimesh.transformations.euler_matrix(*np.radians(self.rotate), axes="sxyz")
+        rx, ry, rz = np.radians(self.rotate)
+        m = trimesh.transformations.euler_matrix(rx, ry, rz, axes="sxyz")
         m[:3, :3] = m[:3, :3] * np.broadcast_to(np.asarray(self.scale, dtype=np.float64), (3,))
         m[:3, 3] = self.translate
         return m
@@ -232,6 +233,7 @@ def _model(spec: ObjectSpec, folder: Path, where: str) -> Model:
     if spec.mesh is not None:
         return load_model(folder / spec.mesh)
     p = spec.primitive
+    assert p is not None  # one of the two, checked above
     return Model([primitive(p.type, **{k: v for k, v in p.model_dump().items() if k != "type" and v is not None})])
 
 
@@ -372,13 +374,23 @@ def load_environment(path: Path, exposure: float = 0.0) -> Environment:
 
 
 def frame_camera(parts: list[Part], fov: float = 45.0) -> Camera:
-    """A camera that frames ``parts`` from the front, a little above and to the right."""
+    """A camera that frames ``parts`` from the front, a little above and to the right. Raises
+    :class:`SceneError` for a model too large or too far from the origin for any valid camera to frame."""
     points = np.concatenate([p.vertices[p.faces].reshape(-1, 3) for p in parts])
     lo, hi = points.min(axis=0), points.max(axis=0)
-    center, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
-    distance = radius / math.sin(math.radians(fov) / 2) * 1.05
-    view = np.array([0.45, 0.35, 1.0]) / np.linalg.norm([0.45, 0.35, 1.0])
-    return Camera(tuple(center + distance * view), tuple(center), fov=fov)
+    with np.errstate(all="ignore"):  # a model near the float64 limit: its size is infinite, refused below
+        center, radius = (lo + hi) / 2, max(float(np.linalg.norm(hi - lo)) / 2, 1e-6)
+        distance = radius / math.sin(math.radians(fov) / 2) * 1.05
+        view = np.array([0.45, 0.35, 1.0]) / np.linalg.norm([0.45, 0.35, 1.0])
+        eye = center + distance * view
+    try:
+        return Camera(tuple(eye), tuple(center), fov=fov)
+    except CameraError:
+        raise SceneError(
+            f"the model spans from ({', '.join(f'{x:.3g}' for x in lo)}) to ({', '.join(f'{x:.3g}' for x in hi)}): "
+            f"too large, or too far from the origin, for a camera within +-{COORDINATE_LIMIT:g} scene units to "
+            "frame it"
+        ) from None
 
 
 def mesh_scene(path: Path) -> Scene:

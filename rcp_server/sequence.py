@@ -35,7 +35,7 @@ class FramePainter(Protocol):
     """Paints one frame: ``(camera, scene_time, params, previous) -> PaintResult`` (``painting.paint`` with the
     scene, the size and where the tiles run already bound)."""
 
-    def __call__(self, camera: Camera, scene_time: float, params: PaintParams, previous: PaintState | None): ...
+    def __call__(self, camera: Camera, scene_time: float, params: PaintParams, previous: PaintState | None, /): ...
 
 
 def frame_params(params: PaintParams, temporal: int | None, index: int) -> PaintParams:
@@ -47,8 +47,24 @@ def paint_sequence(
     paint_frame: FramePainter, shots: Iterable[Shot], params: PaintParams, temporal: int | None = None
 ) -> Iterator[np.ndarray]:
     """The paintings of ``shots`` in order, each (h, w, 3) float32, painted one after another."""
-    previous: PaintState | None = None
-    for index, shot in enumerate(shots):
+    for result in paint_results(paint_frame, shots, params, temporal):
+        yield result.image
+
+
+def paint_results(
+    paint_frame: FramePainter,
+    shots: Iterable[Shot],
+    params: PaintParams,
+    temporal: int | None = None,
+    first: int = 0,
+    previous: PaintState | None = None,
+) -> Iterator:
+    """:func:`paint_sequence`'s paintings as the painter's results (image and state), from frame ``first`` of
+    the sequence on (``shots`` start there); temporal from ``first > 0``, ``previous`` is frame ``first - 1``'s
+    state (a job that resumes after a restart)."""
+    if temporal and first > 0 and previous is None:
+        raise ValueError("a temporal sequence resumed past its first frame needs the previous frame's state")
+    for index, shot in enumerate(shots, first):
         result = paint_frame(shot.camera, shot.scene_time, frame_params(params, temporal, index), previous)
         previous = result.state if temporal else None
-        yield result.image
+        yield result

@@ -16,6 +16,7 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import functools
+import os
 from pathlib import Path
 from typing import NamedTuple
 
@@ -66,9 +67,15 @@ class EmbreeMissing(RuntimeError):
     """The Embree library cannot be found or loaded."""
 
 
+LIBRARY_VARIABLE = "RCP_EMBREE_LIBRARY"  # an Embree 4 library to use instead of the one embreex ships
+
+
 def _library_path() -> str:
-    """The Embree 4 library that embreex's wheel ships (its file name carries a hash that changes between
-    releases), else one installed on the system."""
+    """``RCP_EMBREE_LIBRARY`` when set; else the Embree 4 library that embreex's wheel ships (its file name
+    carries a hash that changes between releases); else one installed on the system."""
+    given = os.environ.get(LIBRARY_VARIABLE)
+    if given:
+        return given
     try:
         import embreex
 
@@ -90,7 +97,7 @@ def _library() -> ctypes.CDLL:
     try:
         lib = ctypes.CDLL(path)
     except OSError as error:
-        raise EmbreeMissing(f"cannot load the Embree 4 library {path}: {error}") from None
+        raise EmbreeMissing(f"cannot load the Embree 4 library {path}: {str(error).splitlines()[0]}") from None
     void_p, uint = ctypes.c_void_p, ctypes.c_uint
     signatures = {
         "rtcNewDevice": (void_p, [ctypes.c_char_p]),
@@ -134,7 +141,10 @@ def _check(device: int, doing: str) -> None:
 
 
 def _address(name: str) -> int:
-    return ctypes.cast(getattr(_library(), name), ctypes.c_void_p).value
+    address = ctypes.cast(getattr(_library(), name), ctypes.c_void_p).value
+    if not address:  # a function the library exports is never at address 0 (None, for ctypes)
+        raise EmbreeMissing(f"Embree's library has no {name}")
+    return address
 
 
 # ---- calling Embree from compiled kernels --------------------------------------------------------------

@@ -23,6 +23,7 @@ import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import Any
 from urllib.parse import unquote
 
 import numpy as np
@@ -47,9 +48,16 @@ SIGNATURES = (
     (b"glTF", "a GLB model"),
     (b"ply", "a PLY model"),
 )
+READER_ENVIRONMENT = ("PATH", "LANG", "LC_ALL", "LC_CTYPE", "TMPDIR", "PYTHONHASHSEED")
+"""The environment variables the reader keeps: where programs and temporary files are, the text encoding.
+(Its imports need no PYTHONPATH: the fork server is handed the server's ``sys.path``.)"""
+NAME_MAX = 255  # bytes in one part of a path (Linux's NAME_MAX)
+PATH_MAX = 1024  # bytes in a path inside the upload (Linux takes 4096 from the root; the work folder comes first)
 GLB_JSON, GLB_BIN = 0x4E4F534A, 0x004E4942  # chunk types: "JSON" and "BIN\0", little-endian
 _SCHEME = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*:")  # http:, file:, and a Windows drive letter (C:) alike
 _MTLLIB = re.compile(rb"^[ \t]*mtllib[ \t]+([^\r\n]+)", re.M)
+_FACE_LINE = re.compile(rb"^[ \t]*f[ \t][^\r\n]*", re.M)
+_PLY_FACES = re.compile(rb"^element[ \t]+face[ \t]+(\d+)", re.M)
 _MTL_MAP = re.compile(rb"^[ \t]*(?:map_\w+|bump|disp|decal|refl|norm)[ \t]+([^\r\n]+)", re.M | re.I)
 
 
@@ -65,10 +73,20 @@ class Limits:
     max_meshes: int = 4096  # separate meshes in one model (the staircase has 348)
     memory_bytes: int = 2 << 30
     seconds: float = 60.0
+    room_bytes: int | None = None  # memory the server's uploaded scenes have left (None: no such budget)
+
+
+BYTES_PER_TRIANGLE = 200
+"""Memory an uploaded scene takes per triangle, at least (its arrays, the traced geometry, Embree's tree): what
+the declared triangles are weighed with against ``Limits.room_bytes``."""
 
 
 class Refused(ValueError):
     """An upload that cannot be used; the message is one line for the uploader, naming the fault."""
+
+
+class NoRoom(Refused):
+    """An upload that would not fit in the memory the uploaded scenes have left (it may, later)."""
 
 
 # ---- what kind of file it is ----
@@ -125,8 +143,9 @@ def safe_relative(ref: str, where: str) -> PurePosixPath:
 
 
 def unzip(archive: Path, folder: Path, limits: Limits) -> None:
-    """Every file of ``archive`` into ``folder``, refusing links, paths leading out, and more files or bytes
-    than ``limits`` allow, by the declared sizes first and by the bytes actually inflated as they come."""
+    """Every file of ``archive`` into ``folder``, refusing links, paths leading out or that no file system
+    takes, names that clash, and more files or bytes than ``limits`` allow, by the declared sizes first and by
+    the bytes actually inflated as they come."""
     try:
         zf = zipfile.ZipFile(archive)
     except (zipfile.BadZipFile, OSError) as exc:
@@ -138,9 +157,9 @@ def unzip(archive: Path, folder: Path, limits: Limits) -> None:
         declared = sum(e.file_size for e in entries)
         if declared > limits.max_unpacked_bytes:
             raise Refused(f"the zip unpacks to {declared:,} bytes; at most {limits.max_unpacked_bytes:,} are taken")
+        paths = zip_paths(entries)
         total = 0
-        for entry in entries:
-            relative = safe_relative(entry.filename, f"the zip entry {entry.filename[:80]!r}")
+        for entry, relative in zip(entries, paths, strict=True):
             if stat.S_ISLNK(entry.external_attr >> 16):
                 raise Refused(f"the zip entry {entry.filename[:80]!r} is a link; only plain files are taken")
             target = folder / relative
@@ -158,12 +177,37 @@ def unzip(archive: Path, folder: Path, limits: Limits) -> None:
                                 else f"the zip unpacks to more than {limits.max_unpacked_bytes:,} bytes"
                             )
                         sink.write(chunk)
-            except FileExistsError:
-                raise Refused(f"the zip holds {entry.filename[:80]!r} twice") from None
-            except (zipfile.BadZipFile, NotImplementedError, RuntimeError, EOFError, OSError) as exc:
+            except (zipfile.BadZipFile, NotImplementedError, RuntimeError, EOFError) as exc:
                 raise Refused(
                     f"the zip entry {entry.filename[:80]!r} is damaged or lies about its size ({exc})"
                 ) from None
+            except OSError as exc:  # its strerror only: the exception's own text names the folder it was written to
+                raise Refused(f"the zip entry {entry.filename[:80]!r} cannot be unpacked ({exc.strerror})") from None
+
+
+def zip_paths(entries: list[zipfile.ZipInfo]) -> list[PurePosixPath]:
+    """The relative path each entry unpacks to, checked as a whole before a byte is written: inside the
+    upload, names a file system takes (``NAME_MAX`` bytes a part), and no two entries on one path or one
+    file where another entry needs a folder."""
+    paths = [safe_relative(e.filename, f"the zip entry {e.filename[:80]!r}") for e in entries]
+    files: set[PurePosixPath] = set()
+    for entry, path in zip(entries, paths, strict=True):
+        if any(len(part.encode()) > NAME_MAX for part in path.parts) or len(str(path).encode()) > PATH_MAX:
+            raise Refused(
+                f"the zip entry {entry.filename[:80]!r} has a name longer than {NAME_MAX} bytes (a folder's or the "
+                f"file's), or a path longer than {PATH_MAX}"
+            )
+        if path in files:
+            raise Refused(f"the zip holds {entry.filename[:80]!r} twice")
+        files.add(path)
+    for entry, path in zip(entries, paths, strict=True):
+        clash = next((parent for parent in path.parents if parent in files), None)
+        if clash is not None:
+            raise Refused(
+                f"the zip holds both a file {str(clash)[:80]!r} and {entry.filename[:80]!r}, which needs a folder "
+                "of that name"
+            )
+    return paths
 
 
 def the_model(folder: Path) -> Path:
@@ -261,17 +305,95 @@ def gltf_images(gltf: dict, binary: bytes, model: Path, folder: Path, name: str)
             _inside(folder, model.parent, unquote(uri), label)
             _inside(folder, model.parent, uri, label)
         elif isinstance(image.get("bufferView"), int):
-            view = views[image["bufferView"]] if 0 <= image["bufferView"] < len(views) else None
-            buffer = view.get("buffer") if view else None
-            if not isinstance(buffer, int) or not 0 <= buffer < len(buffers):
+            view: dict | None = views[image["bufferView"]] if 0 <= image["bufferView"] < len(views) else None
+            held = view.get("buffer") if view else None
+            if view is None or not isinstance(held, int) or not 0 <= held < len(buffers):
                 raise Refused(f"{label}: its bufferView does not exist")
             start, length = view.get("byteOffset", 0), view.get("byteLength")
             if not isinstance(start, int) or not isinstance(length, int) or start < 0 or length < 0:
                 raise Refused(f"{label}: its bufferView has no valid byteOffset and byteLength")
-            if start + length > len(buffers[buffer]):
+            if start + length > len(buffers[held]):
                 raise Refused(f"{label}: its bufferView reaches past the end of its buffer")
-            embedded.append((label, buffers[buffer][start : start + length]))
+            embedded.append((label, buffers[held][start : start + length]))
     return embedded
+
+
+def gltf_declared(gltf: dict, name: str) -> tuple[int, int]:
+    """Triangles and mesh instances a glTF declares, as its default scene's nodes place its meshes (a mesh
+    that a thousand nodes place counts a thousand times): counted from the accessors' counts and the node
+    tree alone, before a byte of geometry is read. Broken references count nothing (the reader refuses them
+    later)."""
+    accessors, meshes = _items(gltf, "accessors", name), _items(gltf, "meshes", name)
+    nodes = _items(gltf, "nodes", name)
+
+    def count(index) -> int:
+        ok = isinstance(index, int) and 0 <= index < len(accessors) and isinstance(accessors[index].get("count"), int)
+        return max(accessors[index]["count"], 0) if ok else 0
+
+    def mesh_triangles(index) -> int:
+        if not isinstance(index, int) or not 0 <= index < len(meshes):
+            return 0
+        triangles = 0
+        for primitive in meshes[index].get("primitives") or []:
+            if not isinstance(primitive, dict):
+                continue
+            attributes = primitive.get("attributes")
+            corners = count(primitive["indices"]) if "indices" in primitive else None
+            if corners is None:
+                corners = count(attributes.get("POSITION")) if isinstance(attributes, dict) else 0
+            mode = primitive.get("mode", 4)
+            triangles += corners // 3 if mode == 4 else max(corners - 2, 0) if mode in (5, 6) else 0
+        return triangles
+
+    scenes = _items(gltf, "scenes", name)
+    if scenes:
+        chosen = gltf.get("scene", 0)
+        scene = scenes[chosen] if isinstance(chosen, int) and 0 <= chosen < len(scenes) else scenes[0]
+        roots = _node_list(scene.get("nodes"), len(nodes))
+    else:  # no scene: every node nobody holds
+        held = {c for node in nodes for c in _node_list(node.get("children"), len(nodes))}
+        roots = [k for k in range(len(nodes)) if k not in held]
+    # every node the scene reaches, once (a node held twice, or holding itself, is read once)
+    reached, waiting = set(), list(roots)
+    while waiting:
+        index = waiting.pop()
+        if index not in reached:
+            reached.add(index)
+            waiting.extend(_node_list(nodes[index].get("children"), len(nodes)))
+    triangles = instances = 0
+    for index in reached:
+        node = nodes[index]
+        if "mesh" not in node:
+            continue
+        copies = 1  # or as many as EXT_mesh_gpu_instancing's attributes give
+        extensions = node.get("extensions")
+        instancing = extensions.get("EXT_mesh_gpu_instancing") if isinstance(extensions, dict) else None
+        if isinstance(instancing, dict) and isinstance(instancing.get("attributes"), dict):
+            copies = max([count(a) for a in instancing["attributes"].values()] or [1])
+        triangles += copies * mesh_triangles(node["mesh"])
+        instances += copies
+    return triangles, instances
+
+
+def _node_list(value, length: int) -> list[int]:
+    """The valid node indices of a glTF list of them (a scene's ``nodes``, a node's ``children``)."""
+    return [k for k in value if isinstance(k, int) and 0 <= k < length] if isinstance(value, list) else []
+
+
+def declared_triangles(model: Path) -> int | None:
+    """Triangles (at least) that an OBJ, PLY or binary STL says it has, from its text or header alone; None
+    for kinds that declare nothing cheaply (an ASCII STL)."""
+    suffix = model.suffix.lower()
+    if suffix == ".obj":
+        return sum(len(line.split()) - 3 for line in _FACE_LINE.findall(model.read_bytes()))
+    with open(model, "rb") as f:
+        head = f.read(1 << 16)
+    if suffix == ".ply":
+        found = _PLY_FACES.search(head.split(b"end_header", 1)[0])
+        return int(found.group(1)) if found else None
+    if suffix == ".stl" and not head.lstrip()[:5].lower() == b"solid" and len(head) >= 84:
+        return struct.unpack_from("<I", head, 80)[0]
+    return None
 
 
 def _data_uri(uri: str, where: str) -> bytes:
@@ -317,18 +439,36 @@ def image_pixels(data: bytes | Path, label: str, limits: Limits) -> int:
 
 
 def check_model(model: Path, folder: Path, limits: Limits) -> None:
-    """Every check before the model is read: its kind, its header (GLB), the paths it names and its images."""
+    """Every check before the model is read: its kind, its header (GLB), the triangles and mesh instances it
+    declares, the paths it names and its images (their pixels from their headers)."""
     name = model.name
     check_kind(model, name)
     embedded: list[tuple[str, bytes]] = []
     suffix = model.suffix.lower()
-    if suffix == ".glb":
-        gltf, binary = glb_chunks(model.read_bytes(), name)
+    instances: int | None = None
+    triangles: int | None
+    if suffix in (".glb", ".gltf"):
+        gltf, binary = (
+            glb_chunks(model.read_bytes(), name) if suffix == ".glb" else (_json(model.read_bytes(), name), b"")
+        )
         embedded = gltf_images(gltf, binary, model, folder, name)
-    elif suffix == ".gltf":
-        embedded = gltf_images(_json(model.read_bytes(), name), b"", model, folder, name)
-    elif suffix == ".obj":
+        triangles, instances = gltf_declared(gltf, name)
+    else:
+        triangles = declared_triangles(model)
+    if suffix == ".obj":
         obj_paths(model, folder)
+    # what the model would unfold into, refused before anything is built
+    if triangles is not None and triangles > limits.max_triangles:
+        raise Refused(
+            f"{name} declares {triangles:,} triangles (as placed); at most {limits.max_triangles:,} are taken"
+        )
+    if instances is not None and instances > limits.max_meshes:
+        raise Refused(f"{name} places meshes {instances:,} times; at most {limits.max_meshes:,} are taken")
+    if triangles is not None and limits.room_bytes is not None and triangles * BYTES_PER_TRIANGLE > limits.room_bytes:
+        raise NoRoom(
+            f"{name} declares {triangles:,} triangles, {triangles * BYTES_PER_TRIANGLE >> 20} MiB or more once built, "
+            f"and the uploaded scenes have {limits.room_bytes >> 20} MiB left; try again later, or a smaller model"
+        )
     pixels = sum(image_pixels(data, label, limits) for label, data in embedded)
     for path in sorted(folder.rglob("*")):
         if path.suffix.lower() in IMAGE_SUFFIXES and path.is_file() and "__MACOSX" not in path.parts:
@@ -387,7 +527,7 @@ def write_parts(path: Path, model) -> None:
     the file's cameras as ``viewpoints`` (n, 10) float64 (eye, forward, up, fov) with ``viewpoint_names``,
     its lights as ``lights`` (n, 6) float64 (position, direction) with ``light_kinds`` and ``light_names``."""
     parts = model.parts
-    arrays: dict[str, np.ndarray] = {"parts": np.int64(len(parts))}
+    arrays: dict[str, Any] = {"parts": np.int64(len(parts))}  # arrays and numpy scalars, by name
     images: dict[int, int] = {}
     coverages: dict[int, int] = {}
 
@@ -457,13 +597,16 @@ def confine(limits: Limits) -> None:
 
 def job(work: Path, filename: str, limits: Limits) -> None:
     """The child's whole life (forked from :mod:`rcp_server.untrusted`'s warm fork server): confine, read,
-    answer. Exit status 0 with ``work/parts.npz``; 2 (refused) or 3 (over its memory) with ``work/refused``."""
+    answer. Exit status 0 with ``work/parts.npz``; 2 (refused), 3 (over its memory) or 4 (no room left,
+    :class:`NoRoom`) with ``work/refused``."""
     sys.exit(_answer(work, filename, limits))
 
 
 def _answer(work: Path, filename: str, limits: Limits) -> int:
     from PIL import Image
 
+    for key in os.environ.keys() - set(READER_ENVIRONMENT):  # the fork server's already are (untrusted._forks)
+        del os.environ[key]
     confine(limits)
     # a backstop behind check_model's headers: Pillow refuses to decode more pixels than this
     Image.MAX_IMAGE_PIXELS = limits.max_texture_pixels
@@ -472,11 +615,17 @@ def _answer(work: Path, filename: str, limits: Limits) -> int:
         model = read_upload(work / "upload", filename, work / "files", limits)
         write_parts(work / "parts.npz", model)
         return 0
+    except NoRoom as exc:
+        message, status = str(exc), 4
     except Refused as exc:
         message, status = str(exc), 2
     except MemoryError:
         message, status = f"reading the model needs more than the {limits.memory_bytes >> 20} MiB it may take", 3
     except Exception as exc:  # a fault the checks did not foresee, in trimesh or here: still only this file's
-        message, status = f"the model cannot be read ({type(exc).__name__}: {str(exc)[:160]})", 2
-    (work / "refused").write_text(" ".join(message.split()), encoding="utf-8")
+        message, status = f"the model cannot be read ({type(exc).__name__}: {exc})", 2
+    # the uploader is told about their files, never where the server keeps them
+    for folder in (work / "files", work):
+        for spelling in {str(folder), str(folder.resolve())}:
+            message = message.replace(spelling + "/", "").replace(spelling, "the upload")
+    (work / "refused").write_text(" ".join(message.split())[:240], encoding="utf-8")
     return status

@@ -5,38 +5,61 @@ Whatever the file does, the caller gets parts or a :class:`Refused` with one lin
 
 Each child is forked from a fork server that has loaded trimesh and Pillow once (multiprocessing's
 ``forkserver``): a fresh process per upload, with nothing of the server's in it, in milliseconds rather than
-the second and a half a new interpreter takes to import them.
+the second and a half a new interpreter takes to import them. The fork server starts with only the
+environment variables of :data:`READER_ENVIRONMENT` (not the server's token, nor anything else of its
+environment), and its children inherit that.
 """
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
+import multiprocessing.forkserver
+import os
 import threading
 from pathlib import Path
 
 import numpy as np
 
 from . import unpack
-from .gltf import PunctualLight, Viewpoint
+from .gltf import PunctualLight, Viewpoint, triple
 from .meshes import PLAIN, Material, Model, Part, packed
-from .unpack import UPLOAD_SUFFIXES, Limits, Refused, check_kind
+from .unpack import READER_ENVIRONMENT, UPLOAD_SUFFIXES, Limits, NoRoom, Refused, check_kind
 
-__all__ = ["UPLOAD_SUFFIXES", "Limits", "Refused", "read_model"]
+__all__ = ["UPLOAD_SUFFIXES", "Limits", "NoRoom", "Refused", "read_model"]
 
 _lock = threading.Lock()
 _context = None
 
 
 def _forks():
-    """The fork server's context, started on first use (once per process)."""
+    """The fork server's context, its server started on first use (once per process) with only
+    :data:`READER_ENVIRONMENT`. (Should it die, multiprocessing starts another with the whole environment;
+    :func:`unpack.job` keeps only those variables in each child all the same.)"""
     global _context
     with _lock:
         if _context is None:
-            _context = multiprocessing.get_context("forkserver")
-            _context.set_forkserver_preload(
+            context = multiprocessing.get_context("forkserver")
+            context.set_forkserver_preload(
                 ["rcp_server.unpack", "rcp_server.meshes", "PIL.Image", "PIL.PngImagePlugin"]
             )
+            with _environment_of_the_reader():
+                multiprocessing.forkserver.ensure_running()
+            _context = context
         return _context
+
+
+@contextlib.contextmanager
+def _environment_of_the_reader():
+    """``os.environ`` reduced to :data:`READER_ENVIRONMENT` while the fork server starts (once: the server's
+    threads read no variables after their start)."""
+    whole = dict(os.environ)
+    try:
+        for key in whole.keys() - set(READER_ENVIRONMENT):
+            del os.environ[key]
+        yield
+    finally:
+        os.environ.update(whole)
 
 
 def read_model(work: Path, filename: str, limits: Limits) -> Model:
@@ -55,8 +78,9 @@ def read_model(work: Path, filename: str, limits: Limits) -> Model:
         child.join()
         raise Refused(f"reading the model took longer than the {limits.seconds:g} s it may take")
     refused = work / "refused"
-    if child.exitcode in (2, 3) and refused.is_file():
-        raise Refused(refused.read_text(encoding="utf-8", errors="replace")[:300])
+    if child.exitcode in (2, 3, 4) and refused.is_file():
+        message = refused.read_text(encoding="utf-8", errors="replace")[:300]
+        raise NoRoom(message) if child.exitcode == 4 else Refused(message)
     if child.exitcode != 0:
         how = f"signal {-child.exitcode}" if child.exitcode < 0 else f"status {child.exitcode}"
         raise Refused(f"the model could not be read: its reader stopped ({how}), most likely over a limit")
@@ -133,7 +157,7 @@ def _parts(arrays: dict, limits: Limits) -> list[Part]:
         if not np.isfinite(m).all():
             raise Refused("the model has material values that are not finite numbers")
         material = Material(
-            tuple(float(v) for v in np.clip(m[:3], 0.0, 1.0)),
+            triple(np.clip(m[:3], 0.0, 1.0)),
             textures[emission] if emission >= 0 else None,
             bool(m[3]),
             float(np.clip(m[4], 0.0, 1e6)) if alpha >= 0 else 0.0,
@@ -167,14 +191,12 @@ def _cameras_and_lights(arrays: dict) -> tuple[list[Viewpoint], list[PunctualLig
     if not (np.isfinite(views).all() and np.isfinite(lights).all()):
         raise Refused("the model's cameras or lights hold numbers that are not finite")
     viewpoints = [
-        Viewpoint(
-            str(name)[:80], tuple(map(float, v[:3])), tuple(map(float, v[3:6])), tuple(map(float, v[6:9])), float(v[9])
-        )
+        Viewpoint(str(name)[:80], triple(v[:3]), triple(v[3:6]), triple(v[6:9]), float(v[9]))
         for name, v in zip(names, views, strict=True)
         if 0 < v[9] < 180 and np.linalg.norm(v[3:6]) > 0.5 and np.linalg.norm(v[6:9]) > 0.5
     ]
     found = [
-        PunctualLight(str(name)[:80], str(kind), tuple(map(float, v[:3])), tuple(map(float, v[3:6])))
+        PunctualLight(str(name)[:80], str(kind), triple(v[:3]), triple(v[3:6]))
         for name, kind, v in zip(light_names, kinds, lights, strict=True)
         if kind in ("directional", "point", "spot")
     ]

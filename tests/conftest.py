@@ -93,6 +93,15 @@ def _probe(data):
     return np.zeros((len(data.color), 3))
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _own_data_folder(tmp_path_factory):
+    """``RCP_DATA`` in a temporary folder for the whole session: no test touches the user's data folder (servers
+    started by tests get one of their own besides: ``bench.harness``)."""
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setenv("RCP_DATA", str(tmp_path_factory.mktemp("rcp-data")))
+        yield
+
+
 @pytest.fixture(scope="session")
 def gradient_scene() -> Scene:
     """An unlit plane at depth 4 whose albedo is linear in x and y; it fills the standard view."""

@@ -125,11 +125,23 @@ def test_a_loop_closes_smoothly_and_leaves_out_the_repeated_frame():
     assert scene_time[3] == pytest.approx(4.0)  # time itself does not loop
 
 
+AT_THE_LIMIT = [
+    key(0, (0, 0, 5), (-1e9, 0, 0)),
+    key(1, (0, 0, 6), (-1e9, 1e9, 0)),
+    key(2, (0, 0, 6), (-1e9, 0, -1e9)),
+]
+
+
 @pytest.mark.parametrize(
     ("change", "names"),
     [
         (lambda p: p.update(keyframes=p["keyframes"][:1]), "keyframes: List should have at least 2 items"),
         (lambda p: p["keyframes"][2].update(t=0.5), "keyframes.2.t: must be greater"),
+        # keyframes too close for a curve's slopes (scipy: "`dydx` must contain only finite values"), looped or not
+        (lambda p: p["keyframes"][1].update(t=1e-300), "keyframes.1.t: must be greater than the previous"),
+        (lambda p: p.update(loop=True, keyframes=[key(0, (0, 1, 5)), key(5e-324, (1, 1, 5))]), "by 0.001 s"),
+        # keyframes at the coordinate limit whose curve reaches just past it between them
+        (lambda p: p.update(keyframes=AT_THE_LIMIT), "the camera of frame 1 (t = 0.0416667 s), between them"),
         (lambda p: p["keyframes"][1].update(eye=[0, "x", 0]), "keyframes.1.eye.1"),
         (lambda p: p["keyframes"][1].update(fov=180), "keyframes.1.fov"),
         (lambda p: p["keyframes"][0].update(t=-1), "keyframes.0.t"),

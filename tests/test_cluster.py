@@ -20,7 +20,7 @@ ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs i
 from rcp_server import images  # noqa: E402
 from rcp_server.camerapath import parse_path  # noqa: E402
 from rcp_server.cli import main  # noqa: E402
-from rcp_server.cluster import ClusterError, RayPainter, check_address, connect  # noqa: E402
+from rcp_server.cluster import Backoff, ClusterError, RayPainter, check_address, connect  # noqa: E402
 from rcp_server.painting import Abandoned, paint  # noqa: E402
 from rcp_server.params import PaintParams  # noqa: E402
 from rcp_server.sequence import paint_sequence  # noqa: E402
@@ -149,29 +149,38 @@ def test_a_worker_that_dies_is_restarted_and_its_frames_painted_again(painter, b
         np.testing.assert_array_equal(frame, painting)
 
 
-def test_a_temporal_band_lost_with_its_worker_fails_the_job_in_one_line(painter, busy_scene):
-    params = PaintParams(iterations=2)
-    frames = painter.images(busy_scene, shots(busy_scene, long_path(20)), W, H, params, temporal=1)
-    next(frames)
+@pytest.mark.parametrize("settings", [{}, {"mapping": "depth", "lambda_p": 6.0, "method": "image"}])
+def test_a_temporal_band_lost_with_its_worker_is_painted_again_and_the_film_is_the_threads(
+    painter, busy_scene, settings
+):
+    """Ray restarts the worker empty: its band is painted again from the first frame, the film goes on."""
+    params = replace(PaintParams(iterations=2), **settings)
+    path = long_path(0.5)
+    frames = painter.images(busy_scene, shots(busy_scene, path), W, H, params, temporal=1)
+    got = [next(frames), next(frames), next(frames)]
     crash(painter.actors())
-    with pytest.raises(ClusterError, match="^a Ray worker was lost mid-job, and with it a band's previous frame$"):
-        for _ in frames:
-            pass
-    again = list(painter.images(busy_scene, shots(busy_scene), W, H, params, temporal=1))
-    np.testing.assert_array_equal(again[2], threaded(busy_scene, params, temporal=1)[2])
+    got += list(frames)
+    expected = threaded(busy_scene, params, temporal=1, path=path)
+    assert len(got) == len(expected) == 16
+    for frame, painting in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(frame, painting)
 
 
-def test_a_worker_gone_for_good_fails_the_job_and_the_next_job_gets_new_workers(painter, busy_scene):
+@pytest.mark.parametrize("temporal", [None, 1])
+def test_a_worker_gone_for_good_is_replaced_and_only_its_frames_painted_again(painter, busy_scene, temporal):
     params = PaintParams(iterations=2)
-    frames = painter.images(busy_scene, shots(busy_scene, long_path(20)), W, H, params)
-    next(frames)
-    for actor in painter.actors():
-        ray.kill(actor)  # no restart
-    with pytest.raises(ClusterError, match="a Ray worker was lost mid-job"):
-        for _ in frames:
-            pass
-    again = list(painter.images(busy_scene, shots(busy_scene), W, H, params))
-    np.testing.assert_array_equal(again[2], threaded(busy_scene, params)[2])
+    path = long_path(0.5)
+    frames = painter.images(busy_scene, shots(busy_scene, path), W, H, params, temporal)
+    got = [next(frames), next(frames)]
+    crew = painter.actors()
+    ray.kill(crew[0])  # no restart: a node gone
+    got += list(frames)
+    expected = threaded(busy_scene, params, temporal, path=path)
+    assert len(got) == len(expected) == 16
+    for frame, painting in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(frame, painting)
+    after = painter.actors()
+    assert after[0] != crew[0] and after[1:] == crew[1:]  # the other worker kept its place and its work
 
 
 def test_a_painting_no_longer_wanted_stops_waiting(painter, busy_scene):
@@ -231,34 +240,123 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
     assert ray_png == here_png
 
 
-def test_a_server_whose_ray_does_not_answer_says_so_and_serves_the_rest(tmp_path):
+def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_path, caplog):
+    """A server painting on Ray stops mid-film; started again on the same data folder, it goes on from the last
+    frame written (a temporal job paints up to there again on the actors), and the film is the threads' one."""
+    import av
     import httpx
 
     from rcp_server.bench.harness import BackgroundServer
 
-    with socket.socket() as probe:  # a port nobody listens on
+    caplog.set_level("INFO", "rcp.service")
+    (tmp_path / "tiny.toml").write_text(TINY)
+    data = tmp_path / "data"
+    path = long_path(1.0)
+    painter.close()  # the server's actors need the runtime's CPUs
+    films = {}
+    for temporal in (None, 1):
+        body = {"scene": "tiny", "path": path, "width": 32, "height": 24, "temporal": temporal}
+        with BackgroundServer(scenes=tmp_path, data=data, ray_address="local") as live:
+            with httpx.Client(base_url=live.url, timeout=60) as client:
+                job = client.post("/api/videos", json=body).json()
+                deadline = time.monotonic() + 60
+                while (status := client.get(f"/api/videos/{job['id']}").json())["done_frames"] < 2:
+                    assert time.monotonic() < deadline
+                    time.sleep(0.02)
+        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 31
+        for where in ({"ray_address": "local"}, {}):  # resumed on Ray; then the same film on threads
+            with BackgroundServer(scenes=tmp_path, data=data, **where) as live:
+                with httpx.Client(base_url=live.url, timeout=60) as client:
+                    if where:
+                        video_id = job["id"]
+                    else:
+                        video_id = client.post("/api/videos", json=body).json()["id"]
+                    deadline = time.monotonic() + 120
+                    while (status := client.get(f"/api/videos/{video_id}").json())["state"] in ("queued", "running"):
+                        assert time.monotonic() < deadline
+                        time.sleep(0.05)
+                    assert status["state"] == "done", status
+                    if where:
+                        assert any(m.startswith(f"video {job['id']} resumes at frame ") for m in caplog.messages)
+                    data_file = client.get(f"/api/videos/{video_id}/file").content
+            with av.open(io.BytesIO(data_file)) as container:
+                films[temporal, bool(where)] = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+        for resumed, here in zip(films[temporal, True], films[temporal, False], strict=True):
+            np.testing.assert_array_equal(resumed, here)
+
+
+@pytest.mark.parametrize("listening", [False, True])
+def test_rcp_serve_with_a_ray_that_does_not_answer_fails_to_start_in_one_line(tmp_path, listening):
+    """``RCP_RAY_ADDRESS`` is joined at start-up: an address nobody listens at, or one that takes connections
+    but never speaks Ray's protocol, is one line and exit status 2, in bounded time (``RCP_RAY_JOIN_S``)."""
+    import subprocess
+    import sys
+
+    from rcp_server.bench.harness import PACKAGE_ROOT, free_port
+
+    with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
+        if listening:
+            probe.listen()
         address = f"127.0.0.1:{probe.getsockname()[1]}"
+        env = {**os.environ, "PYTHONPATH": str(PACKAGE_ROOT), "RCP_DATA": str(tmp_path), "RCP_RAY_ADDRESS": address}
+        clock = time.monotonic()
+        started = subprocess.run(
+            [sys.executable, "-m", "rcp_server.cli", "serve", "--port", str(free_port())],
+            env={**env, "RCP_RAY_JOIN_S": "3"},
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
+    said = (
+        f"Ray at {address} was not joined within 3 s (RCP_RAY_JOIN_S)"
+        if listening
+        else f"Ray address {address} does not answer (Connection refused)"
+    )
+    assert started.returncode == 2, started.stderr
+    assert started.stderr.strip().splitlines() == [f"rcp: error: {said}"]
+    assert time.monotonic() - clock < 30
+
+
+def test_ray_backs_off_after_a_failure_and_doubles_its_wait():
+    now = [100.0]
+    backoff = Backoff(first_s=5.0, most_s=30.0, clock=lambda: now[0])
+    assert backoff.wait_s() == 0
+    waits = []
+    for _ in range(5):
+        backoff.failed("Ray is down")
+        waits.append(backoff.wait_s())
+    assert waits == [5.0, 10.0, 20.0, 30.0, 30.0]
+    now[0] += 29.0
+    assert backoff.wait_s() == 1.0
+    backoff.succeeded()
+    assert backoff.wait_s() == 0 and backoff.failures == 0
+    backoff.failed("again")
+    assert backoff.wait_s() == 5.0
+
+
+def test_a_server_whose_ray_failed_paints_here_meanwhile_and_says_so_at_once(painter, tmp_path, busy_scene):
+    """While Ray backs off, a large REST render is painted on the server's own threads (the same PNG), and a
+    painting asked of Ray fails at once rather than waiting for it."""
+    import httpx
+
+    from rcp_server.bench.harness import BackgroundServer
+    from rcp_server.service.state import service_of
+
     (tmp_path / "tiny.toml").write_text(TINY)
     large = {"scene": "tiny", "width": 64, "height": 48, "paint": {"spp": 2, "iterations": 2}}
-    with BackgroundServer(scenes=tmp_path, ray_address=address, ray_min_work=64 * 48 * 2 * 2) as live:
-        with httpx.Client(base_url=live.url, timeout=30) as client:
-            refused = client.post("/api/render", json=large)
-            assert refused.status_code == 503
-            assert refused.headers["retry-after"] == "30"
-            assert refused.json() == {"detail": f"Ray address {address} does not answer (Connection refused)"}
-            small = client.post("/api/render", json={**large, "width": 32})
-            assert small.status_code == 200 and small.headers["content-type"] == "image/png"
-            job = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 16, "height": 16}).json()
-            deadline = time.monotonic() + 30
-            while (status := client.get(f"/api/videos/{job['id']}").json())["state"] in ("queued", "running"):
-                assert time.monotonic() < deadline
-                time.sleep(0.05)
-            assert status == {
-                "id": job["id"],
-                "state": "failed",
-                "frames": 5,
-                "done_frames": 0,
-                "message": f"Ray address {address} does not answer (Connection refused)",
-            }
-            assert client.get("/api/health").json()["status"] == "ok"
+    painter.close()  # the server's actors need the runtime's CPUs
+    with BackgroundServer(scenes=tmp_path, ray_address="local", ray_min_work=1) as live:
+        cluster = service_of(live.app).cluster
+        with httpx.Client(base_url=live.url, timeout=60) as client:
+            on_ray = client.post("/api/render", json=large)
+            assert on_ray.status_code == 200
+            cluster.backoff.failed("a Ray worker was lost mid-job: gone")
+            clock = time.monotonic()
+            here = client.post("/api/render", json=large)
+            assert here.status_code == 200 and here.content == on_ray.content
+            with pytest.raises(
+                ClusterError, match=r"^a Ray worker was lost mid-job: gone \(Ray is tried again in 5 s\)$"
+            ):
+                cluster.render(busy_scene, busy_scene.camera, W, H, PaintParams(iterations=2))
+            assert time.monotonic() - clock < 5

@@ -80,7 +80,26 @@ def test_the_service_container_runs_rcp_serve_with_settings_it_takes(documents, 
     paths = set(create_app(settings).openapi()["paths"])
     assert "/api/health" in paths and "/api/videos" in paths
     mounts = {m["mountPath"] for m in service["volumeMounts"]}
-    assert str(settings.video_dir) in mounts
+    assert str(settings.data) in mounts
+
+
+def test_the_service_keeps_its_data_on_a_claim_its_user_may_write(documents):
+    """RCP_DATA on a PersistentVolumeClaim (uploads and videos outlive the pod), the pod's fsGroup the image's
+    group, and the image's own RCP_DATA a declared volume."""
+    head = pods(documents)[0]
+    (service,) = [c for c in head["containers"] if c.get("command")]
+    data = {e["name"]: e["value"] for e in service["env"]}["RCP_DATA"]
+    (mount,) = [m for m in service["volumeMounts"] if m["mountPath"] == data]
+    (volume,) = [v for v in head["volumes"] if v["name"] == mount["name"]]
+    (claim,) = [d for d in documents if d["kind"] == "PersistentVolumeClaim"]
+    assert volume["persistentVolumeClaim"]["claimName"] == claim["metadata"]["name"]
+    assert claim["spec"]["accessModes"] == ["ReadWriteOnce"]  # one server per data folder: it holds a lock
+    dockerfile = (ROOT / "Dockerfile").read_text()
+    gid = re.search(r"groupadd --gid (\d+) rcp", dockerfile).group(1)
+    assert head["securityContext"]["fsGroup"] == int(gid)
+    assert re.search(rf"^\s*RCP_DATA={re.escape(data)} ", dockerfile, re.M)  # the image's default is the same folder
+    assert f'VOLUME ["{data}"]' in dockerfile
+    assert re.search(rf"mkdir -p [^\n]*{re.escape(data)} && chown -R rcp:rcp [^\n]*{re.escape(data)}", dockerfile)
 
 
 def test_the_ray_address_is_the_heads_gcs_and_the_head_paints_no_frames(documents):

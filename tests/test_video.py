@@ -161,4 +161,5 @@ def test_a_broken_path_file_is_refused_naming_the_file_and_field(files, tmp_path
     path.write_text(json.dumps(broken))
     assert main(["render", str(scene), "--path", str(path), "--out", str(tmp_path / "v.mp4")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == f"rcp: error: {path}: keyframes.1.t: must be greater than the previous keyframe's t (0 after 0.5)"
+    said = "keyframes.1.t: must be greater than the previous keyframe's t, by 0.001 s at least (0 after 0.5)"
+    assert err == f"rcp: error: {path}: {said}"

@@ -20,6 +20,7 @@ import statistics
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -28,7 +29,7 @@ from ..scenefile import load_scene
 from .metrics import edge_band, psnr, ssim, upscale
 
 SCENES = ("default", "sea", "sky")
-CURVES = {  # name -> the settings that paint it
+CURVES: dict[str, dict[str, Any]] = {  # name -> the settings that paint it
     "raytrace": {"method": "raytrace", "fast": False},
     "raytrace fast": {"method": "raytrace", "fast": True},
     "image": {"method": "image"},

@@ -17,6 +17,7 @@ EXTRA = "pip install '.[bench]' in the rcp source folder"
 # (module to find, requirement to name): what the bench extra adds to a plain install
 MATPLOTLIB = ("matplotlib", "matplotlib")
 WEBSOCKETS = ("websockets.asyncio.client", "websockets>=14")  # a plain install has it through uvicorn[standard]
+SCHEMATHESIS = ("schemathesis", "schemathesis>=4.32,<5")  # the test extra's: pip install -e ".[test]"
 
 
 class MissingExtra(Exception):
@@ -72,6 +73,17 @@ def _soak(args: argparse.Namespace) -> None:
     bench_soak(args.seconds, args.clients, args.rest)
 
 
+def _fuzz(args: argparse.Namespace) -> None:
+    if not _findable(SCHEMATHESIS[0]):
+        raise MissingExtra(
+            f"rcp bench fuzz needs {SCHEMATHESIS[1]}, which the test extra installs: pip install -e '.[test]'"
+        )
+    from .fuzz import fuzz
+
+    if fuzz(args.examples, args.seed):
+        raise SystemExit(1)
+
+
 def _accuracy(args: argparse.Namespace) -> None:
     require("accuracy", MATPLOTLIB)  # for the chart, drawn at the end: refuse before measuring for minutes
     from .accuracy import run
@@ -99,6 +111,12 @@ def _cluster(args: argparse.Namespace) -> None:
     from .cluster import bench_cluster
 
     bench_cluster(args.scene, args.width, args.height, args.frames, args.ray, args.gbps, args.cores)
+
+
+def _restart(args: argparse.Namespace) -> None:
+    from .restart import bench_restart
+
+    bench_restart(args.model, args.triangles, args.width, args.height)
 
 
 # ---- the subcommands ----
@@ -169,6 +187,11 @@ def add_bench_commands(subparsers) -> None:
     )
     p.set_defaults(run_bench=_soak)
 
+    p = command("fuzz", "the REST API fuzzed from its OpenAPI schema with a random seed; prints what it finds")
+    p.add_argument("--examples", type=positive_int, default=300, help="examples an operation (default 300)")
+    p.add_argument("--seed", type=int, help="the seed of an earlier run, to repeat it (default: a random one)")
+    p.set_defaults(run_bench=_fuzz)
+
     p = command("accuracy", "time per frame against error, both methods (needs the bench extra)")
     _out_and_quick(p)
     p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
@@ -186,6 +209,18 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--height", type=positive_int, default=720, help="pixels (default 720)")
     p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
     p.set_defaults(run_bench=_memory)
+
+    p = command("restart", "rcp serve killed and started again: how soon it serves a stored upload")
+    p.add_argument("--model", type=Path, help="a model file to upload (default: a sphere built in code)")
+    p.add_argument(
+        "--triangles",
+        type=positive_int,
+        default=330_000,
+        help="about as many triangles in the built sphere (default 330,000)",
+    )
+    p.add_argument("--width", type=positive_int, default=640, help="first frames' pixels (default 640)")
+    p.add_argument("--height", type=positive_int, default=360, help="first frames' pixels (default 360)")
+    p.set_defaults(run_bench=_restart)
 
     p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
     p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")

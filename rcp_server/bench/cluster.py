@@ -113,12 +113,12 @@ def bench_cluster(
         here = _u8(paint(scene, scene.camera, *big, large, threads=threads).image)
         here_s = time.perf_counter() - clock
         clock = time.perf_counter()
-        there = painter.render(scene, scene.camera, *big, large)
+        there_one = painter.render(scene, scene.camera, *big, large)
         ray_s = time.perf_counter() - clock
         print(
             f"one {big[0]}x{big[1]} painting at 4 spp: threads {here_s:.2f} s, "
             f"Ray in {len(actors)} bands {ray_s:.2f} s, "
-            f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {np.array_equal(here, there)}"
+            f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {np.array_equal(here, there_one)}"
         )
     finally:
         painter.close()

@@ -14,6 +14,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import urllib.error
@@ -72,9 +73,12 @@ class BackgroundServer:
     """``rcp serve`` in a thread: uvicorn on 127.0.0.1 and a free port. Use it as a context manager."""
 
     def __init__(self, **settings):
+        if "data" not in settings:  # a data folder of its own (the user's is never touched), removed at the end
+            self._data = tempfile.TemporaryDirectory(prefix="rcp-data-")
+            settings["data"] = Path(self._data.name)
         self.settings = Settings(host="127.0.0.1", port=free_port(), **settings)
         self.server = Server(self.settings, log_level="warning")
-        self.app = self.server.config.app
+        self.app = self.server.app
         self.url = f"http://127.0.0.1:{self.settings.port}"
         self.ws_url = f"ws://127.0.0.1:{self.settings.port}/ws"
         self._thread = threading.Thread(target=self.server.run, name="rcp-server", daemon=True)
@@ -91,6 +95,8 @@ class BackgroundServer:
     def __exit__(self, *exc) -> None:
         self.server.should_exit = True
         self._thread.join(30)
+        if hasattr(self, "_data"):
+            self._data.cleanup()
 
 
 # ---- a subprocess ----
@@ -157,7 +163,9 @@ def _healthy(url: str) -> bool:
 @contextlib.contextmanager
 def rcp_serve(log_dir: Path, **settings: str):
     """``rcp serve`` in a subprocess on 127.0.0.1 and a free port (``settings`` as ``RCP_*`` variables: ``token=``
-    is ``RCP_TOKEN``), up once ``/api/health`` answers; stopped (or killed) on the way out."""
+    is ``RCP_TOKEN``; without ``data=``, a new data folder in ``log_dir``), up once ``/api/health`` answers;
+    stopped (or killed) on the way out."""
+    settings.setdefault("data", tempfile.mkdtemp(prefix="data-", dir=log_dir))
     port = free_port()
     log = log_dir / "rcp-serve.log"
     command = [sys.executable, "-m", "rcp_server.cli", "serve", "--host", "127.0.0.1", "--port", str(port)]

@@ -20,6 +20,7 @@ import statistics
 import threading
 import time
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 import websockets
@@ -138,7 +139,7 @@ def _alone_ms(scene, width: int, height: int, params: PaintParams, temporal: boo
     return statistics.median(times)
 
 
-REST_LOAD = {"width": 1280, "height": 720, "paint": {"spp": 4}}
+REST_LOAD: dict[str, Any] = {"width": 1280, "height": 720, "paint": {"spp": 4}}
 
 
 class _Load:

@@ -100,11 +100,11 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         print("Embree alone: nothing to compare with, this scene has no triangles (every ray sees the sky)")
         return
     targets = {"embreex": "target <= 1.0x, goal 0.7x", "packets": "the limit: Embree's packets and nothing else"}
-    for name, seconds in alone.items():
-        embree = statistics.median(seconds)
+    for name, pairs in alone.items():
+        embree = statistics.median(pairs)
         # each repeat pairs a painting with Embree alone right after it, under the same machine load: the
         # median of the pairwise ratios is steadier than the ratio of the medians
-        ratios = sorted(p / a for p, a in zip(painted, seconds, strict=True))
+        ratios = sorted(p / a for p, a in zip(painted, pairs, strict=True))
         print(
             f"{name + ' alone, same rays and threads:':38s} {embree * 1e3:7.2f} ms   {n / embree / 1e6:5.2f} M rays/s"
         )

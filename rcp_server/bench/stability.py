@@ -19,6 +19,7 @@ import math
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from scipy.ndimage import binary_dilation
@@ -153,7 +154,7 @@ def edges_section(scene: Scene, width: int, height: int, params: PaintParams) ->
     band = edge_band(height, width)
     traced = paint(scene, scene.camera, width, height, params, keep_iterations=True).iterations
     images = {"raytrace": traced[-1]}
-    out = {}
+    out: dict[str, dict] = {}
     for edge in EDGES:
         p = replace(params, method="image", edge=edge)
         kept = paint(scene, scene.camera, width, height, p, keep_iterations=True).iterations
@@ -177,6 +178,7 @@ def eye_section(scene: Scene, width: int, height: int, params: PaintParams, lamb
     traced = paint(scene, scene.camera, width, height, probe).image
     image = paint(scene, scene.camera, width, height, replace(params, method="image")).image
     depth = paint(scene, scene.camera, width, height, PaintParams(mapping="depth", iterations=1)).state.depth
+    assert depth is not None  # the depth mapping records it
     z = depth.reshape(height, width)
     jump = np.zeros_like(z, bool)
     jump[:, 1:] |= np.abs(np.diff(z, axis=1)) > 0.1 * np.minimum(z[:, 1:], z[:, :-1])
@@ -453,7 +455,7 @@ def run(out: Path, quick: bool = False) -> dict:
     base = replace(scene.paint, lambda_e=0.0, spp=1)
     base = replace(base, lambda_p=base.lambda_p * height / 360)  # the same painting at any resolution
     edges, crops = edges_section(scene, width, height, base)
-    report = {
+    report: dict[str, Any] = {
         "scene": "default",
         "size": [width, height],
         "params": asdict(base),

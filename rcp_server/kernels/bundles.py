@@ -14,6 +14,7 @@ import numpy as np
 
 from ..camera import Camera, Region
 from ..paintstate import CHANNELS, channel_shape
+from ..tracer import Hits
 
 Channels = namedtuple("Channels", CHANNELS)
 Channels.__doc__ = """Per-pixel data of n pixels, row-major, as PaintState holds it (fields: ``paintstate.CHANNELS``).
@@ -138,7 +139,7 @@ class Scratch(NamedTuple):
     v_e: np.ndarray  # (n, 3) float64
     origins: np.ndarray  # (n*spp, 3) float32
     directions: np.ndarray  # (n*spp, 3) float32
-    hits: tuple  # tracer.Hits of n*spp rays
+    hits: Hits  # of n*spp rays
     pending: np.ndarray  # (n*spp,) int64 rays left to Embree
     changed: np.ndarray  # (n,) int64 pixels painted again
     every: np.ndarray  # (n*spp,) int64 0, 1, 2, ...

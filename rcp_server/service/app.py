@@ -1,11 +1,11 @@
 """The app factory, wiring only: settings in, the service opened by the lifespan, the middleware, one router
-per surface, the client's files at ``/``."""
+per surface (the token, where it is needed, given once, here), the client's files at ``/``."""
 
 from __future__ import annotations
 
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI, Request
+from fastapi import Depends, FastAPI, Request
 from fastapi.exception_handlers import http_exception_handler
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
@@ -14,11 +14,12 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.routing import Match, Mount
 
+from .access import NO_TOKEN, HostCheck, require_token
 from .faults import InternalErrors
-from .guard import Capacity
-from .routes import rest, scenes, styles, videos, walk
+from .guard import BodyLimit, Capacity
+from .routes import docs, rest, scenes, styles, videos, walk
 from .settings import Settings
-from .state import Service
+from .state import Service, service_of
 
 
 def create_app(settings: Settings | None = None) -> FastAPI:
@@ -26,7 +27,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        service = Service.open(settings)
+        service = service_of(app) or Service.open(settings)  # opened already by `rcp serve`, or now
         app.state.service = service  # read back through state.get_service
         try:
             yield
@@ -37,9 +38,14 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         title="rcp",
         summary="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.",
         lifespan=lifespan,
-        max_body_size=settings.max_body_bytes,
+        openapi_url=None,  # the schema and its pages are routes.docs, behind the token like the rest
+        docs_url=None,
+        redoc_url=None,
     )
-    app.add_middleware(InternalErrors)
+    # every body's limit, uploads' their own (larger) one: a JSON 413 naming it
+    uploads = (settings.upload_max_bytes, "the file", "RCP_UPLOAD_MAX_BYTES")
+    app.add_middleware(BodyLimit, limit=settings.max_body_bytes, larger={"/api/scenes": uploads})
+    app.add_middleware(InternalErrors)  # outside the body limit: a 413 is an answer, not a fault
     app.add_middleware(Capacity, limit=settings.max_requests)  # inside CORS: a 503 keeps its CORS headers
     if settings.cors_origins:  # off unless configured: only the client served here calls the API
         app.add_middleware(
@@ -48,15 +54,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_methods=["GET", "POST", "DELETE"],
             allow_headers=["Authorization", "Content-Type"],
         )
+    app.add_middleware(HostCheck, settings=settings)  # outermost: a name the server is not served under, nothing
     app.add_exception_handler(RequestValidationError, _invalid)
     app.add_exception_handler(StarletteHTTPException, _http_error)
-    app.include_router(rest.public)
-    app.include_router(rest.router)
-    app.include_router(styles.router)
-    app.include_router(videos.router)
-    app.include_router(videos.paths)
-    app.include_router(walk.router)
-    app.include_router(scenes.router, max_body_size=settings.upload_max_bytes)  # uploads: their own body limit
+    app.include_router(rest.public)  # /api/health: open to all
+    for router in (rest.router, scenes.router, styles.router, videos.router, videos.paths, docs.router):
+        app.include_router(router, dependencies=[Depends(require_token)], responses=NO_TOKEN)
+    app.include_router(walk.router)  # the walk-through checks the token as it opens (walk.py)
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app
@@ -72,9 +76,10 @@ class _ClientFiles(Mount):
         return super().matches(scope)
 
 
-async def _http_error(request: Request, exc: StarletteHTTPException) -> Response:
+async def _http_error(request: Request, exc: Exception) -> Response:
     """FastAPI's answer, except that a 405's ``Allow`` names the methods of every route at the path, not only
-    those of the first (``GET /api/scenes`` lists and ``POST /api/scenes`` uploads, from two routers)."""
+    those of the first (``GET`` and ``DELETE /api/videos/{id}`` are two routes): the one place it is set."""
+    assert isinstance(exc, StarletteHTTPException)  # the handler of that class (Starlette types handlers loosely)
     if exc.status_code == 405:
         allowed = [
             method
@@ -90,7 +95,8 @@ def app_routes(request: Request) -> list:
     return [route for route in request.app.routes if not isinstance(route, _ClientFiles)]
 
 
-async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+async def _invalid(request: Request, exc: Exception) -> Response:
     """FastAPI's 422, without echoing the input: a NaN or an infinity in it could not be written as JSON."""
+    assert isinstance(exc, RequestValidationError)  # the handler of that class
     errors = [{"loc": list(e["loc"]), "msg": e["msg"], "type": e["type"]} for e in exc.errors()]
     return JSONResponse({"detail": errors}, 422)

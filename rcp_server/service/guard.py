@@ -11,7 +11,9 @@ turned everyone else away with a plain-text 503. Here instead:
 - past ``max_connections`` open connections, the one idle longest (no request in progress) is closed to
   make room, so idle sockets never keep a real client out;
 - only requests in progress count against the capacity, ``max_requests`` of them (:class:`Capacity`);
-  past it a caller gets a 503 with ``Retry-After`` and a JSON ``detail``, like every other 503 here.
+  past it a caller gets a 503 with ``Retry-After`` and a JSON ``detail``, like every other 503 here;
+- a body larger than its limit gets a JSON 413 naming the limit (:class:`BodyLimit`), whether its
+  ``Content-Length`` says so or its bytes do.
 
 WebSockets that never say hello are the session's to close (``hello_timeout_s``, session.py); until they
 do they hold no walk-through place.
@@ -24,8 +26,9 @@ import json
 import socket
 import time
 
+from starlette.exceptions import HTTPException
 from starlette.responses import JSONResponse
-from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import ASGIApp, Message, Receive, Scope, Send
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
 from .settings import Settings
@@ -120,7 +123,7 @@ class GuardedHttp(HttpToolsProtocol):
         others = [c for c in self.connections if isinstance(c, GuardedHttp) and c is not self]
         idle = [c for c in others if c.idle_since is not None]
         if idle:
-            min(idle, key=lambda c: c.idle_since).transport.close()
+            min(idle, key=lambda c: c.idle_since or 0.0).transport.close()
             return
         limit = self.settings.max_connections
         detail = f"the server has its {limit} connections busy; try again shortly"
@@ -163,3 +166,56 @@ class Capacity:
             await self.app(scope, receive, send)
         finally:
             self.in_progress -= 1
+
+
+class TooLarge(HTTPException):
+    """A request body past its limit, raised from the body's ``receive`` (the route's body parsing passes an
+    ``HTTPException`` on to the app's handlers, which answer it in JSON)."""
+
+    def __init__(self, limit: int, what: str, setting: str):
+        super().__init__(413, f"{what} is larger than the {limit:,} bytes this server takes ({setting})")
+
+
+class BodyLimit:
+    """ASGI middleware: the one limit on request bodies, ``limit`` bytes (``max_body_bytes``), or the larger one
+    ``larger`` gives a path (uploads). A ``Content-Length`` past it is answered at once, a body that grows
+    past it as soon as it does; both with a JSON 413 that names the limit and its setting."""
+
+    def __init__(self, app: ASGIApp, limit: int, larger: dict[str, tuple[int, str, str]]):
+        self.app = app
+        self.limit = (limit, "the body", "RCP_MAX_BODY_BYTES")
+        self.larger = larger  # path -> (limit, what is limited, its setting)
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+        limit, what, setting = self.larger.get(scope["path"], self.limit)
+        too_large = TooLarge(limit, what, setting)
+        declared = next((value for name, value in scope["headers"] if name == b"content-length"), b"")
+        if declared.isdigit() and int(declared) > limit:
+            return await _too_large(too_large)(scope, receive, send)
+        received, started = 0, False
+
+        async def counted() -> Message:
+            nonlocal received
+            message = await receive()
+            received += len(message.get("body", b""))
+            if received > limit:
+                raise too_large
+            return message
+
+        async def watched(message: Message) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, counted, watched)
+        except TooLarge:  # past the route's own handling (a body read outside it): still a 413, not a fault
+            if started:
+                raise
+            await _too_large(too_large)(scope, receive, send)
+
+
+def _too_large(exc: TooLarge) -> JSONResponse:
+    return JSONResponse({"detail": exc.detail}, 413, headers={"Connection": "close"})

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
@@ -37,10 +37,11 @@ class _Paint(_Model):
         return self.model_dump(exclude_none=True)
 
 
-def _wire(declared: PaintSetting):
+def _wire(declared: PaintSetting) -> tuple[Any, Any]:
     """A painting setting on the wire, from its declaration: optional, ``null`` meaning the scene's value."""
+    kind: Any  # a type built at run time from the declaration
     if declared.kind is str:
-        kind = Literal[declared.choices]  # mappings: the built-in ones (others are registered in Python only)
+        kind = Literal[declared.choices]  # type: ignore[name-defined]  # the built-in mappings (others: Python only)
     elif declared.kind is bool:
         kind = StrictBool  # true or false, not "yes" or 1
     else:
@@ -49,7 +50,7 @@ def _wire(declared: PaintSetting):
     return kind | None, Field(None, description=declared.help)
 
 
-PaintModel = create_model(
+PaintModel = create_model(  # type: ignore[call-overload]  # its fields are declared once, in params.py
     "PaintModel",
     __base__=_Paint,
     __doc__="Painting settings; a field left out takes the scene's value, then the engine's.",
@@ -196,7 +197,7 @@ class ViewMessage(_Model):
 
 
 ClientMessage = Annotated[Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage, Field(discriminator="type")]
-client_message = TypeAdapter(ClientMessage)
+client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 
 
 # ---- WebSocket, server -> client ----
@@ -245,7 +246,7 @@ def client_module() -> str:
     """``client/protocol.js``: the JSON schema of every message, for the browser to build and check against,
     and the engine's painting defaults (``null``: derived per view), for the settings a scene leaves out."""
     schemas = {
-        "client": {m.model_fields["type"].annotation.__args__[0]: m.model_json_schema() for m in _CLIENT},
+        "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in _CLIENT},
         "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error)},
         "paint": PaintModel.model_json_schema(),
     }

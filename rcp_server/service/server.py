@@ -14,7 +14,7 @@ from .access import HideTokens
 from .app import create_app
 from .guard import SEND_BUFFER, guarded_http
 from .settings import Settings
-from .state import service_of
+from .state import Service, service_of
 
 log = logging.getLogger("rcp.service")
 
@@ -48,8 +48,9 @@ class Server(uvicorn.Server):
     GRACE_S = PAINTING_GRACE_S + 4  # uvicorn's: time for the stopped paintings to answer
 
     def __init__(self, settings: Settings, **options):
+        self.app = create_app(settings)
         config = uvicorn.Config(
-            create_app(settings),
+            self.app,
             host=settings.host,
             port=settings.port,
             ws=CappedWebSockets,
@@ -61,7 +62,13 @@ class Server(uvicorn.Server):
         )
         for name in ("uvicorn.error", "uvicorn.access"):
             logging.getLogger(name).addFilter(HideTokens())
+        self.settings = settings
         super().__init__(config)
+
+    def open_service(self) -> None:
+        """Open the service now, before listening (else the app's lifespan opens it): a data folder in use or a
+        Ray that does not answer is then an error before any port is taken, and nothing reports healthy first."""
+        self.app.state.service = Service.open(self.settings)
 
     def handle_exit(self, sig, stack) -> None:  # stack: where the signal interrupted the program
         if self.should_exit and self._stop_paintings():
@@ -77,7 +84,7 @@ class Server(uvicorn.Server):
 
     def _stop_paintings(self) -> bool:
         """Stop the paintings, unless they are stopped already or the app has not started: True if it did."""
-        service = service_of(self.config.app)
+        service = service_of(self.app)
         if service is None or service.workshop.stopping:
             return False
         log.info("stopping the paintings in progress (%d)", service.workshop.in_progress)

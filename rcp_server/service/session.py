@@ -14,6 +14,7 @@ import asyncio
 import collections
 import time as _time
 from dataclasses import asdict, dataclass
+from functools import partial
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
@@ -208,7 +209,7 @@ class Session:
                     pass
                 continue
             try:
-                result, seconds = await self.workshop.run(lambda job=job: self._paint_and_encode(job))
+                result, seconds = await self.workshop.run(partial(self._paint_and_encode, job))
             except Abandoned:
                 if self.workshop.stopping:
                     return  # the server is stopping: nothing will paint again
@@ -225,6 +226,8 @@ class Session:
             self._finished(job, result, seconds)
 
     def _view(self) -> View:
+        # hello sets the scene and its settings together
+        assert self.scene is not None and self.params is not None, "a view is asked for only after hello"
         moving = self.animate and self.scene.animated
         return View(self.width, self.height, self.params, self.temporal, moving)
 
@@ -238,7 +241,8 @@ class Session:
         plan = self.planner.next_frame(_time.monotonic(), self._view())
         if plan is None:
             return None
-        previous = self.state.resized(plan.width, plan.height) if plan.continues else None
+        previous = self.state.resized(plan.width, plan.height) if plan.continues and self.state is not None else None
+        assert self.camera is not None, "hello sets the camera with the scene"
         return _Job(plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality)
 
     def _paint_and_encode(self, job: _Job) -> tuple[tuple[PaintResult, bytes], float]:

@@ -5,6 +5,7 @@ Every limit a caller can run into is here, with a default that keeps one 2-core 
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated
 
@@ -20,6 +21,11 @@ CLIENT_DIR = REPOSITORY / "client"
 BUNDLED_SCENES = REPOSITORY / "scenes"  # RCP_SCENES names another folder: the service reads it once, below
 
 
+def default_data() -> Path:
+    """The user's data directory (XDG): ``$XDG_DATA_HOME/rcp``, else ``~/.local/share/rcp``."""
+    return Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share") / "rcp"
+
+
 class Settings(BaseSettings):
     model_config = SettingsConfigDict(env_prefix="RCP_")
 
@@ -27,9 +33,13 @@ class Settings(BaseSettings):
     port: int = Field(8000, ge=0, le=65535)
     scenes: Path = BUNDLED_SCENES  # the folder scene names resolve in (RCP_SCENES)
     client: Path = CLIENT_DIR  # the browser client's static files
+    data: Path = Field(default_factory=default_data)  # uploads, videos and their records (store.py)
     # ---- access ----
     token: SecretStr | None = None  # when set, REST and WebSocket callers must present it
     cors_origins: Annotated[list[str], NoDecode] = []  # origins other pages may call from (comma-separated)
+    # names the server answers to besides loopback's (comma-separated; "*": any); none given, a server bound to
+    # a loopback address answers only to loopback names, one bound elsewhere to any (access.py)
+    allowed_hosts: Annotated[list[str], NoDecode] = []
     # ---- capacity ----
     threads: int = Field(default_factory=default_threads, ge=1, le=256)  # tile workers shared by all renders
     max_renders: int = Field(4, ge=1)  # paintings in progress at once; more wait their turn
@@ -53,8 +63,8 @@ class Settings(BaseSettings):
     max_video_work: int = Field(1 << 34, ge=1)  # pixels x samples x iterations over every frame of one video
     video_disk_bytes: int = Field(2 << 30, ge=1)  # disk the finished videos may use together
     video_keep_s: float = Field(3600.0, gt=0)  # a finished video is kept this long, then deleted
-    video_dir: Path | None = None  # where videos are written (default: a temporary folder, removed at stop)
     ray_address: str | None = None  # paint on Ray: "local" (a runtime here), "auto", host:port, ray://... (below)
+    ray_join_s: float = Field(60.0, gt=0)  # with ray_address, start-up fails if Ray has not been joined by then
     ray_min_work: int = Field(1 << 24, ge=1)  # with ray_address, REST renders of this many rays or more go to Ray
     # ---- walking ----
     frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
@@ -70,19 +80,20 @@ class Settings(BaseSettings):
     upload_read_s: float = Field(60.0, gt=0)  # the reader of one upload: wall-clock seconds
     upload_memory_bytes: int = Field(2 << 30, ge=64 << 20)  # the reader of one upload: address space it may add
 
-    @field_validator("cors_origins", mode="before")
+    @field_validator("cors_origins", "allowed_hosts", mode="before")
     @classmethod
     def _comma_separated(cls, value):
         return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
 
-    def upload_limits(self) -> Limits:
-        """What the sandbox lets one upload take."""
+    def upload_limits(self, room_bytes: int | None = None) -> Limits:
+        """What the sandbox lets one upload take; ``room_bytes``, the memory the uploaded scenes have left."""
         return Limits(
             max_triangles=self.upload_max_triangles,
             max_texture_pixels=self.upload_max_texture_pixels,
             max_unpacked_bytes=8 * self.upload_max_bytes,  # zipped OBJ text shrinks about 4x; never more than 8
             memory_bytes=self.upload_memory_bytes,
             seconds=self.upload_read_s,
+            room_bytes=room_bytes,
         )
 
     def check_painting(self, width: int, height: int, params: PaintParams) -> None:

@@ -4,7 +4,8 @@ walk-throughs; and the dependency that hands it to a route, typed (``service: Se
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+import time
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Protocol
 
@@ -18,11 +19,12 @@ from ..scene import Scene
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol
 from .settings import Settings
-from .uploads import Upload, Uploads
+from .store import Store
+from .uploads import Upload, Uploads, stored_scene
 from .videos import Videos
 from .workshop import Workshop
 
-if TYPE_CHECKING:  # Ray is an extra: the cluster module is imported only when a server is told to use it
+if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
     from ..cluster import RayPainter
 
 log = logging.getLogger("rcp.service")
@@ -33,7 +35,10 @@ class Walkthrough(Protocol):
 
     scene: Scene | None
 
-    walking: bool  # it has said hello: it holds one of the max_sessions places
+    @property
+    def walking(self) -> bool:
+        """It has said hello: it holds one of the ``max_sessions`` places."""
+        ...
 
     def close(self) -> None: ...
 
@@ -48,25 +53,43 @@ class Service:
     infos: dict[str, protocol.SceneInfo]
     workshop: Workshop
     videos: Videos
+    store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
     cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
 
     @classmethod
     def open(cls, settings: Settings) -> Service:
-        """Blocking: load the scenes of ``settings.scenes``, compile the kernels, open the workshop."""
-        scenes = load_scenes(settings.scenes)
-        for scene in list(scenes.values())[:1]:  # load the compiled kernels before a visitor waits for them
-            paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
-        log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
-        infos = {name: scene_info(scene) for name, scene in scenes.items()}
-        workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
-        cluster = None
-        if settings.ray_address is not None:  # Ray joins with its first painting: a server starts without waiting
-            from ..cluster import RayPainter
+        """Blocking: take the data folder (:class:`~.store.DataFolderError` if another server has it), join Ray
+        when told to (:class:`~rcp_server.cluster.ClusterError` if it does not answer in bounded time), load the
+        scenes of ``settings.scenes``, compile the kernels, open the workshop, load the stored uploads and
+        resume the stored video jobs."""
+        store = Store(settings.data)
+        cluster = workshop = videos = None
+        try:
+            if settings.ray_address is not None:  # joined before serving: healthy means Ray is there
+                from ..cluster import RayPainter
 
-            cluster = RayPainter(settings.ray_address)
-        return cls(settings, scenes, infos, workshop, Videos(settings, workshop, cluster), cluster)
+                cluster = RayPainter(settings.ray_address)
+                cluster.start(settings.ray_join_s)
+            scenes = load_scenes(settings.scenes)
+            for scene in list(scenes.values())[:1]:  # load the compiled kernels before a visitor waits for them
+                paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
+            log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
+            infos = {name: scene_info(scene) for name, scene in scenes.items()}
+            workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
+            videos = Videos(settings, workshop, store, cluster)
+            store.remove_strays()
+            service = cls(
+                settings, scenes, infos, workshop, videos, store, cluster, uploads=load_uploads(settings, store)
+            )
+            videos.resume(service.scene)
+            return service
+        except BaseException:
+            for opened in (videos, workshop, cluster, store):
+                if opened is not None:
+                    opened.close()
+            raise
 
     def walking(self) -> int:
         """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
@@ -99,7 +122,8 @@ class Service:
 
     def sweep_uploads(self) -> None:
         """Removes the uploaded scenes nobody has used for ``upload_idle_s`` (shown in a walk-through is used)."""
-        self.uploads.sweep(self.settings.upload_idle_s, (session.scene for session in self.sessions))
+        in_use = [*(session.scene for session in self.sessions), *self.videos.scenes_in_progress()]
+        self.uploads.sweep(self.settings.upload_idle_s, in_use)
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""
@@ -110,11 +134,14 @@ class Service:
         if self.cluster is not None:
             self.cluster.close()
         self.workshop.close()
+        self.uploads.flush()
+        self.store.close()
 
     def on_cluster(self, width: int, height: int, params: PaintParams) -> bool:
-        """Whether a REST render of this size goes to Ray: with a cluster, from ``ray_min_work`` rays on."""
+        """Whether a REST render of this size goes to Ray: with a cluster, from ``ray_min_work`` rays on, unless
+        Ray failed a moment ago (it backs off: meanwhile the render is painted here rather than refused)."""
         work = width * height * params.spp * params.iterations
-        return self.cluster is not None and work >= self.settings.ray_min_work
+        return self.cluster is not None and work >= self.settings.ray_min_work and self.cluster.ready()
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:
@@ -130,6 +157,36 @@ def scene_info(scene: Scene) -> protocol.SceneInfo:
         animated=scene.animated,
         triangles=scene.geometry(0.0)[0].face_count,
     )
+
+
+def load_uploads(settings: Settings, store: Store) -> Uploads:
+    """The uploads the store keeps, loaded from their parsed arrays; those idle past ``upload_idle_s`` (time
+    passes while a server is down) or past the count and memory budgets (the most recently used kept first)
+    are removed, as are any that no longer load. A scene that a stored video job still paints is in use."""
+    uploads = Uploads(store=store)
+    now, weight, clock = time.time(), 0, time.monotonic()
+    filming = {r.scene for r in store.videos() if r.state in ("queued", "running")}  # in use: a film goes on
+    for record in sorted(store.uploads(), key=lambda r: (r.name in filming, r.used), reverse=True):
+        if record.name in filming:
+            record = replace(record, used=now)
+        over = len(uploads.scenes) >= settings.upload_max_scenes or weight + record.weight > settings.upload_total_bytes
+        if now - record.used > settings.upload_idle_s or over:
+            log.info("upload %s removed: %s", record.name, "over a budget" if over else "idle")
+            store.remove_upload(record.name)
+            continue
+        try:
+            scene = stored_scene(store.upload_dir(record.name), record.name, record.title, settings.upload_limits())
+        except Exception as exc:
+            log.error("upload %s removed: it no longer loads (%s)", record.name, exc)
+            store.remove_upload(record.name)
+            continue
+        uploads.keep(scene, scene_info(scene).model_copy(update={"uploaded": True}), record)
+        weight += record.weight
+    if uploads.scenes:
+        log.info(
+            "%d uploaded scenes kept from the last run, loaded in %.2f s", len(uploads.scenes), time.monotonic() - clock
+        )
+    return uploads
 
 
 def load_scenes(folder: Path) -> dict[str, Scene]:

@@ -9,6 +9,8 @@ scene name goes, which is what keeps one visitor's model from the others.
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import os
 import re
 import secrets
 import shutil
@@ -21,13 +23,17 @@ from typing import BinaryIO
 
 import numpy as np
 
+from ..meshes import Model
 from ..scene import Scene
-from ..scenefile import model_scene
-from ..untrusted import Limits, Refused, read_model
+from ..scenefile import SceneError, model_scene
+from ..untrusted import Limits, NoRoom, Refused, parts_from_arrays, read_model
 from . import protocol
+from .store import Store, UploadRecord
 
 NAME_PREFIX = "u-"  # then 22 characters of a 128-bit random token: a valid scene name, never a guessable one
+RECORD_USE_S = 60.0  # an upload's last use is written to the store at most this often (idle expiry is in minutes)
 BVH_BYTES_PER_TRIANGLE = 64  # Embree's tree over a triangle, roughly: counted with the arrays
+MEMORY_RETRY_S = 60  # a caller turned away for the uploads' memory: scenes expire, or are deleted, in minutes
 
 
 class Full(Exception):
@@ -45,7 +51,8 @@ class Upload:
     scene: Scene
     info: protocol.SceneInfo
     weight: int
-    used: float  # time.monotonic()
+    used: float  # time.time(): it means the same after a restart
+    recorded: float = 0.0  # the ``used`` the store holds (written at most every RECORD_USE_S)
 
 
 @dataclass
@@ -55,6 +62,7 @@ class Uploads:
     scenes: dict[str, Upload] = field(default_factory=dict)
     reading: asyncio.Semaphore = field(default_factory=lambda: asyncio.Semaphore(1))
     queued: int = 0  # uploads reading or waiting to
+    store: Store | None = None  # where they are kept across restarts (None: in memory only)
 
     @property
     def weight(self) -> int:
@@ -64,22 +72,40 @@ class Uploads:
         """The upload called ``name``, marked as used now; None if there is none (or it was removed)."""
         upload = self.scenes.get(name)
         if upload is not None:
-            upload.used = time.monotonic()
+            self._use(upload, time.time())
         return upload
 
+    def _use(self, upload: Upload, now: float) -> None:
+        upload.used = now
+        if self.store is not None and now - upload.recorded > RECORD_USE_S:
+            upload.recorded = now
+            self.store.touch_upload(upload.scene.name, now)
+
+    def flush(self) -> None:
+        """Writes every last use the store does not hold yet (a clean stop loses none; a crash, at most
+        ``RECORD_USE_S`` of them)."""
+        for upload in self.scenes.values():
+            if self.store is not None and upload.used != upload.recorded:
+                upload.recorded = upload.used
+                self.store.touch_upload(upload.scene.name, upload.used)
+
     def remove(self, name: str) -> bool:
-        return self.scenes.pop(name, None) is not None
+        if self.scenes.pop(name, None) is None:
+            return False
+        if self.store is not None:
+            self.store.remove_upload(name)
+        return True
 
     def sweep(self, idle_s: float, in_use: Iterable[Scene | None] = ()) -> list[str]:
         """Removes the uploads unused for ``idle_s`` seconds; a scene that a walk-through shows is in use."""
-        now = time.monotonic()
+        now = time.time()
         shown = {id(scene) for scene in in_use}
         for upload in self.scenes.values():
             if id(upload.scene) in shown:
-                upload.used = now
+                self._use(upload, now)
         idle = [name for name, upload in self.scenes.items() if now - upload.used > idle_s]
         for name in idle:
-            del self.scenes[name]
+            self.remove(name)
         return idle
 
     def check_room(self, max_scenes: int, idle_s: float) -> None:
@@ -89,19 +115,38 @@ class Uploads:
             raise Full(
                 f"the server keeps at most {max_scenes} uploaded scenes and has them all; delete one of yours, "
                 "or try again later",
-                max(1, int(idle_s - (time.monotonic() - oldest)) + 1),
+                max(1, int(idle_s - (time.time() - oldest)) + 1),
             )
 
-    def add(self, scene: Scene, info: protocol.SceneInfo, weight: int, max_scenes: int, total_bytes: int) -> None:
-        """Keeps ``scene`` under its name, or refuses (:class:`Full`) past the count or the memory budget."""
+    def add(
+        self,
+        scene: Scene,
+        info: protocol.SceneInfo,
+        weight: int,
+        max_scenes: int,
+        total_bytes: int,
+        owner: str | None = None,
+    ) -> None:
+        """Keeps ``scene`` under its name (recorded in the store, whose folder holds its files already), or
+        refuses (:class:`Full`) past the count or the memory budget. ``owner``: the token it came with."""
         self.check_room(max_scenes, 0)
         if self.weight + weight > total_bytes:
             raise Full(
                 f"the scene needs {weight >> 20} MiB and the uploaded scenes may take {total_bytes >> 20} MiB "
                 f"together, {self.weight >> 20} MiB of which are taken; try again later, or a smaller model",
-                60,
+                MEMORY_RETRY_S,
             )
-        self.scenes[scene.name] = Upload(scene, info, weight, time.monotonic())
+        now = time.time()
+        if self.store is not None:
+            folder = self.store.upload_dir(scene.name)
+            size = sum(f.stat().st_size for f in folder.iterdir()) if folder.is_dir() else 0
+            owned = None if owner is None else hashlib.sha256(owner.encode()).hexdigest()
+            self.store.add_upload(UploadRecord(scene.name, scene.title, owned, size, weight, now, now))
+        self.scenes[scene.name] = Upload(scene, info, weight, now, now)
+
+    def keep(self, scene: Scene, info: protocol.SceneInfo, record: UploadRecord) -> None:
+        """An upload the store held already (at start-up): kept as it was, last used when it was."""
+        self.scenes[scene.name] = Upload(scene, info, record.weight, record.used, record.used)
 
 
 def new_name() -> str:
@@ -142,18 +187,53 @@ def weight_of(scene: Scene) -> int:
     return sum(a.nbytes for a in arrays.values()) + BVH_BYTES_PER_TRIANGLE * geometry.face_count
 
 
-def read_scene(body: BinaryIO, filename: str, limits: Limits) -> tuple[Scene, int]:
+def read_scene(body: BinaryIO, filename: str, limits: Limits, keep: Path | None = None) -> tuple[Scene, int]:
     """Blocking (seconds: run it in a worker thread): the uploaded ``body`` as a new scene with a new name,
-    and its weight in bytes. Raises :class:`Refused` with the reason."""
-    work = Path(tempfile.mkdtemp(prefix="rcp-upload-"))
+    and its weight in bytes. Raises :class:`Refused` with the reason. With ``keep`` (the store's uploads
+    folder), the file and its parsed arrays stay in ``keep/NAME/`` (``original``, ``parts.npz``), for
+    :func:`stored_scene` to load after a restart; the caller removes that folder if it does not keep the scene."""
+    work = Path(tempfile.mkdtemp(prefix=".reading-", dir=keep))  # in ``keep``: moved into place by a rename
     try:
         with open(work / "upload", "wb") as sink:
             shutil.copyfileobj(body, sink, 1 << 20)
-        model = read_model(work, filename, limits)
+        name = new_name()
+        scene = scene_of(read_model(work, filename, limits), name, title_of(filename))
+        if keep is not None:
+            folder = keep / name
+            folder.mkdir()
+            os.replace(work / "upload", folder / "original")
+            os.replace(work / "parts.npz", folder / "parts.npz")
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    scene = model_scene(model, new_name(), title_of(filename))  # builds its tree now, not on the first frame
     return scene, weight_of(scene)
 
 
-__all__ = ["Full", "Refused", "Upload", "Uploads", "new_name", "read_scene", "title_of", "weight_of"]
+def stored_scene(folder: Path, name: str, title: str, limits: Limits) -> Scene:
+    """The scene of the parsed arrays in ``folder/parts.npz``, its tree built: the one path of a first upload
+    and of a reload after a restart, so that both paint the same. Raises :class:`Refused`."""
+    return scene_of(parts_from_arrays(folder / "parts.npz", limits), name, title)
+
+
+def scene_of(model: Model, name: str, title: str) -> Scene:
+    """A model as read from the sandbox's arrays (:func:`~rcp_server.untrusted.parts_from_arrays`) as a scene
+    as its authors made it (``scenefile.model_scene``), its tree built now rather than on the first frame.
+    Raises :class:`Refused` for a model no camera can frame."""
+    try:
+        return model_scene(model, name, title)  # builds its tree (the framing reads it)
+    except SceneError as exc:  # a model no camera can frame (far from the origin, or too large)
+        raise Refused(str(exc)) from None
+
+
+__all__ = [
+    "MEMORY_RETRY_S",
+    "Full",
+    "NoRoom",
+    "Refused",
+    "Upload",
+    "Uploads",
+    "new_name",
+    "read_scene",
+    "stored_scene",
+    "title_of",
+    "weight_of",
+]

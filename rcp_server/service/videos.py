@@ -8,38 +8,62 @@ are painted on Ray instead (``cluster.py``) and the local cores stay with the wa
 
 Limits (``settings.py``): the work of one job (pixels x samples x iterations, summed over its frames), the
 jobs at once, the disk the videos may use, how long a finished video is kept. A job over a limit is refused
-at the door (4xx, or 503 when it is only a matter of waiting); one that runs out of disk fails with a message.
+at the door (4xx, or 503 when it is only a matter of waiting): a job whose estimated size
+(:func:`video_bytes`) does not fit in the disk left, after the finished videos and the estimates of the jobs
+queued and running, gets 507 at once. One that still runs out of disk (a video larger than its estimate)
+fails with a message.
+
+Jobs outlive the server (``store.py``): each is recorded when submitted, its frames are kept as they finish
+(lossless PNGs, and for a temporal job the state the next frame continues from), and the MP4 is assembled from
+them at the end. A server that stops (cleanly or ``kill -9``) resumes its queued and running jobs at the next
+start from the last frame written, and the film is the uninterrupted run's, frame for frame. The jobs of the
+last run count at the door as this run's do: its kept videos by their size, its resumed jobs by their estimate.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
+import math
 import secrets
 import shutil
-import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Literal
 
-from ..camerapath import CameraPath
-from ..cluster import ClusterError
+import numpy as np
+from PIL import Image
+
+from .. import images
+from ..camera import Camera
+from ..camerapath import CameraPath, PathSpec
+from ..cluster import ClusterError, PaintingFailed
 from ..painting import Abandoned, PaintState
 from ..params import PaintParams
 from ..scene import Scene
-from ..sequence import frame_params, paint_sequence
+from ..sequence import frame_params, paint_results
 from ..video import Mp4Writer
 from .faults import fault_message, report_fault
 from .settings import Settings
+from .store import Store, VideoRecord, load_state, save_state, write_whole
 from .workshop import Busy, Workshop
 
 log = logging.getLogger("rcp.service")
 
 State = Literal["queued", "running", "done", "failed", "cancelled"]
 FINISHED = ("done", "failed", "cancelled")
+ANY_CAMERA = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0))
 RETRY_AFTER_S = 30  # a full queue of videos frees a place in minutes, not seconds: a fair first guess
+BYTES_PER_PIXEL = 0.25
+"""An H.264 frame's bytes per pixel at CRF 18, estimated: about three times what a moving painting takes
+(0.08 at 320x180); the noisiest styles may take more, which the check while writing still catches."""
+MP4_BYTES = 64 * 1024  # the container and the encoder's headers, at most, for the estimate
+RAY_ATTEMPTS = 8  # Ray failures a job outlives, waiting each time as Ray backs off (a quarter of an hour in all)
 
 
 class VideoRefused(ValueError):
@@ -57,22 +81,29 @@ def job_work(width: int, height: int, params: PaintParams, temporal: int | None,
     return width * height * params.spp * iterations
 
 
+def video_bytes(width: int, height: int, frames: int) -> int:
+    """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk."""
+    return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames)
+
+
 @dataclass
 class VideoJob:
-    """One video: what to paint, how far it got, and where its file is once done."""
+    """One video: what to paint, how far it got, and where its frames and its file are."""
 
     id: str
-    scene: Scene
+    scene_name: str
+    scene: Scene | None  # None for a finished job restored from the store: it paints no more
     path: CameraPath
     width: int
     height: int
     params: PaintParams
     temporal: int | None
     file: Path
+    frames_dir: Path
     state: State = "queued"
     done_frames: int = 0
     message: str = ""
-    created: float = field(default_factory=time.monotonic)
+    created: float = field(default_factory=time.time)  # wall clock: it means the same after a restart
     finished: float | None = None
     cancelled: threading.Event = field(default_factory=threading.Event)
 
@@ -80,24 +111,95 @@ class VideoJob:
     def frames(self) -> int:
         return self.path.frame_count
 
+    @property
+    def estimate(self) -> int:
+        """Bytes its video is estimated to take (:func:`video_bytes`)."""
+        return video_bytes(self.width, self.height, self.frames)
+
     def finish(self, state: State, message: str = "") -> None:
-        self.state, self.message, self.finished = state, message, time.monotonic()
+        self.state, self.message, self.finished = state, message, time.time()
+
+    def settings(self) -> dict:
+        """What the job paints, as JSON the store keeps: :func:`job_of` makes the same job from it."""
+        return {
+            "path": path_spec(self.path),
+            "width": self.width,
+            "height": self.height,
+            "params": asdict(self.params),
+            "temporal": self.temporal,
+        }
+
+
+def path_spec(path: CameraPath) -> dict:
+    """A resolved path written out in full (every camera and scene time explicit), so that resolving it again
+    gives the same path whatever the scene's camera: JSON keeps every float exactly."""
+    keyframes = [
+        {"t": t, "eye": list(c.eye), "look_at": list(c.look_at), "up": list(c.up), "fov": c.fov, "scene_time": st}
+        for t, c, st in zip(path.times, path.cameras, path.scene_times, strict=True)
+    ]
+    return {"fps": path.fps, "keyframes": keyframes, "loop": path.loop}
+
+
+def job_of(record: VideoRecord, scene: Scene | None, store: Store) -> VideoJob:
+    """The job a stored record describes."""
+    given = record.settings
+    temporal = given["temporal"]
+    return VideoJob(
+        record.id,
+        record.scene,
+        scene,
+        PathSpec.model_validate(given["path"]).resolve(ANY_CAMERA),  # every keyframe gives its up and fov
+        given["width"],
+        given["height"],
+        PaintParams(**given["params"]),
+        temporal,
+        store.video_file(record.id),
+        store.frames_dir(record.id),
+        record.state,  # type: ignore[arg-type]
+        record.done_frames,
+        record.message,
+        record.created,
+        record.finished,
+    )
 
 
 class Videos:
-    """The video jobs of one server: submitted, run, kept for ``video_keep_s`` once finished, then dropped."""
+    """The video jobs of one server: submitted, run, kept for ``video_keep_s`` once finished, then dropped; all
+    of it recorded in ``store`` so that a restart resumes where the last run stopped (:meth:`resume`)."""
 
-    def __init__(self, settings: Settings, workshop: Workshop, painter=None):
+    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter=None):
         self.settings = settings
         self.workshop = workshop
+        self.store = store
         self.painter = painter  # a cluster.RayPainter (the service closes it), or None: the workshop's shared pool
-        own = settings.video_dir is None
-        self.folder = Path(tempfile.mkdtemp(prefix="rcp-videos-")) if own else Path(settings.video_dir)
-        self.folder.mkdir(parents=True, exist_ok=True)
-        self._own_folder = own
         self._jobs: dict[str, VideoJob] = {}
         self._lock = threading.Lock()
+        self._closing = False  # stopping the server: jobs in progress stay recorded as they are, to resume
         self._runners = ThreadPoolExecutor(settings.max_videos, thread_name_prefix="rcp-video")
+
+    def resume(self, scene_of: Callable[[str], Scene | None]) -> None:
+        """At start-up: the stored jobs back, the finished ones to be fetched, the others queued again to go on
+        from their last frame written (a job whose scene is gone fails, saying so)."""
+        for record in self.store.videos():
+            scene = scene_of(record.scene) if record.state not in FINISHED else None
+            try:
+                job = job_of(record, scene, self.store)
+            except Exception:  # a record this version cannot read: dropped with its files, said in the log
+                log.exception("video %s dropped: its record cannot be read", record.id)
+                self.store.remove_video(record.id)
+                continue
+            self._jobs[job.id] = job
+            if job.state in FINISHED:
+                if job.state == "done" and not job.file.is_file():
+                    self._finish(job, "failed", "its file was lost while the server was down")
+                continue
+            if scene is None:
+                self._finish(job, "failed", f"its scene {record.scene!r} is gone (removed while the server was down)")
+                continue
+            job.state = "queued"
+            self.store.update_video(job.id, state="queued")
+            log.info("video %s queued again, %d of its %d frames written", job.id, job.done_frames, job.frames)
+            self._runners.submit(self._run, job)
 
     # ---- the door ----
 
@@ -116,20 +218,29 @@ class Videos:
                 "frames, pixels, samples or iterations"
             )
         self.sweep()
-        used = self.disk_used()
-        if used >= settings.video_disk_bytes:
-            raise VideoRefused(
-                f"the stored videos use {used:,} bytes of the {settings.video_disk_bytes:,} allowed: delete some "
-                f"(DELETE /api/videos/ID) or wait until they expire ({settings.video_keep_s:g} s after they finish)",
-                507,
-            )
         job_id = secrets.token_hex(8)
-        job = VideoJob(job_id, scene, path, width, height, params, temporal, self.folder / f"{job_id}.mp4")
+        store = self.store
+        job = VideoJob(
+            job_id, scene.name, scene, path, width, height, params, temporal, store.video_file(job_id),
+            store.frames_dir(job_id),
+        )  # fmt: skip
         with self._lock:
-            waiting = sum(1 for j in self._jobs.values() if j.state in ("queued", "running"))
-            if waiting >= settings.max_videos + settings.max_videos_waiting:
+            waiting = [j for j in self._jobs.values() if j.state in ("queued", "running")]
+            room = settings.video_disk_bytes - self.disk_used() - sum(j.estimate for j in waiting)
+            if job.estimate > room:
+                raise VideoRefused(
+                    f"the video would take about {job.estimate:,} bytes and the videos have {max(room, 0):,} of "
+                    f"their {settings.video_disk_bytes:,} left (RCP_VIDEO_DISK_BYTES, with the videos in progress): "
+                    f"ask for fewer frames or pixels, delete videos (DELETE /api/videos/ID) or wait until they "
+                    f"expire ({settings.video_keep_s:g} s after they finish)",
+                    507,
+                )
+            if len(waiting) >= settings.max_videos + settings.max_videos_waiting:
                 raise Busy(RETRY_AFTER_S)
             self._jobs[job_id] = job
+        store.add_video(
+            VideoRecord(job.id, job.scene_name, job.settings(), job.frames, job.state, 0, "", job.created, None, 0)
+        )
         self._runners.submit(self._run, job)
         return job
 
@@ -145,63 +256,120 @@ class Videos:
         with self._lock:
             if job.state in FINISHED:
                 self._jobs.pop(job_id, None)
-                job.file.unlink(missing_ok=True)
+                self.store.remove_video(job_id)
                 return job
             job.cancelled.set()
             if job.state == "queued":
-                job.finish("cancelled", "cancelled before it started")
+                self._finish(job, "cancelled", "cancelled before it started")
         return job
+
+    def scenes_in_progress(self) -> list[Scene]:
+        """The scenes of the jobs queued or painting (an uploaded one among them is in use)."""
+        return [j.scene for j in list(self._jobs.values()) if j.state not in FINISHED and j.scene is not None]
 
     # ---- the work ----
 
     def _run(self, job: VideoJob) -> None:
         with self._lock:
-            if job.state != "queued":  # cancelled while it waited
+            if job.state != "queued" or self._closing:  # cancelled while it waited, or the server is stopping
                 return
             job.state = "running"
-        writer = None
+        self.store.update_video(job.id, state="running")
         try:
-            writer = Mp4Writer(job.file, job.width, job.height, job.path.fps)
-            for image in self._paintings(job):
-                writer.write(image)
-                job.done_frames += 1
-                self._check_disk(writer.size())
-            writer.close()
-            try:
-                self._check_disk(writer.size())  # the encoder's last packets and the index come at the end
-            except OSError:
+            job.frames_dir.mkdir(parents=True, exist_ok=True)
+            for attempt in itertools.count(1):
+                try:
+                    self._paint_frames(job)
+                    break
+                except ClusterError as exc:  # Ray failed: it backs off, and the job goes on from its last frame
+                    if attempt >= RAY_ATTEMPTS or isinstance(exc, PaintingFailed):  # the latter would fail again
+                        raise
+                    wait = self.painter.backoff.wait_s()
+                    job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
+                    self.store.update_video(job.id, message=job.message)
+                    if job.cancelled.wait(wait):
+                        raise Abandoned from None
+                    job.message = ""
+            self._assemble(job)
+            size = job.file.stat().st_size
+            if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
                 job.file.unlink(missing_ok=True)
-                raise
-            job.finish("done", f"{job.frames} frames, {job.file.stat().st_size:,} bytes")
-        except Abandoned:
-            message = "the server is stopping" if self.workshop.stopping else "cancelled"
-            job.finish("failed" if self.workshop.stopping else "cancelled", message)
-        except OSError as exc:  # the disk: full, or over the budget
-            job.finish("failed", f"cannot write the video: {exc.strerror or exc}")
-        except ClusterError as exc:  # Ray: no answer at its address, a worker lost
-            job.finish("failed", str(exc))
+                raise OSError(f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed")
+            self._finish(job, "done", f"{job.frames} frames, {size:,} bytes")
         except Exception as exc:
-            if job.cancelled.is_set():
-                job.finish("cancelled", "cancelled")
+            if self._closing or self.workshop.stopping:  # recorded as it was: the next start goes on from here
+                return
+            if isinstance(exc, Abandoned) or job.cancelled.is_set():
+                self._finish(job, "cancelled", "cancelled")
+            elif isinstance(exc, OSError):  # the disk: full, or over the budget
+                self._finish(job, "failed", f"cannot write the video: {exc.strerror or exc}")
+            elif isinstance(exc, ClusterError):  # Ray: no answer at its address, a worker lost
+                self._finish(job, "failed", str(exc))
             else:
-                job.finish("failed", fault_message(report_fault(f"video {job.id}: {exc}")))
-        finally:
-            if job.state != "done" and writer is not None:
-                writer.abort()
+                self._finish(job, "failed", fault_message(report_fault(f"video {job.id}: {exc}")))
 
-    def _paintings(self, job: VideoJob):
+    def _paint_frames(self, job: VideoJob) -> None:
+        """Paints the frames not on disk yet, keeping each as it finishes (and a temporal job's state)."""
+        start, previous = self._resume_point(job)
+        if start > 0:
+            log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
+        job.done_frames = start
+        for image, state in self._paintings(job, start, previous):
+            write_whole(frame_file(job, job.done_frames), partial(_save_png, image))
+            if state is not None:
+                save_state(job.frames_dir / "state.npz", job.done_frames, state)
+            job.done_frames += 1
+            self.store.update_video(job.id, done_frames=job.done_frames)
+
+    def _resume_point(self, job: VideoJob) -> tuple[int, PaintState | None]:
+        """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
+        here the state it continues from. A frame written without its state is painted again."""
+        written = 0
+        while frame_file(job, written).is_file():
+            written += 1
+        if not job.temporal or self.painter is not None or written == 0:
+            return written, None  # Ray's temporal bands keep their state on the actors: they paint up to here again
+        saved = load_state(job.frames_dir / "state.npz")
+        if saved is not None and saved[0] in (written - 1, written - 2):
+            index, state = saved
+            if index == written - 2:  # stopped between the frame and its state: that frame is painted again
+                frame_file(job, written - 1).unlink(missing_ok=True)
+            return index + 1, state
+        for k in range(written):  # no state to go on from: the frames are painted again
+            frame_file(job, k).unlink(missing_ok=True)
+        return 0, None
+
+    def _paintings(
+        self, job: VideoJob, start: int, previous: PaintState | None
+    ) -> Iterator[tuple[np.ndarray, PaintState | None]]:
+        """The frames from ``start`` on, each (height, width, 3) uint8, with the state a temporal job continues
+        from (None when nothing needs keeping)."""
+        if start >= job.frames:
+            return
+        scene = job.scene
+        assert scene is not None
+
         def stop() -> bool:
             return job.cancelled.is_set()
 
         if self.painter is not None:
-            yield from self.painter.images(
-                job.scene, job.path.frames(), job.width, job.height, job.params, job.temporal, should_stop=stop
-            )
+            if job.temporal:  # the bands' states live on the actors: the frames before ``start`` are painted again
+                shots = job.path.frames()
+                paintings = self.painter.images(
+                    scene, shots, job.width, job.height, job.params, job.temporal, should_stop=stop
+                )
+                paintings = itertools.islice(paintings, start, None)
+            else:
+                paintings = self.painter.images(
+                    scene, job.path.frames(start), job.width, job.height, job.params, None, should_stop=stop
+                )
+            for image in paintings:
+                yield image, None
             return
 
         def paint_frame(camera, scene_time: float, params: PaintParams, previous: PaintState | None):
             return self.workshop.paint(
-                job.scene,
+                scene,
                 camera,
                 job.width,
                 job.height,
@@ -212,11 +380,31 @@ class Videos:
                 previous=previous,
             )
 
-        yield from paint_sequence(paint_frame, job.path.frames(), job.params, job.temporal)
+        shots = job.path.frames(start)
+        for result in paint_results(paint_frame, shots, job.params, job.temporal, start, previous):
+            yield images.to_uint8(result.image), result.state if job.temporal else None
 
-    def _check_disk(self, writing: int) -> None:
-        if writing + self.disk_used() > self.settings.video_disk_bytes:
-            raise OSError(f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed")
+    def _assemble(self, job: VideoJob) -> None:
+        """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""
+        writer = Mp4Writer(job.file, job.width, job.height, job.path.fps)
+        try:
+            for k in range(job.frames):
+                if job.cancelled.is_set():
+                    raise Abandoned
+                with Image.open(frame_file(job, k)) as frame:
+                    writer.write(np.asarray(frame.convert("RGB")))
+            writer.close()
+        except BaseException:
+            writer.abort()
+            raise
+
+    def _finish(self, job: VideoJob, state: State, message: str = "") -> None:
+        job.finish(state, message)
+        size = _size(job.file) if state == "done" else 0
+        self.store.update_video(job.id, state=state, message=message, finished=job.finished, bytes=size)
+        shutil.rmtree(job.frames_dir, ignore_errors=True)
+        if state != "done":
+            job.file.unlink(missing_ok=True)
 
     # ---- keeping house ----
 
@@ -226,7 +414,7 @@ class Videos:
 
     def sweep(self) -> None:
         """Forget the jobs finished more than ``video_keep_s`` ago, and delete their files."""
-        now = time.monotonic()
+        now = time.time()
         with self._lock:
             old = [
                 j
@@ -236,15 +424,23 @@ class Videos:
             for job in old:
                 del self._jobs[job.id]
         for job in old:
-            job.file.unlink(missing_ok=True)
+            self.store.remove_video(job.id)
 
     def close(self) -> None:
-        """Cancel every job, wait for the runners, and remove the folder if this server made it."""
+        """Stop every job at its next tile, and wait for the runners: what they wrote stays, recorded, for the
+        next start to go on from."""
+        self._closing = True
         for job in list(self._jobs.values()):
             job.cancelled.set()
         self._runners.shutdown(wait=True, cancel_futures=True)
-        if self._own_folder:
-            shutil.rmtree(self.folder, ignore_errors=True)
+
+
+def _save_png(image: np.ndarray, path: Path) -> None:
+    Image.fromarray(image).save(path, "PNG", compress_level=1)  # lossless, and fast: a frame waits for it
+
+
+def frame_file(job: VideoJob, index: int) -> Path:
+    return job.frames_dir / f"frame_{index:06d}.png"
 
 
 def _size(file: Path) -> int:

@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -122,3 +126,19 @@ def test_a_scene_without_triangles_is_refused_by_no_one_and_hits_nothing():
     directions = _unit(RNG.normal(size=(9, 3)))
     assert (empty.intersect(origins, directions).face == -1).all()
     assert Hits.misses(3).face.tolist() == [-1, -1, -1]
+
+
+def test_a_missing_embree_library_is_one_line_and_exit_status_1(tmp_path):
+    """The library is found beside embreex, or where RCP_EMBREE_LIBRARY says; where it cannot load, one line."""
+    env = {**os.environ, "RCP_EMBREE_LIBRARY": str(tmp_path / "libembree4.so.4")}
+    run = subprocess.run(
+        [sys.executable, "-m", "rcp_server.cli", "render", "default", "--out", str(tmp_path / "x.png")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert run.returncode == 1
+    assert run.stderr.startswith("rcp: error: cannot load the Embree 4 library")
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "x.png").exists()

@@ -6,6 +6,7 @@ import contextlib
 import io
 import json
 
+import httpx
 import numpy as np
 import pytest
 from PIL import Image
@@ -19,6 +20,11 @@ def live_server():
     """One real server per test process (settles fast, so refinement starts soon after the camera rests)."""
     with BackgroundServer(settle_ms=80) as server:
         yield server
+
+
+def post(server, body: dict) -> httpx.Response:
+    """``POST /api/render`` of ``body``."""
+    return httpx.post(f"{server.url}/api/render", json=body, timeout=120)
 
 
 def decode(data: bytes) -> np.ndarray:

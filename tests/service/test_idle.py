@@ -17,6 +17,8 @@ from rcp_server.bench.harness import BackgroundServer
 
 SMALL = {"scene": "sky", "width": 32, "height": 18}
 BOUND_S = 10  # generous: what a real client may wait for an answer on two busy cores
+HALF_A_BODY = b"POST /api/render HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
+HALF_A_BODY += b"Content-Length: 200\r\n\r\n{"  # 1 of its 200 bytes
 
 
 def until(condition, seconds: float, what: str) -> None:
@@ -27,7 +29,7 @@ def until(condition, seconds: float, what: str) -> None:
 
 
 @contextlib.contextmanager
-def half_requests(port: int, count: int, head: bytes = b"GET /api/health HTTP/1.1\r\nHost: x\r\nX-Slow: "):
+def half_requests(port: int, count: int, head: bytes = b"GET /api/health HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: "):
     """``count`` connections that each send ``head`` (half a request) and then wait."""
     with contextlib.ExitStack() as stack:
         socks = []
@@ -77,7 +79,7 @@ def test_half_open_requests_neither_starve_health_and_renders_nor_stay_open():
 
 def test_a_slow_body_is_cut_off_at_the_deadline():
     with BackgroundServer(header_timeout_s=1.0) as server:
-        head = b"POST /api/render HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 200\r\n\r\n{"
+        head = HALF_A_BODY
         with half_requests(server.settings.port, 1, head) as (sock,):
             clock = time.monotonic()
             assert read_to_end(sock, BOUND_S) == b""  # the app saw a disconnect: no answer, the socket closed
@@ -85,7 +87,7 @@ def test_a_slow_body_is_cut_off_at_the_deadline():
 
 
 def test_requests_past_the_capacity_get_a_json_503_with_retry_after_until_the_stalled_ones_are_cut():
-    head = b"POST /api/render HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\nContent-Length: 200\r\n\r\n{"
+    head = HALF_A_BODY
     with BackgroundServer(max_requests=3, header_timeout_s=2.0) as server:
         with half_requests(server.settings.port, 3, head):  # three requests in progress, waiting on their bodies
             responses = []
@@ -124,7 +126,7 @@ def test_a_websocket_that_never_says_hello_is_closed_and_holds_no_place(walk_to)
 def test_a_client_that_never_reads_its_answer_is_let_go():
     # a PNG of some 2 MB: far more than the kernel buffers and the transport hold for a client that reads nothing
     body = json.dumps({"scene": "default", "width": 4096, "height": 2048, "paint": {"iterations": 1}}).encode()
-    request = b"POST /api/render HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+    request = b"POST /api/render HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
     request += b"Content-Length: %d\r\n\r\n%s" % (len(body), body)
     with BackgroundServer(send_timeout_s=1.0) as server:
         with socket.socket() as sock:

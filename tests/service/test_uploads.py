@@ -4,14 +4,18 @@ while another visitor's walk-through goes on."""
 
 from __future__ import annotations
 
+import os
 import threading
 import time
+from pathlib import Path
 
 import httpx
 import numpy as np
 import pytest
 
 from rcp_server.bench.harness import BackgroundServer
+from rcp_server.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
+from rcp_server.untrusted import Limits, NoRoom, read_model
 
 from . import upload_files as files
 from .conftest import decode
@@ -108,9 +112,24 @@ def test_the_count_of_uploaded_scenes_is_capped_with_503_and_retry_after(server)
 
 
 def test_a_file_over_the_upload_size_gets_413_while_json_bodies_keep_their_own_limit(server):
-    assert upload(server, "big.obj", b"#" * (2 << 20)).status_code == 413
+    """Both in JSON, in one line naming the limit and its setting (an upload's was a plain-text "Content Too
+    Large"), whether the body's Content-Length says it is too large or only its bytes do (chunked)."""
+    said = "the file is larger than the 1,048,576 bytes this server takes (RCP_UPLOAD_MAX_BYTES)"
+    declared = upload(server, "big.obj", b"#" * (2 << 20))
+
+    def chunked():
+        yield b'--XX\r\nContent-Disposition: form-data; name="file"; filename="big.obj"\r\n\r\n'
+        yield from (b"#" * (1 << 16) for _ in range(40))
+        yield b"\r\n--XX--\r\n"
+
+    streamed = httpx.post(
+        f"{server.url}/api/scenes", content=chunked(), headers={"content-type": "multipart/form-data; boundary=XX"}
+    )
+    for response in (declared, streamed):
+        assert response.status_code == 413 and response.json() == {"detail": said}, response.text
     big_json = {"scene": "default", "x": "y" * 100_000}  # under the upload limit, over max_body_bytes
-    assert httpx.post(f"{server.url}/api/render", json=big_json, timeout=30).status_code == 413
+    response = httpx.post(f"{server.url}/api/render", json=big_json, timeout=30)
+    assert response.status_code == 413 and "65,536 bytes" in response.json()["detail"]
 
 
 HOSTILE = [
@@ -129,6 +148,16 @@ HOSTILE = [
     ("box.obj", files.obj_reaching_out, "mtllib: the path '/etc/passwd' points outside the upload"),
     ("map.zip", lambda: files.textured_obj_zip(map_path="../../secret.png"), "texture map: the path"),
     ("texture.zip", lambda: files.textured_obj_zip(files.bomb_png(4096, 4096)), "larger than 1,048,576 pixels"),
+    # a model no valid camera frames: refused in one line (it was a 500)
+    ("far.obj", files.far_obj, "too large, or too far from the origin, for a camera within +-1e+09"),
+    ("moved.glb", lambda: files.glb_moved(translation=[2e9, 0, 0]), "too large, or too far from the origin"),
+    ("huge.glb", lambda: files.glb_moved(scale=[1e300, 1e300, 1e300]), "too large, or too far from the origin"),
+    # names the server could not unpack: said as such, without the server's folders (they were in the message)
+    ("clash.zip", lambda: files.zipped({"m": b"", "m/model.obj": files.obj()}), "both a file 'm' and 'm/model.obj'"),
+    ("long.zip", lambda: files.zipped({"x" * 300 + ".obj": files.obj()}), "a name longer than 255 bytes"),
+    # a small file placing one mesh many times: refused from what it declares, before anything is built
+    ("many.glb", lambda: files.glb_placed_many_times(5000), "many.glb places meshes 5,000 times; at most 4,096"),
+    ("more.glb", lambda: files.glb_placed_many_times(2000, 10), "declares 2,400,000 triangles (as placed)"),
 ]
 
 
@@ -137,6 +166,7 @@ def test_a_hostile_file_gets_422_with_one_line_saying_what_is_wrong(server, file
     response = upload(server, filename, make())
     detail = response.json()["detail"]
     assert response.status_code == 422 and says in detail and "\n" not in detail, detail
+    assert "/tmp" not in detail and "rcp-upload" not in detail, detail  # no folder of the server's
 
 
 def test_another_walk_through_keeps_getting_frames_while_hostile_files_are_read(server, walk_to):
@@ -246,3 +276,42 @@ def test_a_gltf_arrives_as_authored_its_cameras_offered_and_its_cut_outs_seen_th
     assert image[24, 23, 0] > 200 and image[24, 23, 1:].max() < 60  # the red wall, through the cut-out
     assert image[24, 40, 1] > 200 and image[24, 40, [0, 2]].max() < 60  # the quad's green half
     delete(server, info["name"])
+
+
+def test_the_reader_keeps_only_the_environment_it_needs(monkeypatch, tmp_path):
+    """The server's environment (its token, and whatever else the operator keeps there) stays out of the
+    process that reads strangers' files: its fork server starts with READER_ENVIRONMENT only."""
+    monkeypatch.setenv("RCP_TOKEN", "a-secret-of-the-server")
+    (tmp_path / "upload").write_bytes(files.obj())
+    assert len(read_model(tmp_path, "box.obj", Limits()).parts) == 1
+    servers = [
+        pid
+        for pid in (int(p.name) for p in Path("/proc").iterdir() if p.name.isdigit())
+        if _parent(pid) == os.getpid() and b"forkserver" in _read(f"/proc/{pid}/cmdline")
+    ]
+    assert len(servers) == 1
+    names = {entry.split(b"=", 1)[0].decode() for entry in _read(f"/proc/{servers[0]}/environ").split(b"\0") if entry}
+    # (a library may set variables of its own below os.environ, such as readline's LINES: none of the server's)
+    assert "RCP_TOKEN" not in names and not (names - set(READER_ENVIRONMENT)) & set(os.environ), names
+    assert "PATH" in names and "HOME" in os.environ and "HOME" not in names
+
+
+def test_a_model_that_declares_more_than_the_memory_left_is_refused_before_it_is_built(tmp_path):
+    for work in (tmp_path / "left", tmp_path / "right"):  # each reading has a folder of its own
+        work.mkdir()
+        (work / "upload").write_bytes(files.glb_placed_many_times(100))  # 100 boxes: 1,200 triangles
+    with pytest.raises(NoRoom, match=r"declares 1,200 triangles, 0 MiB or more once built, and the uploaded"):
+        read_model(tmp_path / "left", "boxes.glb", Limits(room_bytes=1200 * BYTES_PER_TRIANGLE - 1))
+    assert len(read_model(tmp_path / "right", "boxes.glb", Limits(room_bytes=1200 * BYTES_PER_TRIANGLE))) == 100
+
+
+def _parent(pid: int) -> int | None:
+    stat = _read(f"/proc/{pid}/stat")
+    return int(stat.rsplit(b")", 1)[1].split()[1]) if stat else None
+
+
+def _read(path: str) -> bytes:
+    try:
+        return Path(path).read_bytes()
+    except OSError:  # gone meanwhile, or not ours to read
+        return b""

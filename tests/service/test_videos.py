@@ -5,19 +5,26 @@ from __future__ import annotations
 
 import io
 import time
+from dataclasses import asdict
 
 import av
 import httpx
 import numpy as np
 import pytest
-from conftest import SPINNING_BOX
+from conftest import CAMERA, SPINNING_BOX, make_scene
 from PIL import Image
 
 from rcp_server import images
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camerapath import parse_path
+from rcp_server.cluster import Backoff, ClusterError
 from rcp_server.painting import paint
+from rcp_server.params import PaintParams
 from rcp_server.scenefile import load_scene
+from rcp_server.service.settings import Settings
+from rcp_server.service.store import Store, VideoRecord
+from rcp_server.service.videos import VideoRefused, Videos, path_spec, video_bytes
+from rcp_server.service.workshop import Workshop
 
 PATH = {
     "fps": 6,
@@ -148,6 +155,30 @@ def test_bad_jobs_are_refused_in_one_line(server, body, status, says):
     assert says in one_line(answer, status)
 
 
+AT_THE_LIMIT = [  # keyframes at the coordinate limit, whose curve carries the look-at just past it between them
+    {"t": 0, "eye": [0, 0, 5], "look_at": [-1e9, 0, 0]},
+    {"t": 1, "eye": [0, 0, 6], "look_at": [-1e9, 1e9, 0]},
+    {"t": 2, "eye": [0, 0, 6], "look_at": [-1e9, 0, -1e9]},
+]
+CLOSE = [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 1e-300}]  # scipy: "`dydx` must contain only finite"
+
+
+@pytest.mark.parametrize(
+    ("path", "says"),
+    [
+        ({**PATH, "keyframes": CLOSE}, "keyframes.1.t: must be greater than the previous keyframe's t, by 0.001 s"),
+        ({**PATH, "loop": True, "keyframes": [CLOSE[0], {**CLOSE[1], "t": 5e-324}]}, "by 0.001 s at least"),
+        ({**PATH, "keyframes": AT_THE_LIMIT}, "frame 3 (t = 0.5 s), between them, is not valid: look_at must lie"),
+    ],
+)
+def test_a_path_that_would_fail_later_is_refused_when_it_is_given(server, path, says):
+    """Its preview was a 500, its video a 202 and then a failed job: every camera a path will ask of its curves
+    is checked when the path is given."""
+    assert says in one_line(server.post("/api/paths", json={"scene": "tiny", "path": path}), 422)
+    video = server.post("/api/videos", json={"scene": "tiny", "path": path, "width": 32, "height": 32})
+    assert says in one_line(video, 422)
+
+
 def test_bad_bodies_and_unknown_ids_are_4xx(server):
     assert server.post("/api/videos", json={"scene": "tiny"}).status_code == 422  # no path
     text = '{"scene": "tiny", "path": {"keyframes": [{"t": NaN, "eye": [0,0,0], "look_at": [0,0,1]}]}}'
@@ -158,13 +189,110 @@ def test_bad_bodies_and_unknown_ids_are_4xx(server):
     assert server.delete("/api/videos/nothing").status_code == 404
 
 
-def test_a_full_disk_budget_fails_the_job_and_finished_jobs_expire(scenes, tmp_path):
-    settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "video_dir": tmp_path}
+def test_a_video_past_the_disk_budget_is_refused_at_submission_with_507(scenes, tmp_path):
+    """The 507 comes when the job is submitted (it was accepted and failed halfway), with the estimate and the
+    room left, the estimates of the jobs in progress counted: of two that fit one at a time, the second waits."""
+    path = {**PATH, "fps": 60}  # 61 frames: the first job is still painting when the second comes
+    body = {"scene": "tiny", "path": path, "width": 32, "height": 32}
+    estimate = video_bytes(32, 32, parse_path(path).resolve(load_scene("tiny", scenes).camera).frame_count)
+    settings = {"scenes": scenes, "video_disk_bytes": estimate * 3 // 2, "data": tmp_path}
+    with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
+        first = client.post("/api/videos", json=body)
+        second = client.post("/api/videos", json=body)
+        assert first.status_code == 202
+        said = one_line(second, 507)
+        assert (
+            f"about {estimate:,} bytes" in said
+            and f"have {estimate // 2:,} of their {estimate * 3 // 2:,} left" in said
+        )
+        assert wait_until(client, first.json()["id"])["state"] == "done"
+    with BackgroundServer(scenes=scenes, video_disk_bytes=1) as live, httpx.Client(base_url=live.url) as client:
+        assert "have 1 of their 1 left" in one_line(client.post("/api/videos", json=body), 507)
+
+
+class StillPainting:
+    """A painter in place of Ray's that paints nothing until its job is stopped: the job stays running."""
+
+    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
+        while not should_stop():
+            time.sleep(0.01)
+        yield from ()
+
+
+def test_a_job_resumed_from_the_last_run_reserves_its_estimate_at_submission(tmp_path):
+    """A job the last run left queued comes back at start-up and counts at the door as this run's jobs do."""
+    path = parse_path(PATH).resolve(CAMERA)
+    estimate = video_bytes(32, 32, path.frame_count)
+    given = {"path": path_spec(path), "width": 32, "height": 32, "params": asdict(PaintParams()), "temporal": None}
+    settings = Settings(data=tmp_path, threads=1, video_disk_bytes=estimate * 3 // 2)
+    workshop = Workshop(1, 1)
+    scene = make_scene()
+    with Store(tmp_path) as store:
+        store.add_video(VideoRecord("0123456789abcdef", "tiny", given, path.frame_count, "queued", 0, "", 0.0, None, 0))
+        videos = Videos(settings, workshop, store, StillPainting())
+        try:
+            videos.resume(lambda name: scene if name == "tiny" else None)
+            assert videos.get("0123456789abcdef").state in ("queued", "running")
+            with pytest.raises(VideoRefused) as refused:
+                videos.submit(scene, path, 32, 32, PaintParams(), None)
+            assert refused.value.status == 507
+            assert f"have {estimate // 2:,} of their {estimate * 3 // 2:,} left" in str(refused.value)
+        finally:
+            videos.close()
+            workshop.close()
+
+
+def test_a_video_larger_than_its_estimate_fails_at_the_budget_and_finished_jobs_expire(scenes, tmp_path, monkeypatch):
+    monkeypatch.setattr("rcp_server.service.videos.video_bytes", lambda width, height, frames: 0)  # falls short
+    settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "data": tmp_path}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
         created = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 32, "height": 32}).json()
         status = wait_until(client, created["id"])
         assert status["state"] == "failed"
         assert status["message"] == "cannot write the video: the videos would use more than the 1 bytes allowed"
-        assert list(tmp_path.iterdir()) == []  # the partial video is gone
+        assert list((tmp_path / "videos").iterdir()) == []  # its frames and the video are gone
         time.sleep(1.2)
         assert client.get(f"/api/videos/{created['id']}").status_code == 404  # expired
+
+
+class FlakyRay:
+    """A painter in place of Ray's: its frames are flat colours by index, and its first sequence fails after
+    three frames, as Ray does when a head goes away (Ray then backs off)."""
+
+    def __init__(self):
+        self.backoff = Backoff(first_s=0.2)
+        self.asked: list[int] = []  # the first frame index of each sequence asked for
+
+    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
+        shots = list(shots)
+        self.asked.append(shots[0].index)
+        for n, shot in enumerate(shots):
+            if len(self.asked) == 1 and n == 3:
+                self.backoff.failed("Ray went away")
+                raise ClusterError("Ray went away")
+            yield np.full((height, width, 3), 20 * shot.index, np.uint8)
+
+
+def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(tmp_path):
+    settings = Settings(data=tmp_path, threads=1)
+    workshop = Workshop(1, 1)
+    painter = FlakyRay()
+    with Store(tmp_path) as store:
+        videos = Videos(settings, workshop, store, painter)
+        try:
+            job = videos.submit(make_scene(), parse_path(PATH).resolve(CAMERA), 32, 32, PaintParams(), None)
+            deadline = time.monotonic() + 30
+            messages = set()
+            while job.state not in ("done", "failed", "cancelled"):
+                messages.add(job.message)
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            assert job.state == "done", job.message
+            assert painter.asked == [0, 3]  # the three frames written were not asked for again
+            assert "Ray went away; going on from frame 3 in 1 s" in messages
+            with av.open(str(job.file)) as container:
+                frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+            np.testing.assert_allclose([np.median(f) for f in frames], [20 * k for k in range(7)], atol=2)  # H.264
+        finally:
+            videos.close()
+            workshop.close()

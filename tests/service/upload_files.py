@@ -143,3 +143,39 @@ def obj_with_nan() -> bytes:
 
 def vertices_of(data: bytes) -> np.ndarray:
     return np.asarray(trimesh.load(io.BytesIO(data), file_type="glb", force="mesh").vertices)
+
+
+def glb_edited(edit) -> bytes:
+    """The box's GLB with its glTF JSON changed by ``edit(gltf)`` (in place), packed again."""
+    data = glb()
+    json_length = struct.unpack_from("<I", data, 12)[0]
+    gltf = json.loads(data[20 : 20 + json_length])
+    edit(gltf)
+    text = json.dumps(gltf).encode()
+    text += b" " * (-len(text) % 4)
+    rest = data[20 + json_length :]  # the binary chunk, header and all
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + rest
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def glb_moved(**node) -> bytes:
+    """The box placed by its node's own ``translation``, ``scale`` or ``matrix``."""
+    return glb_edited(lambda gltf: gltf["nodes"][0].update(node))
+
+
+def glb_placed_many_times(count: int, size: int = 1) -> bytes:
+    """A small file that places one mesh ``count`` times, side by side, each a node of its own (a few dozen
+    bytes a node); the mesh is the box, or with ``size`` a grid of ``size`` x ``size`` boxes' worth of
+    triangles as declared (its accessor's count is all that is changed)."""
+
+    def edit(gltf):
+        gltf["nodes"] = [{"mesh": 0, "translation": [1.5 * k, 0, 0]} for k in range(count)]
+        gltf["scenes"] = [{"nodes": list(range(count))}]
+        gltf["accessors"][0]["count"] *= size * size
+
+    return glb_edited(edit)
+
+
+def far_obj() -> bytes:
+    """One triangle a trillion units wide."""
+    return b"v -5e11 0 0\nv 5e11 0 0\nv 0 1 0\nf 1 2 3\n"

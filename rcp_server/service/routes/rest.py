@@ -1,4 +1,4 @@
-"""REST: health, the scene list, and renders of a single painting (``POST /api/render``)."""
+"""REST: health (open to all) and renders of a single painting (``POST /api/render``)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import logging
 import threading
 import time
 
-from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi import APIRouter, HTTPException, Request, Response
 
 from ... import images
 from ...camera import Camera, CameraError
@@ -15,14 +15,13 @@ from ...cluster import ClusterError
 from ...painting import Abandoned
 from ...styles import with_style
 from .. import protocol
-from ..access import admits, require_token
+from ..access import admits
 from ..state import ServiceDep
 from ..workshop import Busy
 from . import SCENE_BODY
 
-public = APIRouter(prefix="/api")
-NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
-router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
+public = APIRouter(prefix="/api")  # the one route without the token (app.py puts it on the others)
+router = APIRouter(prefix="/api")
 
 MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
 BUSY = {"description": "every render place is taken, the render ran out of time, or Ray failed; see Retry-After"}
@@ -43,11 +42,6 @@ async def health(request: Request, service: ServiceDep) -> dict:
         "renders": service.workshop.admitted,
         "painting": service.workshop.in_progress,
     }
-
-
-@router.get("/scenes")
-async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
-    return list(service.infos.values())
 
 
 @router.post(
@@ -81,8 +75,9 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
 
     def job() -> bytes:
         size = (body.width, body.height)
-        if service.on_cluster(*size, params):  # a large render: Ray paints it, the cores here stay with the walks
-            image = service.cluster.render(scene, camera, *size, params, body.time, stop)
+        cluster = service.cluster if service.on_cluster(*size, params) else None
+        if cluster is not None:  # a large render: Ray paints it, the cores here stay with the walks
+            image = cluster.render(scene, camera, *size, params, body.time, stop)
         else:
             image = workshop.paint(scene, camera, *size, params, time=body.time, should_stop=stop).image
         return images.encode(image, fmt, body.quality)

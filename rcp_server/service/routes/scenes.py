@@ -1,26 +1,32 @@
-"""Visitors' own scenes over REST: upload a model (``POST /api/scenes``), describe one by name, delete one.
+"""Scenes over REST: the operator's listed (``GET /api/scenes``); visitors' own uploaded (``POST /api/scenes``);
+any described by name, an uploaded one deleted.
 
-The app includes this router with its own body limit (``RCP_UPLOAD_MAX_BYTES``), larger than the JSON
-routes' ``RCP_MAX_BODY_BYTES``.
+Uploads have their own body limit (``RCP_UPLOAD_MAX_BYTES``, app.py), larger than the JSON routes'
+``RCP_MAX_BODY_BYTES``.
 """
 
 from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, HTTPException, Path, Response, UploadFile
+from fastapi import APIRouter, HTTPException, Path, Request, Response, UploadFile
 from starlette.concurrency import run_in_threadpool
 
 from ...scenefile import SCENE_NAME
 from .. import protocol
-from ..access import require_token
+from ..access import presented
 from ..state import Service, ServiceDep, scene_info
-from ..uploads import Full, Refused, read_scene
-from .rest import NO_TOKEN
+from ..uploads import MEMORY_RETRY_S, Full, NoRoom, Refused, read_scene
 
-router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
+router = APIRouter(prefix="/api")
 NamePath = Annotated[str, Path(pattern=f"^{SCENE_NAME.pattern}$")]
 MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (each reading takes a core)
+
+
+@router.get("/scenes")
+async def scenes(service: ServiceDep) -> list[protocol.SceneInfo]:
+    """The operator's scenes (uploaded ones are not listed: their names are their holders' secret)."""
+    return list(service.infos.values())
 
 
 @router.post(
@@ -35,7 +41,7 @@ MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (eac
     },
     form_limits={"max_files": 1, "max_fields": 16},  # fields beside `file` are ignored; a flood of them is a 400
 )
-async def upload(file: UploadFile, response: Response, service: ServiceDep) -> protocol.SceneInfo:
+async def upload(file: UploadFile, request: Request, response: Response, service: ServiceDep) -> protocol.SceneInfo:
     """A model as a new scene: a `.glb`; a `.gltf` with its files in a `.zip`; an `.obj` alone or in a `.zip`
     with its `.mtl` and textures; a `.ply` or an `.stl`. The answer describes it as `GET /api/scenes` does
     (`uploaded` true), under a new name that only the uploader knows; use it wherever a scene name goes."""
@@ -50,13 +56,21 @@ async def upload(file: UploadFile, response: Response, service: ServiceDep) -> p
         uploads.queued += 1
         try:
             async with uploads.reading:
+                limits = settings.upload_limits(room_bytes=settings.upload_total_bytes - uploads.weight)
                 scene, weight = await run_in_threadpool(
-                    read_scene, file.file, file.filename or "", settings.upload_limits()
+                    read_scene, file.file, file.filename or "", limits, service.store.uploads_dir
                 )
         finally:
             uploads.queued -= 1
         info = scene_info(scene).model_copy(update={"uploaded": True})
-        uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes)
+        owner = presented(request.headers, request.query_params) if settings.token is not None else None
+        try:
+            uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes, owner)
+        except Full:
+            service.store.remove_upload(scene.name)  # its files, kept by read_scene
+            raise
+    except NoRoom as exc:  # what the file declares would not fit in the memory left: refused before it is built
+        raise HTTPException(503, str(exc), headers={"Retry-After": str(MEMORY_RETRY_S)}) from None
     except Refused as exc:
         raise HTTPException(422, str(exc)) from None
     except Full as full:

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 from dataclasses import asdict
 
-from fastapi import APIRouter, Depends
+from fastapi import APIRouter
 
 from ...styles import STYLES
 from .. import protocol
-from ..access import require_token
-from .rest import NO_TOKEN
 
-router = APIRouter(prefix="/api", dependencies=[Depends(require_token)], responses=NO_TOKEN)
+router = APIRouter(prefix="/api")
 
 
 @router.get("/styles")

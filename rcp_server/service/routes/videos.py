@@ -2,43 +2,21 @@
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Depends, HTTPException, Response
-from fastapi.responses import FileResponse, JSONResponse
-from fastapi.routing import APIRoute
-from starlette.types import Receive, Scope, Send
+from fastapi import APIRouter, HTTPException, Response
+from fastapi.responses import FileResponse
+from starlette.concurrency import run_in_threadpool
 
 from ...camera import CameraError
 from ...camerapath import PathError
 from ...styles import with_style
 from .. import protocol
-from ..access import require_token
 from ..state import ServiceDep
 from ..videos import VideoJob, VideoRefused
 from ..workshop import Busy
-from . import SCENE_BODY
+from . import SCENE_BODY, Responses
 
-
-class _SharedPath(APIRoute):
-    """A route whose 405 lists every method of its path in ``Allow`` (GET and DELETE share ``/{video_id}``;
-    Starlette would list only the first route's)."""
-
-    async def handle(self, scope: Scope, receive: Receive, send: Send) -> None:
-        if scope["type"] == "http" and scope["method"] not in self.methods:
-            allowed = {m for r in router.routes if isinstance(r, APIRoute) and r.path == self.path for m in r.methods}
-            answer = JSONResponse({"detail": "Method Not Allowed"}, 405, headers={"Allow": ", ".join(sorted(allowed))})
-            return await answer(scope, receive, send)
-        return await super().handle(scope, receive, send)
-
-
-NO_TOKEN = {401: {"description": "the server has a token (RCP_TOKEN) and the request did not bring it"}}
-router = APIRouter(
-    prefix="/api/videos",
-    dependencies=[Depends(require_token)],
-    responses=NO_TOKEN,
-    tags=["videos"],
-    route_class=_SharedPath,
-)
-UNKNOWN = {404: {"description": "no such video (never made, deleted, or expired)"}}
+router = APIRouter(prefix="/api/videos", tags=["videos"])
+UNKNOWN: Responses = {404: {"description": "no such video (never made, deleted, or expired)"}}
 
 
 def _status(job: VideoJob) -> protocol.VideoStatus:
@@ -54,7 +32,7 @@ def _job(service, video_id: str) -> VideoJob:
     return job
 
 
-paths = APIRouter(prefix="/api/paths", dependencies=[Depends(require_token)], responses=NO_TOKEN, tags=["videos"])
+paths = APIRouter(prefix="/api/paths", tags=["videos"])
 PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 fps; longer paths are stepped)
 
 
@@ -71,7 +49,7 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
     if scene is None:
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
-        path = body.path.resolve(scene.camera)
+        path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
     except PathError as exc:
         raise HTTPException(422, str(exc)) from None
     step = -(-path.frame_count // PREVIEW_FRAMES)
@@ -92,7 +70,9 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
         **SCENE_BODY,
         422: {"description": "a path or setting the painting cannot take, or one over a limit"},
         503: {"description": "every place in the video queue is taken; see Retry-After"},
-        507: {"description": "the stored videos use all the disk allowed to them (RCP_VIDEO_DISK_BYTES)"},
+        507: {
+            "description": "the video's estimated size does not fit in the disk left to videos (RCP_VIDEO_DISK_BYTES)"
+        },
     },
 )
 async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.VideoCreated:
@@ -101,7 +81,7 @@ async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.V
     if scene is None:
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
-        path = body.path.resolve(scene.camera)
+        path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
         params = with_style(scene.paint, body.paint.given())
         if body.width % 2 or body.height % 2:
             raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {body.width}x{body.height}")
@@ -143,4 +123,4 @@ async def file(video_id: str, service: ServiceDep) -> Response:
     job = _job(service, video_id)
     if job.state != "done":
         raise HTTPException(409, f"video {video_id} is {job.state}, not done: {job.message or 'wait for it'}")
-    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene.name}-{job.id}.mp4")
+    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene_name}-{job.id}.mp4")
