@@ -12,7 +12,6 @@ import numpy as np
 
 from . import kernels
 from .camera import RAY_DTYPE
-from .kernels.alpha import masked_rays
 from .scene import Geometry
 from .tracer import Hits, Tracer
 
@@ -39,7 +38,7 @@ def pass_masked(
     todo = np.ascontiguousarray(rays, dtype=np.int64)
     out = np.empty(len(todo), np.int64)
     for _ in range(MAX_LAYERS):
-        count = masked_rays(rays=todo, hits=hits, surfaces=bundle, out=out)
+        count = kernels.masked_rays(rays=todo, hits=hits, surfaces=bundle, out=out)
         if count == 0:
             return
         todo = out[:count].copy()

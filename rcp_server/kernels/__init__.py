@@ -4,14 +4,15 @@
 ``shade.py``: hits -> per-pixel data (``shade``); ``triangle.py``: where a ray meets the triangle it hits
 (``place_hits``); ``lookup.py``: the image-space method's lookup (``look_up``); ``seen.py`` and
 ``reuse.py``: the shortcuts of the ``fast`` setting (``resolve_seen`` finds the hit where the plain render
-already knows it, ``changed_pixels`` what must be painted again). Each releases the GIL, so tiles run on
-threads side by side with Embree, and each has a plain numpy reference in ``tests/engine`` that it is
-checked against.
+already knows it, ``changed_pixels`` what must be painted again); ``alpha.py``: which hits land on a cut-out
+(``masked_rays``, for ``alphamask.py``). Each releases the GIL, so tiles run on threads side by side with
+Embree, and each has a plain numpy reference in ``tests/engine`` that it is checked against.
 
 Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same type passed in each
 other's place must be an error, not a wrong image.
 """
 
+from .alpha import masked_rays
 from .bundles import Channels, Field, ImagePlane, Seen, Surfaces, channels, or_dummy
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
@@ -40,6 +41,7 @@ __all__ = [
     "channels",
     "fill_field",
     "look_up",
+    "masked_rays",
     "or_dummy",
     "place_hits",
     "resolve_seen",
