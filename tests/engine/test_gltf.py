@@ -250,3 +250,19 @@ def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypa
     masked = _unlit_scene(_cut_out_quad(tmp_path, mode="MASK", name="masked.glb"))
     with pytest.raises(AssertionError, match="alpha pass ran"):  # the same patch does see a scene with them
         paint(masked, CAMERA, W, H, PaintParams(iterations=1), threads=1)
+
+
+def test_a_malformed_gltf_json_yields_what_it_can_and_never_raises():
+    document = {
+        "nodes": [
+            {"children": 5, "camera": 0, "extensions": {"KHR_lights_punctual": {"light": 1}}},
+            {"children": [0, "x"]},
+        ],
+        "cameras": [{"type": "perspective", "perspective": 3}],
+        "extensions": {"KHR_lights_punctual": {"lights": [5, {"type": "spot"}]}},
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"extensions": 4}}, "alphaCutoff": "x"}, 7],
+        "scenes": [{"nodes": [1]}],
+    }
+    found = gltf.extras(document)
+    assert found.viewpoints == [] and [light.kind for light in found.lights] == ["spot"]
+    assert len(found.materials) == 2 and found.materials[0].alpha_cutoff == 0.5
