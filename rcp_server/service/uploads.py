@@ -137,6 +137,7 @@ def weight_of(scene: Scene) -> int:
                 part.corner_uv,
                 part.texture,
                 part.material.emission_texture,
+                part.material.alpha_texture,
             ):
                 count(a)
     return sum(a.nbytes for a in arrays.values()) + BVH_BYTES_PER_TRIANGLE * geometry.face_count
