@@ -144,6 +144,11 @@ def _list(gltf: dict, key: str) -> list:
     return [item if isinstance(item, dict) else {} for item in items] if isinstance(items, list) else []
 
 
+def _indices(value) -> list[int]:
+    """The integers of a JSON list (a node's children, a scene's roots); nothing for anything else."""
+    return [v for v in value if isinstance(v, int) and not isinstance(v, bool)] if isinstance(value, list) else []
+
+
 def _numbers(value, count: int, default) -> tuple:
     try:
         out = tuple(float(v) for v in value)
@@ -183,9 +188,9 @@ def world_matrices(gltf: dict) -> dict[int, np.ndarray]:
     index = gltf.get("scene", 0)
     if scenes:
         scene = scenes[index] if isinstance(index, int) and 0 <= index < len(scenes) else scenes[0]
-        roots = [r for r in scene.get("nodes", []) if isinstance(r, int)]
+        roots = _indices(scene.get("nodes"))
     else:
-        children = {c for node in nodes for c in node.get("children", []) if isinstance(c, int)}
+        children = {c for node in nodes for c in _indices(node.get("children"))}
         roots = [k for k in range(len(nodes)) if k not in children]
     world: dict[int, np.ndarray] = {}
     stack = [(r, np.eye(4)) for r in roots]
@@ -194,7 +199,7 @@ def world_matrices(gltf: dict) -> dict[int, np.ndarray]:
         if not (isinstance(k, int) and 0 <= k < len(nodes)) or k in world:  # a bad index, or a cycle
             continue
         world[k] = parent @ _local(nodes[k])
-        stack.extend((c, world[k]) for c in nodes[k].get("children", []) if isinstance(c, int))
+        stack.extend((c, world[k]) for c in _indices(nodes[k].get("children")))
     return world
 
 
@@ -230,7 +235,8 @@ def extras(gltf: dict) -> GltfExtras:
             continue
         cam = node.get("camera")
         if isinstance(cam, int) and 0 <= cam < len(cameras) and cameras[cam].get("type") == "perspective":
-            yfov = cameras[cam].get("perspective", {}).get("yfov")
+            perspective = cameras[cam].get("perspective")
+            yfov = perspective.get("yfov") if isinstance(perspective, dict) else None
             if isinstance(yfov, (int, float)) and 0 < yfov < math.pi:
                 name = str(cameras[cam].get("name") or node.get("name") or f"camera {len(out.viewpoints) + 1}")
                 out.viewpoints.append(

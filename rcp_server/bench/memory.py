@@ -43,7 +43,7 @@ loaded = status()
 painting.paint(scene, scene.camera, width, height, scene.paint, threads=threads)
 first_frame_s = time.perf_counter() - start
 painted = status()
-textures = geometry.texels.nbytes if geometry.face_count else 0
+textures = geometry.texels.nbytes if geometry.texture_id.max(initial=-1) >= 0 else 0  # not the stand-in
 print(json.dumps(dict(base=base["VmRSS"], loaded=loaded["VmRSS"] - base["VmRSS"],
     peak=painted["VmHWM"] - base["VmRSS"] if resettable else None, triangles=geometry.face_count,
     textures=textures, loaded_s=loaded_s, first_frame_s=first_frame_s)))

@@ -38,7 +38,7 @@ def _unlit_scene(path):
     return scene
 
 
-def _cut_out_quad(tmp_path, mode="MASK", **extra):
+def _cut_out_quad(tmp_path, mode="MASK", name="model.glb", **extra):
     """A red wall behind a quad whose texture is cut out (alpha 0, blue) on its left half, green on its right."""
     b = GltfBuilder()
     b.quad(BACK, material=b.material(pbrMetallicRoughness={"baseColorFactor": [1, 0, 0, 1]}))
@@ -47,7 +47,7 @@ def _cut_out_quad(tmp_path, mode="MASK", **extra):
     texels[:, 4:] = (0, 255, 0, 255)
     material = {"pbrMetallicRoughness": {"baseColorTexture": {"index": b.texture(texels)}}, "alphaMode": mode, **extra}
     b.quad(FRONT, material=b.material(**material))
-    return _write(tmp_path, b)
+    return _write(tmp_path, b, name)
 
 
 def test_the_first_camera_is_the_scenes_and_the_others_are_viewpoints(tmp_path):
@@ -99,7 +99,7 @@ def test_an_opaque_material_ignores_its_textures_alpha_and_blend_is_a_mask_at_on
     assert not opaque.geometry()[0].masked  # nothing to pass through: no alpha pass at all
     image = paint(opaque, CAMERA, W, H, PaintParams(iterations=1), threads=1).image
     np.testing.assert_allclose(image[ROW, LEFT], [0, 0, 1], atol=2e-4)  # the cut-out's own color
-    blend = _unlit_scene(_cut_out_quad(tmp_path / ".." / tmp_path.name, mode="BLEND"))
+    blend = _unlit_scene(_cut_out_quad(tmp_path, mode="BLEND", name="blend.glb"))
     image = paint(blend, CAMERA, W, H, PaintParams(iterations=1), threads=1).image
     np.testing.assert_allclose(image[ROW, LEFT], [1, 0, 0], atol=1e-6)
     # a whole BLEND surface below one half of coverage is not drawn; above, it is opaque
@@ -235,3 +235,34 @@ def test_the_geometry_keeps_a_models_textures_without_copying_them(tmp_path):
     assert geometry.texels.dtype == np.uint8 and geometry.texels.shape[1] == 3
     # the cut-out's coverage is kept apart, for the one texture whose material lets rays through
     assert geometry.alpha_texels.size == 8 * 8 and (geometry.texture_alpha_offset >= 0).sum() == 1
+
+
+def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypatch):
+    from rcp_server import raytrace
+
+    def refuse(*args):
+        raise AssertionError("the alpha pass ran for a scene without cut-outs")
+
+    monkeypatch.setattr(raytrace, "pass_masked", refuse)
+    scene = _unlit_scene(_cut_out_quad(tmp_path, mode="OPAQUE"))
+    for fast, spp in ((False, 1), (True, 1), (True, 2)):
+        paint(scene, CAMERA, W, H, PaintParams(iterations=2, spp=spp, lambda_p=2.0, fast=fast), threads=1)
+    masked = _unlit_scene(_cut_out_quad(tmp_path, mode="MASK", name="masked.glb"))
+    with pytest.raises(AssertionError, match="alpha pass ran"):  # the same patch does see a scene with them
+        paint(masked, CAMERA, W, H, PaintParams(iterations=1), threads=1)
+
+
+def test_a_malformed_gltf_json_yields_what_it_can_and_never_raises():
+    document = {
+        "nodes": [
+            {"children": 5, "camera": 0, "extensions": {"KHR_lights_punctual": {"light": 1}}},
+            {"children": [0, "x"]},
+        ],
+        "cameras": [{"type": "perspective", "perspective": 3}],
+        "extensions": {"KHR_lights_punctual": {"lights": [5, {"type": "spot"}]}},
+        "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"extensions": 4}}, "alphaCutoff": "x"}, 7],
+        "scenes": [{"nodes": [1]}],
+    }
+    found = gltf.extras(document)
+    assert found.viewpoints == [] and [light.kind for light in found.lights] == ["spot"]
+    assert len(found.materials) == 2 and found.materials[0].alpha_cutoff == 0.5

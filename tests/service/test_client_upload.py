@@ -52,3 +52,26 @@ def test_a_model_picked_in_the_page_uploads_with_progress_and_is_walked_through(
         wait_final(page)
         assert page.evaluate("rcp.state.scene.name") == scene["name"]
         assert page.evaluate("rcp.uploads.group.children.length") == 1
+
+
+def test_a_models_other_cameras_are_offered_as_viewpoints(browser, live_server):  # noqa: F811
+    from engine.gltf_helpers import GltfBuilder
+
+    b = GltfBuilder()
+    b.quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], material=b.material())
+    b.camera("Front", (0, 0, 4))
+    b.camera("Far away", (0, 0, 12), yfov_degrees=20)
+    with client(browser, live_server.url) as page:
+        wait_final(page)
+        assert page.is_hidden("#viewpoint-row")  # the village brings no cameras of its own
+        page.set_input_files(
+            "#upload-file", files=[{"name": "cams.glb", "mimeType": "model/gltf-binary", "buffer": b.glb()}]
+        )
+        page.wait_for_function("rcp.state.scene?.uploaded === true", timeout=30_000)
+        assert page.is_visible("#viewpoint-row")
+        options = page.evaluate("[...document.querySelectorAll('#viewpoint option')].map((o) => o.textContent)")
+        assert options == ["the scene's camera", "Far away"]
+        page.select_option("#viewpoint", label="Far away")
+        assert page.evaluate("rcp.walk.walk.eye") == [0, 0, 12]
+        page.click("#reset-camera")
+        assert page.evaluate("rcp.walk.walk.eye") == [0, 0, 4] and page.input_value("#viewpoint") == ""
