@@ -238,6 +238,8 @@ def test_the_geometry_keeps_a_models_textures_without_copying_them(tmp_path):
 
 
 def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypatch):
+    """The pass is skipped unless a scene has cut-outs: a tile's compiled iteration reads it from its
+    ``Trace``, and the visible-surface pass (fast, 2 spp) never calls it."""
     from rcp_server import raytrace
 
     def refuse(*args):
@@ -245,11 +247,13 @@ def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypa
 
     monkeypatch.setattr(raytrace, "pass_masked", refuse)
     scene = _unlit_scene(_cut_out_quad(tmp_path, mode="OPAQUE"))
+    assert not raytrace.Frame.of(scene, 0.0, CAMERA, PaintParams()).trace.masked
     for fast, spp in ((False, 1), (True, 1), (True, 2)):
         paint(scene, CAMERA, W, H, PaintParams(iterations=2, spp=spp, lambda_p=2.0, fast=fast), threads=1)
     masked = _unlit_scene(_cut_out_quad(tmp_path, mode="MASK", name="masked.glb"))
+    assert raytrace.Frame.of(masked, 0.0, CAMERA, PaintParams()).trace.masked
     with pytest.raises(AssertionError, match="alpha pass ran"):  # the same patch does see a scene with them
-        paint(masked, CAMERA, W, H, PaintParams(iterations=1), threads=1)
+        paint(masked, CAMERA, W, H, PaintParams(iterations=2, spp=2, lambda_p=2.0), threads=1)
 
 
 def test_a_malformed_gltf_json_yields_what_it_can_and_never_raises():
