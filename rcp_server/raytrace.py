@@ -296,7 +296,7 @@ class TracedTile:
                 normal="normal" in reads,
                 direction="direction" in reads,
                 # colors compare in display levels while the eyes rest; with moving eyes every shortcut is exact
-                color_levels=kernels.DISPLAY_LEVELS if params.lambda_e == 0.0 else 0,
+                color_levels=kernels.REUSE_LEVELS if params.lambda_e == 0.0 else 0,
             ),
             before=kernels.channels(before if compare else state),
             previous=kernels.channels(state),

@@ -1,8 +1,8 @@
-"""``rcp bench levels``: is comparing colors in 8 display levels (the ``fast`` setting's reuse of pixels whose
-color settled) a smaller change to a painting than a change of seed?
+"""``rcp bench levels``: is comparing colors in quarter display levels (``kernels.REUSE_LEVELS``: the ``fast``
+setting's reuse of pixels whose color settled) a smaller change to a painting than a change of seed?
 
 Each shipped scene is painted with its own settings at 4 samples per pixel three times, all ``fast``:
-colors compared bit for bit, in display levels (the convention), and bit for bit with another seed.
+colors compared bit for bit, in the reuse's levels (the convention), and bit for bit with another seed.
 """
 
 from __future__ import annotations
@@ -26,17 +26,17 @@ def difference(a: np.ndarray, b: np.ndarray) -> str:
 
 def levels(width: int, height: int, scenes=SCENES) -> None:
     print(f"{width}x{height}, 4 spp, each scene's own painting settings, fast")
-    convention = kernels.DISPLAY_LEVELS
+    convention = kernels.REUSE_LEVELS
     try:
         for name in scenes:
             scene = load_scene(name)
             params = replace(scene.paint, spp=4)
-            kernels.DISPLAY_LEVELS = 0  # colors compared bit for bit: a pixel is kept only if exactly the same
+            kernels.REUSE_LEVELS = 0  # colors compared bit for bit: a pixel is kept only if exactly the same
             bits = paint(scene, scene.camera, width, height, params).image
             other_seed = paint(scene, scene.camera, width, height, replace(params, seed=params.seed + 1)).image
-            kernels.DISPLAY_LEVELS = convention
+            kernels.REUSE_LEVELS = convention
             shown = paint(scene, scene.camera, width, height, params).image
             print(f"{name:8s} display levels against bits: {difference(shown, bits)}")
             print(f"{'':8s} another seed against bits:    {difference(other_seed, bits)}")
     finally:
-        kernels.DISPLAY_LEVELS = convention
+        kernels.REUSE_LEVELS = convention

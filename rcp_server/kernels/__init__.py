@@ -32,13 +32,13 @@ from .bundles import (
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
 from .iterate import paint_iteration
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
-from .reuse import DISPLAY_LEVELS, carry, changed_pixels
+from .reuse import REUSE_LEVELS, carry, changed_pixels
 from .seen import cover_thin, resolve_seen
 from .shade import shade
 from .triangle import place_hits
 
 __all__ = [
-    "DISPLAY_LEVELS",
+    "REUSE_LEVELS",
     "EDGE_CLAMP",
     "EDGE_MIRROR",
     "EDGE_WRAP",

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from .jit import jit
@@ -23,6 +24,50 @@ from .triangle import ray_triangle
 
 SILHOUETTE = 1.1  # the farthest of four neighbouring centres' hits over the nearest, beyond which they
 # are two objects, not one surface (a surface at 85 degrees to the view changes by 3% a pixel at 640x360)
+
+
+IN_FRONT = 1e-3  # how much nearer (relative) than the plane of a ray's face a corner's hit must be to count
+
+
+@numba.njit(inline="always")
+def _corner_in_front(
+    triangles, f, ox, oy, oz, seen_face, seen_distance, corner, width, height, basis, tan_half, aspect
+):
+    """Whether one of the four centres around ``corner`` saw, by another face, something nearer than the plane
+    of face ``f`` along its own ray (seen from the eye ``o``): an object that stands before ``f`` right beside
+    the ray. A corner on the same surface, flat or bulging away, lies on or behind that plane."""
+    ax = float(triangles[f, 0, 0])
+    ay = float(triangles[f, 0, 1])
+    az = float(triangles[f, 0, 2])
+    e1x = float(triangles[f, 1, 0]) - ax
+    e1y = float(triangles[f, 1, 1]) - ay
+    e1z = float(triangles[f, 1, 2]) - az
+    e2x = float(triangles[f, 2, 0]) - ax
+    e2y = float(triangles[f, 2, 1]) - ay
+    e2z = float(triangles[f, 2, 2]) - az
+    nx = e1y * e2z - e1z * e2y
+    ny = e1z * e2x - e1x * e2z
+    nz = e1x * e2y - e1y * e2x
+    reach = (ax - ox) * nx + (ay - oy) * ny + (az - oz) * nz  # the plane's distance along n from the eye
+    for q in range(4):
+        c = corner + (q & 1) + (q >> 1) * width
+        g = seen_face[c]
+        if g < 0 or g == f:
+            continue
+        # the centre's ray, as the plain render cast it (camera.py)
+        sx = ((c % width + 0.5) / width * 2.0 - 1.0) * aspect * tan_half
+        ty = (1.0 - (c // width + 0.5) / height * 2.0) * tan_half
+        dx = basis[2, 0] + sx * basis[0, 0] + ty * basis[1, 0]
+        dy = basis[2, 1] + sx * basis[0, 1] + ty * basis[1, 1]
+        dz = basis[2, 2] + sx * basis[0, 2] + ty * basis[1, 2]
+        length = math.sqrt(dx * dx + dy * dy + dz * dz)
+        across = (dx * nx + dy * ny + dz * nz) / length
+        if across == 0.0:
+            continue
+        t_plane = reach / across
+        if t_plane > 0.0 and seen_distance[c] < t_plane * (1.0 - IN_FRONT):
+            return True
+    return False
 
 
 @jit
@@ -98,7 +143,15 @@ def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pendi
             t, u, v, inside = ray_triangle(triangles, f, ox, oy, oz, dx, dy, dz)
             if inside and t < best_t:
                 best, best_t, best_u, best_v = f, t, u, v
-        if best < 0:  # none of the candidates: something the centres did not see, Embree finds it
+        if (
+            best < 0
+            or not (f00 == f01 and f00 == f10 and f00 == f11)
+            and _corner_in_front(
+                triangles, best, ox, oy, oz, seen_face, seen_distance, corner, width, height, basis, tan_half, aspect
+            )
+        ):
+            # none of the candidates: something the centres did not see; or a corner saw something in front
+            # of the face the ray hits, whose next face (one no centre saw) may cover the ray: Embree decides
             pending[n_pending] = s
             n_pending += 1
             continue
