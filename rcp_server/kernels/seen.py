@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from .jit import jit
-from .triangle import ray_triangle
+from .triangle import corner_and_edges, ray_triangle
 
 SILHOUETTE = 1.1  # the farthest of four neighbouring centres' hits over the nearest, beyond which they
 # are two objects, not one surface (a surface at 85 degrees to the view changes by 3% a pixel at 640x360)
@@ -36,15 +36,7 @@ def _corner_in_front(
     """Whether one of the four centres around ``corner`` saw, by another face, something nearer than the plane
     of face ``f`` along its own ray (seen from the eye ``o``): an object that stands before ``f`` right beside
     the ray. A corner on the same surface, flat or bulging away, lies on or behind that plane."""
-    ax = float(triangles[f, 0, 0])
-    ay = float(triangles[f, 0, 1])
-    az = float(triangles[f, 0, 2])
-    e1x = float(triangles[f, 1, 0]) - ax
-    e1y = float(triangles[f, 1, 1]) - ay
-    e1z = float(triangles[f, 1, 2]) - az
-    e2x = float(triangles[f, 2, 0]) - ax
-    e2y = float(triangles[f, 2, 1]) - ay
-    e2z = float(triangles[f, 2, 2]) - az
+    ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z = corner_and_edges(triangles, f)
     nx = e1y * e2z - e1z * e2y
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x

@@ -14,21 +14,33 @@ from .jit import jit
 
 
 @numba.njit(inline="always")
+def corner_and_edges(triangles, f):
+    """Face ``f``'s first corner and its two edges from it, in float64: ``(ax, ay, az, e1x, e1y, e1z, e2x, e2y,
+    e2z)``."""
+    ax = float(triangles[f, 0, 0])
+    ay = float(triangles[f, 0, 1])
+    az = float(triangles[f, 0, 2])
+    return (
+        ax,
+        ay,
+        az,
+        float(triangles[f, 1, 0]) - ax,
+        float(triangles[f, 1, 1]) - ay,
+        float(triangles[f, 1, 2]) - az,
+        float(triangles[f, 2, 0]) - ax,
+        float(triangles[f, 2, 1]) - ay,
+        float(triangles[f, 2, 2]) - az,
+    )
+
+
+@numba.njit(inline="always")
 def ray_triangle(triangles, f, ox, oy, oz, dx, dy, dz):
     """Moller-Trumbore in double precision, both sides (Embree culls no back faces): ``(t, u, v, inside)``
     for the ray ``o + t d`` and triangle ``f`` of ``triangles`` (F, 3, 3); u, v weigh its second and third
     corner; ``inside``: the ray meets the triangle at t > 0 (t, u, v are those of its plane even when not)."""
     # float32 in, float64 throughout: the same bits wherever it is inlined
     ox, oy, oz, dx, dy, dz = float(ox), float(oy), float(oz), float(dx), float(dy), float(dz)
-    ax = float(triangles[f, 0, 0])
-    ay = float(triangles[f, 0, 1])
-    az = float(triangles[f, 0, 2])
-    e1x = float(triangles[f, 1, 0]) - ax
-    e1y = float(triangles[f, 1, 1]) - ay
-    e1z = float(triangles[f, 1, 2]) - az
-    e2x = float(triangles[f, 2, 0]) - ax
-    e2y = float(triangles[f, 2, 1]) - ay
-    e2z = float(triangles[f, 2, 2]) - az
+    ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z = corner_and_edges(triangles, f)
     px = dy * e2z - dz * e2y
     py = dz * e2x - dx * e2z
     pz = dx * e2y - dy * e2x

@@ -51,6 +51,36 @@ def room():
     return make_scene(objects, light=light)
 
 
+def _displaced_rays(scene) -> tuple[Rays, Hits]:
+    """The rays of a painted second iteration of ``scene`` (lambda 9, noise 0.5) and what Embree says they hit."""
+    params = PaintParams(lambda_p=9.0, noise=0.5, iterations=2)
+    state = paint(scene, CAMERA, W, H, params).state
+    rays = Rays.allocate(W * H, 1)
+    assign_cameras(state, setup_tile(CAMERA, Region(W, H), params), params, params.focus(CAMERA), rays)
+    return rays, scene.geometry(0.0)[1].intersect(rays.origins, rays.directions)
+
+
+def _decided(scene, rays: Rays, seen: kernels.Seen) -> tuple[np.ndarray, Hits]:
+    """Which rays ``kernels.resolve_seen`` decides with ``seen``, (n,) bool, and the hits it gives them."""
+    n = W * H
+    hits = Hits.misses(n)
+    hits.face[:] = -7
+    pending = np.empty(n, np.int64)
+    left = kernels.resolve_seen(
+        origins=rays.origins,
+        directions=rays.directions,
+        count=n,
+        plane=kernels.ImagePlane.of(CAMERA, Region(W, H)),
+        seen=seen,
+        triangles=scene.geometry(0.0)[0].triangles,
+        hits=hits,
+        pending=pending,
+    )
+    done = np.ones(n, bool)
+    done[pending[:left]] = False
+    return done, hits
+
+
 def _close_share(a: np.ndarray, b: np.ndarray) -> float:
     return float((np.abs(a - b).max(axis=2) <= 2 / 255 + 1e-6).mean())
 
@@ -68,41 +98,19 @@ def test_no_centre_sees_the_bars_and_yet_no_ray_is_decided_through_them(room):
     region = Region(W, H)
     seen = kernels.Seen.empty(W, H)
     visible_faces(room, 0.0, CAMERA, region, seen)
-    geometry, tracer = room.geometry(0.0)
+    geometry = room.geometry(0.0)[0]
     tint = primitive("box", extents=(1, 1, 1)).tinted(BAR_COLOR).corner_colors[0, 0]
     bar = np.all(geometry.colors[:, 0] == tint, axis=1)  # (F,) the bars' faces
     seen_bars = bar[seen.face[seen.face >= 0]].mean()
     assert seen_bars < 0.02  # a few centres: most of the bars lie between them
-    params = PaintParams(lambda_p=9.0, noise=0.5, iterations=2)
-    state = paint(room, CAMERA, W, H, params).state
-    rays = Rays.allocate(region.pixel_count, 1)
-    assign_cameras(state, setup_tile(CAMERA, region, params), params, params.focus(CAMERA), rays)
-    truth = tracer.intersect(rays.origins, rays.directions)
+    rays, truth = _displaced_rays(room)
     n = region.pixel_count
 
     def decided_wrongly(with_thin_parts: bool) -> int:
         grid = kernels.Seen(seen.face, seen.distance, np.full(n, np.inf, np.float32), W, H)
         if with_thin_parts:
             thin_parts(room, 0.0, CAMERA, region, grid)
-        hits = tracer.intersect(rays.origins[:1], rays.directions[:1])._replace(
-            face=np.full(n, -7, np.int32),
-            t=np.empty(n, np.float32),
-            b1=np.empty(n, np.float32),
-            b2=np.empty(n, np.float32),
-        )
-        pending = np.empty(n, np.int64)
-        left = kernels.resolve_seen(
-            origins=rays.origins,
-            directions=rays.directions,
-            count=n,
-            plane=kernels.ImagePlane.of(CAMERA, region),
-            seen=grid,
-            triangles=geometry.triangles,
-            hits=hits,
-            pending=pending,
-        )
-        done = np.ones(n, bool)
-        done[pending[:left]] = False
+        done, hits = _decided(room, rays, grid)
         return int((done & (hits.face != truth.face)).sum())
 
     hit_bars = bar[truth.face[truth.face >= 0]].sum()
@@ -164,28 +172,8 @@ def test_a_panel_just_before_a_wall_is_never_decided_through():
     seen = kernels.Seen.empty(W, H)
     visible_faces(scene, 0.0, CAMERA, region, seen)
     thin_parts(scene, 0.0, CAMERA, region, seen)
-    params = PaintParams(lambda_p=9.0, noise=0.5, iterations=2)
-    state = paint(scene, CAMERA, W, H, params).state
-    rays = Rays.allocate(region.pixel_count, 1)
-    assign_cameras(state, setup_tile(CAMERA, region, params), params, params.focus(CAMERA), rays)
-    geometry, tracer = scene.geometry(0.0)
-    truth = tracer.intersect(rays.origins, rays.directions)
-    n = region.pixel_count
-    hits = Hits.misses(n)
-    hits.face[:] = -7
-    pending = np.empty(n, np.int64)
-    left = kernels.resolve_seen(
-        origins=rays.origins,
-        directions=rays.directions,
-        count=n,
-        plane=kernels.ImagePlane.of(CAMERA, region),
-        seen=seen,
-        triangles=geometry.triangles,
-        hits=hits,
-        pending=pending,
-    )
-    done = np.ones(n, bool)
-    done[pending[:left]] = False
+    rays, truth = _displaced_rays(scene)
+    done, hits = _decided(scene, rays, seen)
     assert done.mean() > 0.8  # the shortcut still decides most rays
     wrong = done & (hits.face != truth.face)
     # only ties may differ: a ray through an edge the two faces share, at the same distance
