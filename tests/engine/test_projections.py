@@ -27,7 +27,6 @@ from rcp_server.meshes import primitive
 from rcp_server.painting import paint, see, seen_grid
 from rcp_server.paintstate import PaintState
 from rcp_server.params import EDGES, PaintParams
-from rcp_server.raytrace import setup_tile
 from rcp_server.scene import Environment, Light, SceneObject
 
 EYE = Camera((0.2, 0.1, 0.3), (0.9, 0.0, -2.0), fov=60.0)
