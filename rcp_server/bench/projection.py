@@ -46,7 +46,7 @@ def costs(scene: Scene, width: int, repeats: int) -> dict[str, float]:
     times: dict[str, list[float]] = {}
     for fast in (True, False):
         params = replace(scene.paint, fast=fast)
-        for name, camera in kinds.items():
+        for camera in kinds.values():
             _timed(scene, camera, width, height, params)  # compiled, and the scene built, before timing
         for _ in range(repeats):
             for name, camera in kinds.items():
@@ -71,6 +71,7 @@ def rivalry(scene: Scene, camera: Camera, width: int, height: int, params: Paint
     region = Region(*full)
     i, j = region.pixel_coords()
     eyes, _, _, f = pixel_frames(camera, region, i, j)
+    assert seen.direction is not None and seen.depth is not None, "the probe reads both"
     direction = seen.direction.astype(np.float64)
     along = seen.depth / np.einsum("ij,ij->i", direction, f)
     points = eyes + along[:, None] * direction
@@ -80,7 +81,7 @@ def rivalry(scene: Scene, camera: Camera, width: int, height: int, params: Paint
     # each column has its own), the nearest pixel
     target = np.empty(len(left), np.int64)
     right_eye = np.broadcast_to(np.asarray(camera.eye, np.float64), (len(left), 3))
-    ok = np.ones(len(left), bool)
+    ok: np.ndarray = np.ones(len(left), bool)
     for _ in range(2):
         x, y, ok = project(camera, region, np.ones(len(left), np.int64), points[left] - right_eye)
         x = np.clip(np.rint(x), 0, region.full_width - 1).astype(np.int64)
