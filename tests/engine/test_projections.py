@@ -227,6 +227,33 @@ def test_fast_is_within_two_levels_of_exact_on_every_projection(surround, name, 
     assert np.abs(exact.image - exact.iterations[0]).max() > 0.2  # the painting did move
 
 
+@pytest.mark.parametrize("name", ["equirect", "perspective top-bottom", "equirect top-bottom"])
+def test_temporal_mode_continues_each_eyes_painting_and_fast_stays_within_the_bound(surround, name):
+    """Frames that go on from the one before (each eye from its own), a step apart: fast against exact, and the
+    shared eyes' mode against its own exact painting."""
+    for camera in (CAMERAS[name], CAMERAS[name].moved(eyes="shared")):
+        params = PaintParams(lambda_p=12.0, iterations=2)
+        exact = fast = None
+        for k in range(3):
+            step = camera.moved(eye=tuple(np.add(camera.eye, (0.05 * k, 0.0, -0.05 * k))))
+            exact = paint(surround, step, *_size(step), replace(params, fast=False), previous=exact and exact.state)
+            fast = paint(surround, step, *_size(step), params, previous=fast and fast.state)
+        assert _close_share(fast.image, exact.image) >= 0.99
+        fresh = paint(surround, step, *_size(step), replace(params, fast=False)).image
+        assert np.abs(exact.image - fresh).max() > 0.1  # it did continue, not start again
+
+
+@pytest.mark.parametrize("name", ["equirect", "perspective side-by-side"])
+def test_the_image_method_continues_a_panorama_and_a_pair(surround, name):
+    camera = CAMERAS[name]
+    params = PaintParams(lambda_p=6.0, iterations=2, method="image")
+    first = paint(surround, camera, *_size(camera), params)
+    again = paint(surround, camera, *_size(camera), params, previous=first.state)
+    plain = paint(surround, camera, *_size(camera), PaintParams(iterations=1)).image
+    assert np.abs(again.image - first.image).max() > 0.05 and np.abs(first.image - plain).max() > 0.1
+    assert np.isfinite(again.image).all() and (again.image >= 0).all() and (again.image <= 1).all()
+
+
 @pytest.mark.parametrize("name", sorted(CAMERAS))
 def test_a_tile_across_the_eyes_equals_its_crop(surround, name):
     camera = CAMERAS[name]
