@@ -61,9 +61,10 @@ def _displaced_rays(scene) -> tuple[Rays, Hits]:
     return rays, scene.geometry(0.0)[1].intersect(rays.origins, rays.directions)
 
 
-def _decided(scene, rays: Rays, seen: kernels.Seen) -> tuple[np.ndarray, Hits]:
-    """Which rays ``kernels.resolve_seen`` decides with ``seen``, (n,) bool, and the hits it gives them."""
-    n = W * H
+def _decided(scene, rays: Rays, seen: kernels.Seen, camera: Camera = CAMERA) -> tuple[np.ndarray, Hits]:
+    """Which rays ``kernels.resolve_seen`` decides with ``seen`` (of ``camera``'s painting, one ray a pixel), (n,)
+    bool, and the hits it gives them."""
+    n = seen.width * seen.height
     hits = Hits.misses(n)
     hits.face[:] = -7
     pending = np.empty(n, np.int64)
@@ -71,7 +72,7 @@ def _decided(scene, rays: Rays, seen: kernels.Seen) -> tuple[np.ndarray, Hits]:
         origins=rays.origins,
         directions=rays.directions,
         count=n,
-        plane=kernels.ImagePlane.of(CAMERA, Region(W, H)),
+        plane=kernels.ImagePlane.of(camera, Region(seen.width, seen.height)),
         seen=seen,
         triangles=scene.geometry(0.0)[0].triangles,
         hits=hits,
@@ -237,21 +238,6 @@ def test_no_ray_of_a_panorama_is_decided_through_the_bars(room):
     n = region.pixel_count
     grid = kernels.Seen(seen.face, seen.distance, np.full(n, np.inf, np.float32), width, height)
     thin_parts(room, 0.0, camera, region, grid)
-    hits = Hits.misses(n)
-    pending = np.empty(n, np.int64)
-    left = kernels.resolve_seen(
-        origins=rays.origins,
-        directions=rays.directions,
-        count=n,
-        plane=kernels.ImagePlane.of(camera, region),
-        seen=grid,
-        triangles=room.geometry(0.0)[0].triangles,
-        hits=hits,
-        pending=pending,
-        pixels=np.arange(n),
-        spp=1,
-    )
-    done = np.ones(n, bool)
-    done[pending[:left]] = False
+    done, hits = _decided(room, rays, grid, camera)
     assert done.mean() > 0.5  # the grid decides most rays ...
     assert int((done & (hits.face != truth.face)).sum()) <= 2  # ... and almost none wrongly

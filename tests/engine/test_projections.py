@@ -9,7 +9,7 @@ from dataclasses import replace
 import numba
 import numpy as np
 import pytest
-from conftest import facing_plane, make_scene, sphere, translate
+from conftest import facing_plane, make_scene, noise_texture, sphere, translate, wavy_sky
 
 from rcp_server import kernels
 from rcp_server.bench.projection import rivalry
@@ -170,10 +170,7 @@ def _painting(camera: Camera, stereo: str) -> tuple[int, int]:
 def surround():
     """Things in every direction around EYE (ahead, behind across the panorama's seam, to the sides, above and
     below), some thinner than a pixel, a textured wall, a panorama sky, a light."""
-    rng = np.random.default_rng(7)
-    texture = rng.uniform(0, 1, (64, 64, 3)).astype(np.float32)
-    u, v = np.meshgrid(np.linspace(0, 1, 64), np.linspace(0, 1, 32))
-    sky = np.stack([u, v, 0.5 + 0.5 * np.sin(12 * u)], axis=2).astype(np.float32)
+    texture = noise_texture(7)
     objects = [
         facing_plane(9.0, size=(30.0, 8.0), divisions=(6, 2), texture=texture, center=(0.0, -3.0), uv_repeat=(4, 1)),
         sphere((-1.4, 0.4, -5.0), 1.0, 3, (0.9, 0.2, 0.1), "red"),
@@ -187,7 +184,7 @@ def surround():
         SceneObject("floor", *_floor()),
     ]
     light = Light(tuple(np.array([-0.3, -1.0, -0.4]) / np.linalg.norm([-0.3, -1.0, -0.4])), 0.3)
-    return make_scene(objects, camera=EYE, light=light, environment=Environment(sky))
+    return make_scene(objects, camera=EYE, light=light, environment=wavy_sky())
 
 
 def _pole(x: float, z: float, radius: float) -> SceneObject:
