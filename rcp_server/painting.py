@@ -124,6 +124,7 @@ def paint(
         raise ValueError("region belongs to an image of another size")
     if params.method == "image" and region != Region(width, height):
         raise ValueError("the image-space method needs the full image: its lookups reach anywhere on screen")
+    scene.check_names(params)
     if previous is None or previous.region != region:
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
@@ -206,7 +207,7 @@ def paint(
         lookups = params.iterations if temporal else params.iterations - 1
         kept = (keep if temporal else keep[1:]) if keep is not None else None
         looked = run(
-            lambda tile: imagespace.tile_iteration(plain, setup_tile(camera, tile, params), params),
+            lambda tile: imagespace.tile_iteration(plain, setup_tile(camera, tile, params), params, frame.looks),
             start,
             lookups,
             kept,
@@ -240,7 +241,9 @@ def uses_seen(params: PaintParams) -> bool:
     (``kernels.resolve_seen``), in a scene with triangles: with ``fast``, traced, eyes at rest (every ray
     starts at the eye) and targets that move (else every iteration casts the first one's rays, and the exact
     painting costs nothing more), and more than one ray a pixel. Not the region's size: a tile must be a crop."""
-    fast = params.fast and params.method == "raytrace" and params.lambda_e == 0.0 and params.lambda_p != 0.0
+    looks = params.looks()
+    eyes_rest = all(look.lambda_e == 0.0 for look in looks)
+    fast = params.fast and params.method == "raytrace" and eyes_rest and any(look.lambda_p != 0.0 for look in looks)
     return fast and params.iterations * params.spp > 1
 
 

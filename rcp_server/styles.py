@@ -13,7 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from .params import PAINT_SETTINGS, PaintParams
+from .params import PAINT_SETTINGS, PER, PaintParams, as_dict
 
 STYLE = "style"
 """The name under which a style travels among painting settings (a ``paint`` body or message)."""
@@ -106,8 +106,18 @@ def get_style(name: str) -> Style:
 
 def with_style(base: PaintParams, settings: Mapping[str, Any]) -> PaintParams:
     """``base`` (a scene's painting) with the style that ``settings`` names (under :data:`STYLE`, if any),
-    then the other ``settings`` (name -> value), in their place: explicit settings beat the style's."""
+    then the other ``settings`` (name -> value), in their place: explicit settings beat the style's. Settings
+    per object and per material (``objects``, ``materials``: name -> settings) merge into the base's, name by
+    name and setting by setting."""
     given = dict(settings)
     name = given.pop(STYLE, None)
     style = {} if name is None else get_style(name).settings
+    for per in PER:
+        if per in given:
+            merged = as_dict(getattr(base, per))
+            for key, values in dict(given[per]).items():
+                merged[key] = {**merged.get(key, {}), **(values if isinstance(values, Mapping) else {})}
+                if not isinstance(values, Mapping):
+                    raise ValueError(f"{per}.{key}: give a table of settings, got {values!r}")
+            given[per] = merged
     return replace(base, **{**style, **given})

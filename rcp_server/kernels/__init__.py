@@ -22,12 +22,14 @@ from .bundles import (
     Field,
     ImagePlane,
     Scratch,
+    Records,
     Seen,
     Shading,
     Surfaces,
     Trace,
     channels,
     or_dummy,
+    records,
 )
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
 from .iterate import paint_iteration
@@ -52,6 +54,7 @@ __all__ = [
     "Compare",
     "Field",
     "ImagePlane",
+    "Records",
     "Scratch",
     "Seen",
     "Shading",
@@ -69,6 +72,7 @@ __all__ = [
     "paint_iteration",
     "pass_masked",
     "place_hits",
+    "records",
     "resolve_seen",
     "shade",
 ]

@@ -39,14 +39,12 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
             before=before,
             after=previous,
             color=compare.color,
-            depth=compare.depth,
-            normal=compare.normal,
-            direction=compare.direction,
+            channels=compare.channels,
             color_levels=compare.color_levels,
             out=scratch.changed,
         )
         pixels = scratch.changed[:count]
-        carry(previous, out, pixels, shading.depth, shading.normal, shading.direction)
+        carry(previous, out, pixels, shading.records)
     else:
         count = n
         pixels = scratch.every[:n]
@@ -122,9 +120,7 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
         forward=cast.plane.basis[2],
         z_max=shading.z_max,
         out=out,
-        need_depth=shading.depth,
-        need_normal=shading.normal,
-        need_direction=shading.direction,
+        need=shading.records,
     )
     clock[0] += cast_end - start
     clock[1] += intersect_end - cast_end

@@ -155,9 +155,7 @@ def shade(
     forward,
     z_max,
     out,
-    need_depth,
-    need_normal,
-    need_direction,
+    need,
 ):
     """Shade every sample and average the samples of each pixel.
 
@@ -167,13 +165,18 @@ def shade(
     environment : (h, w, 3) float32 equirectangular; light_dir : (3,) float64 travel direction
     out : bundles.Channels of n pixels: color (n, 3) float32 displayed color in [0, 1]; depth (n,) float32
     view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
-    miss); direction (n, 3) ray direction. The channels not needed are not written.
+    miss); direction (n, 3) ray direction; and the others ``paintstate.PaintState`` describes.
+    need : bundles.Records, the channels beside color to write (the others are not written).
+    A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading).
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
     face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
+    triangles, face_object, material_bands = surfaces.triangles, surfaces.face_object, surfaces.material_bands
+    need_depth, need_normal, need_direction = need.depth, need.normal, need.direction
+    need_geometric, need_albedo, need_uv, need_position = need.geometric, need.albedo, need.uv, need.position
     material_emission, material_emission_texture = surfaces.material_emission, surfaces.material_emission_texture
     out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = len(pixels)
@@ -206,6 +209,15 @@ def shade(
             acc_nx = acc_ny = acc_nz = 0.0
             acc_dx = acc_dy = acc_dz = 0.0
             acc_z = 0.0
+            acc_gx = acc_gy = acc_gz = 0.0
+            acc_ar = acc_ag = acc_ab = 0.0
+            acc_u = acc_v = 0.0
+            acc_px = acc_py = acc_pz = 0.0
+            front = face[m * spp]  # object and material are the first sample's: an index does not average
+            if need.object:
+                out.object[pix] = face_object[front] if front >= 0 else -1.0
+            if need.material:
+                out.material[pix] = face_material[front] if front >= 0 else -1.0
             for s in range(m * spp, (m + 1) * spp):
                 f = face[s]
                 dx = directions[s, 0]
@@ -239,11 +251,18 @@ def shade(
                         ny *= inv
                         nz *= inv
                     mat = face_material[f]
+                    if need_albedo:
+                        acc_ar += r
+                        acc_ag += g
+                        acc_ab += b
                     if lit and not material_unlit[mat]:
                         # two-sided: light the side the ray sees
                         facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-                        lambert = -facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2])
-                        k = ambient + (1.0 - ambient) * max(lambert, 0.0)
+                        lambert = max(-facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2]), 0.0)
+                        bands = material_bands[mat]
+                        if bands > 0 and lambert > 0.0:  # toon: the lit side in flat bands, the last one full light
+                            lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
+                        k = ambient + (1.0 - ambient) * lambert
                         r *= k
                         g *= k
                         b *= k
@@ -274,6 +293,29 @@ def shade(
                         acc_nx += nx
                         acc_ny += ny
                         acc_nz += nz
+                    if need_geometric:  # the triangle's own normal, on the side of the shading normal
+                        ax = triangles[f, 1, 0] - triangles[f, 0, 0]
+                        ay = triangles[f, 1, 1] - triangles[f, 0, 1]
+                        az = triangles[f, 1, 2] - triangles[f, 0, 2]
+                        bx = triangles[f, 2, 0] - triangles[f, 0, 0]
+                        by = triangles[f, 2, 1] - triangles[f, 0, 1]
+                        bz = triangles[f, 2, 2] - triangles[f, 0, 2]
+                        gx = ay * bz - az * by
+                        gy = az * bx - ax * bz
+                        gz = ax * by - ay * bx
+                        glen = math.sqrt(gx * gx + gy * gy + gz * gz)
+                        ginv = 0.0 if glen == 0.0 else (-1.0 if gx * nx + gy * ny + gz * nz < 0.0 else 1.0) / glen
+                        acc_gx += gx * ginv
+                        acc_gy += gy * ginv
+                        acc_gz += gz * ginv
+                    if need_uv:
+                        acc_u += u
+                        acc_v += v
+                    if need_position:
+                        ts = t[s]
+                        acc_px += origins[s, 0] + ts * dx
+                        acc_py += origins[s, 1] + ts * dy
+                        acc_pz += origins[s, 2] + ts * dz
                 else:
                     # ---- miss: the environment, equirectangular ----
                     if not finite:
@@ -286,6 +328,14 @@ def shade(
                         r, g, b = _bilinear(env_flat, 0, env_w, env_h, sky[s - base, 0], sky[s - base, 1], False)
                     if need_depth:
                         acc_z += z_max
+                    if need_albedo:
+                        acc_ar += r
+                        acc_ag += g
+                        acc_ab += b
+                    if need_position and finite:  # the sky: a point z_max along the ray
+                        acc_px += origins[s, 0] + z_max * dx
+                        acc_py += origins[s, 1] + z_max * dy
+                        acc_pz += origins[s, 2] + z_max * dz
                 acc_r += min(max(r, 0.0), 1.0)
                 acc_g += min(max(g, 0.0), 1.0)
                 acc_b += min(max(b, 0.0), 1.0)
@@ -302,6 +352,21 @@ def shade(
                 out_normal[pix, 0] = acc_nx * inv_spp
                 out_normal[pix, 1] = acc_ny * inv_spp
                 out_normal[pix, 2] = acc_nz * inv_spp
+            if need_geometric:
+                out.geometric[pix, 0] = acc_gx * inv_spp
+                out.geometric[pix, 1] = acc_gy * inv_spp
+                out.geometric[pix, 2] = acc_gz * inv_spp
+            if need_albedo:
+                out.albedo[pix, 0] = acc_ar * inv_spp
+                out.albedo[pix, 1] = acc_ag * inv_spp
+                out.albedo[pix, 2] = acc_ab * inv_spp
+            if need_uv:
+                out.uv[pix, 0] = acc_u * inv_spp
+                out.uv[pix, 1] = acc_v * inv_spp
+            if need_position:
+                out.position[pix, 0] = acc_px * inv_spp
+                out.position[pix, 1] = acc_py * inv_spp
+                out.position[pix, 2] = acc_pz * inv_spp
             if need_direction:
                 dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
                 inv = 1.0 / dlen if dlen > 0.0 else 0.0
