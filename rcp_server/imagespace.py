@@ -25,9 +25,9 @@ import numpy as np
 
 from . import kernels
 from .camera import Camera, Region
+from .fields import Looks
 from .paintstate import PaintState, TileIteration
 from .params import EDGES, PaintParams
-from .fields import Looks
 from .raytrace import TileSetup, cameras
 from .stopwatch import Stopwatch
 

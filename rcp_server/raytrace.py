@@ -13,10 +13,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import kernels
+from . import fields, kernels
 from .alphamask import pass_masked, step_floor
 from .camera import RAY_DTYPE, Camera, Region, plane_points
-from . import fields
 from .fields import Looks
 from .mappings import MappingInput, get_mapping
 from .paintstate import PaintState

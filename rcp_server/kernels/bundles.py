@@ -20,8 +20,8 @@ Channels = namedtuple("Channels", CHANNELS)
 Channels.__doc__ = """Per-pixel data of n pixels, row-major, as PaintState holds it (fields: ``paintstate.CHANNELS``).
 
 color : (n, 3) float32;  depth, object, material : (n,) float32;  uv : (n, 2) float32;  the others
-(n, 3) float32 (``paintstate.PaintState`` says what each holds). A channel that is not recorded is a dummy (:func:`channels`): numba needs an array of the right type even where it
-reads or writes nothing."""
+(n, 3) float32 (``paintstate.PaintState`` says what each holds). A channel that is not recorded is a
+dummy (:func:`channels`): numba needs an array of the right type even where it reads or writes nothing."""
 
 
 Records = namedtuple("Records", CHANNELS[1:])  # type: ignore[misc]  # fields from the one list of channels
