@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -60,7 +61,9 @@ class MappingInput:
 
     def rows(self, pick: np.ndarray) -> MappingInput:
         """The input of the pixels ``pick`` (an index array) only."""
-        per_pixel = {name: None if (a := getattr(self, name)) is None else a[pick] for name in (*CHANNELS, "i", "j")}
+        per_pixel: dict[str, Any] = {
+            name: None if (a := getattr(self, name)) is None else a[pick] for name in (*CHANNELS, "i", "j")
+        }
         return replace(self, **per_pixel)
 
     def color_field(self) -> np.ndarray:

@@ -119,7 +119,7 @@ class PaintParams:
     def overridden(self, object: str | None, material: str | None) -> PaintParams:
         """The painting of a pixel that shows ``object`` made of ``material`` (None: a miss, or no name):
         these settings, then the material's overrides, then the object's (the more particular wins)."""
-        given = {**dict(dict(self.materials).get(material, ())), **dict(dict(self.objects).get(object, ()))}
+        given = {**dict(dict(self.materials).get(material or "", ())), **dict(dict(self.objects).get(object or "", ()))}
         return replace(self, objects=(), materials=(), **given) if given else self
 
     def looks(self) -> list[PaintParams]:
