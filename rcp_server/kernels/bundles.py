@@ -16,12 +16,15 @@ from ..camera import Camera, Region
 from ..paintstate import CHANNELS, channel_shape
 from ..tracer import Hits
 
-Channels = namedtuple("Channels", CHANNELS)
+_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
+
+Channels = namedtuple("Channels", CHANNELS, defaults=[_DUMMY[len(channel_shape(name, 1))] for name in CHANNELS[1:]])
 Channels.__doc__ = """Per-pixel data of n pixels, row-major, as PaintState holds it (fields: ``paintstate.CHANNELS``).
 
 color : (n, 3) float32;  depth, object, material : (n,) float32;  uv : (n, 2) float32;  the others
 (n, 3) float32 (``paintstate.PaintState`` says what each holds). A channel that is not recorded is a
-dummy (:func:`channels`): numba needs an array of the right type even where it reads or writes nothing."""
+dummy (:func:`channels`; the default of every channel but color): numba needs an array of the right type
+even where it reads or writes nothing."""
 
 
 Records = namedtuple("Records", CHANNELS[1:])  # type: ignore[misc]  # fields from the one list of channels
@@ -185,9 +188,6 @@ class Seen(NamedTuple):
         """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""
         rows = slice(tile.y0 * self.width, (tile.y0 + tile.height) * self.width)
         return Seen(self.face[rows], self.distance[rows], self.near[rows], self.width, tile.height)
-
-
-_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
 
 
 def or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:
