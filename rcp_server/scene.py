@@ -249,9 +249,8 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             index = packer.texture(part.texture)
             packer.alpha(index, part.material.alpha_texture)
             row = 0 if part.material.plain else packer.material(part.material)
-            corner_uv = part.corner_uv
-            keep_uv = corner_uv is not None and (index >= 0 or part.material.emission_texture is not None)
-            uvs.append(corner_uv if keep_uv and corner_uv is not None else np.zeros((len(tri), 3, 2), np.float32))
+            corner_uv = part.corner_uv  # kept untextured too: the uv channel reads them
+            uvs.append(corner_uv if corner_uv is not None else np.zeros((len(tri), 3, 2), np.float32))
             tex_ids.append(np.full(len(tri), index, np.int32))
             face_materials.append(np.full(len(tri), row, np.int32))
             face_objects.append(np.full(len(tri), names.index(obj.called), np.int32))
