@@ -183,6 +183,157 @@ export const PROTOCOL = {
    "type": "object"
   },
   "paint": {
+   "$defs": {
+    "OwnPaintModel": {
+     "additionalProperties": false,
+     "description": "The painting settings an object or a material may set for itself (those that vary per pixel).",
+     "properties": {
+      "eye_mapping": {
+       "anyOf": [
+        {
+         "enum": [
+          "color",
+          "depth",
+          "normal",
+          "cubist"
+         ],
+         "type": "string"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "eye displacement mapping",
+       "title": "Eye Mapping"
+      },
+      "grain": {
+       "anyOf": [
+        {
+         "exclusiveMinimum": 0,
+         "maximum": 1000000.0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "size of the surface noise's cells, in scene units",
+       "title": "Grain"
+      },
+      "hatch": {
+       "anyOf": [
+        {
+         "type": "boolean"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+       "title": "Hatch"
+      },
+      "lambda_e": {
+       "anyOf": [
+        {
+         "maximum": 100,
+         "minimum": -100,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "largest eye displacement, in scene units",
+       "title": "Lambda E"
+      },
+      "lambda_p": {
+       "anyOf": [
+        {
+         "maximum": 1000000.0,
+         "minimum": -1000000.0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "largest target displacement, in pixels",
+       "title": "Lambda P"
+      },
+      "mapping": {
+       "anyOf": [
+        {
+         "enum": [
+          "color",
+          "depth",
+          "normal",
+          "cubist"
+         ],
+         "type": "string"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "target displacement mapping",
+       "title": "Mapping"
+      },
+      "noise": {
+       "anyOf": [
+        {
+         "maximum": 16,
+         "minimum": 0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "screen noise: strength of a seeded random vector added per pixel",
+       "title": "Noise"
+      },
+      "surface_noise": {
+       "anyOf": [
+        {
+         "maximum": 16,
+         "minimum": 0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+       "title": "Surface Noise"
+      },
+      "surface_scale": {
+       "anyOf": [
+        {
+         "maximum": 16,
+         "minimum": 0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+       "title": "Surface Scale"
+      }
+     },
+     "title": "OwnPaintModel",
+     "type": "object"
+    }
+   },
    "additionalProperties": false,
    "description": "Change painting settings; given fields replace earlier ones, ``null`` restores the scene's default.",
    "properties": {
@@ -210,7 +361,8 @@ export const PROTOCOL = {
        "enum": [
         "color",
         "depth",
-        "normal"
+        "normal",
+        "cubist"
        ],
        "type": "string"
       },
@@ -234,6 +386,34 @@ export const PROTOCOL = {
      "default": null,
      "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
      "title": "Fast"
+    },
+    "grain": {
+     "anyOf": [
+      {
+       "exclusiveMinimum": 0,
+       "maximum": 1000000.0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "size of the surface noise's cells, in scene units",
+     "title": "Grain"
+    },
+    "hatch": {
+     "anyOf": [
+      {
+       "type": "boolean"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+     "title": "Hatch"
     },
     "iterations": {
      "anyOf": [
@@ -286,7 +466,8 @@ export const PROTOCOL = {
        "enum": [
         "color",
         "depth",
-        "normal"
+        "normal",
+        "cubist"
        ],
        "type": "string"
       },
@@ -297,6 +478,27 @@ export const PROTOCOL = {
      "default": null,
      "description": "target displacement mapping",
      "title": "Mapping"
+    },
+    "materials": {
+     "anyOf": [
+      {
+       "additionalProperties": {
+        "$ref": "#/$defs/OwnPaintModel"
+       },
+       "maxProperties": 256,
+       "propertyNames": {
+        "maxLength": 200,
+        "minLength": 1
+       },
+       "type": "object"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "settings per material of the scene, by name (merged into the scene's own)",
+     "title": "Materials"
     },
     "method": {
      "anyOf": [
@@ -327,8 +529,29 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
-     "description": "strength of a seeded random vector added per pixel",
+     "description": "screen noise: strength of a seeded random vector added per pixel",
      "title": "Noise"
+    },
+    "objects": {
+     "anyOf": [
+      {
+       "additionalProperties": {
+        "$ref": "#/$defs/OwnPaintModel"
+       },
+       "maxProperties": 256,
+       "propertyNames": {
+        "maxLength": 200,
+        "minLength": 1
+       },
+       "type": "object"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "settings per object of the scene, by name (merged into the scene's own)",
+     "title": "Objects"
     },
     "seed": {
      "anyOf": [
@@ -379,6 +602,36 @@ export const PROTOCOL = {
      "default": null,
      "description": "a named look (GET /api/styles); the settings given beside it override its own",
      "title": "Style"
+    },
+    "surface_noise": {
+     "anyOf": [
+      {
+       "maximum": 16,
+       "minimum": 0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+     "title": "Surface Noise"
+    },
+    "surface_scale": {
+     "anyOf": [
+      {
+       "maximum": 16,
+       "minimum": 0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+     "title": "Surface Scale"
     },
     "type": {
      "const": "paint",
@@ -482,6 +735,157 @@ export const PROTOCOL = {
   }
  },
  "paint": {
+  "$defs": {
+   "OwnPaintModel": {
+    "additionalProperties": false,
+    "description": "The painting settings an object or a material may set for itself (those that vary per pixel).",
+    "properties": {
+     "eye_mapping": {
+      "anyOf": [
+       {
+        "enum": [
+         "color",
+         "depth",
+         "normal",
+         "cubist"
+        ],
+        "type": "string"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "eye displacement mapping",
+      "title": "Eye Mapping"
+     },
+     "grain": {
+      "anyOf": [
+       {
+        "exclusiveMinimum": 0,
+        "maximum": 1000000.0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "size of the surface noise's cells, in scene units",
+      "title": "Grain"
+     },
+     "hatch": {
+      "anyOf": [
+       {
+        "type": "boolean"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+      "title": "Hatch"
+     },
+     "lambda_e": {
+      "anyOf": [
+       {
+        "maximum": 100,
+        "minimum": -100,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "largest eye displacement, in scene units",
+      "title": "Lambda E"
+     },
+     "lambda_p": {
+      "anyOf": [
+       {
+        "maximum": 1000000.0,
+        "minimum": -1000000.0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "largest target displacement, in pixels",
+      "title": "Lambda P"
+     },
+     "mapping": {
+      "anyOf": [
+       {
+        "enum": [
+         "color",
+         "depth",
+         "normal",
+         "cubist"
+        ],
+        "type": "string"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "target displacement mapping",
+      "title": "Mapping"
+     },
+     "noise": {
+      "anyOf": [
+       {
+        "maximum": 16,
+        "minimum": 0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "screen noise: strength of a seeded random vector added per pixel",
+      "title": "Noise"
+     },
+     "surface_noise": {
+      "anyOf": [
+       {
+        "maximum": 16,
+        "minimum": 0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+      "title": "Surface Noise"
+     },
+     "surface_scale": {
+      "anyOf": [
+       {
+        "maximum": 16,
+        "minimum": 0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+      "title": "Surface Scale"
+     }
+    },
+    "title": "OwnPaintModel",
+    "type": "object"
+   }
+  },
   "additionalProperties": false,
   "description": "Painting settings; a field left out takes the scene's value, then the engine's.",
   "properties": {
@@ -509,7 +913,8 @@ export const PROTOCOL = {
       "enum": [
        "color",
        "depth",
-       "normal"
+       "normal",
+       "cubist"
       ],
       "type": "string"
      },
@@ -533,6 +938,34 @@ export const PROTOCOL = {
     "default": null,
     "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
     "title": "Fast"
+   },
+   "grain": {
+    "anyOf": [
+     {
+      "exclusiveMinimum": 0,
+      "maximum": 1000000.0,
+      "type": "number"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "size of the surface noise's cells, in scene units",
+    "title": "Grain"
+   },
+   "hatch": {
+    "anyOf": [
+     {
+      "type": "boolean"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+    "title": "Hatch"
    },
    "iterations": {
     "anyOf": [
@@ -585,7 +1018,8 @@ export const PROTOCOL = {
       "enum": [
        "color",
        "depth",
-       "normal"
+       "normal",
+       "cubist"
       ],
       "type": "string"
      },
@@ -596,6 +1030,27 @@ export const PROTOCOL = {
     "default": null,
     "description": "target displacement mapping",
     "title": "Mapping"
+   },
+   "materials": {
+    "anyOf": [
+     {
+      "additionalProperties": {
+       "$ref": "#/$defs/OwnPaintModel"
+      },
+      "maxProperties": 256,
+      "propertyNames": {
+       "maxLength": 200,
+       "minLength": 1
+      },
+      "type": "object"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "settings per material of the scene, by name (merged into the scene's own)",
+    "title": "Materials"
    },
    "method": {
     "anyOf": [
@@ -626,8 +1081,29 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
-    "description": "strength of a seeded random vector added per pixel",
+    "description": "screen noise: strength of a seeded random vector added per pixel",
     "title": "Noise"
+   },
+   "objects": {
+    "anyOf": [
+     {
+      "additionalProperties": {
+       "$ref": "#/$defs/OwnPaintModel"
+      },
+      "maxProperties": 256,
+      "propertyNames": {
+       "maxLength": 200,
+       "minLength": 1
+      },
+      "type": "object"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "settings per object of the scene, by name (merged into the scene's own)",
+    "title": "Objects"
    },
    "seed": {
     "anyOf": [
@@ -678,6 +1154,36 @@ export const PROTOCOL = {
     "default": null,
     "description": "a named look (GET /api/styles); the settings given beside it override its own",
     "title": "Style"
+   },
+   "surface_noise": {
+    "anyOf": [
+     {
+      "maximum": 16,
+      "minimum": 0,
+      "type": "number"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+    "title": "Surface Noise"
+   },
+   "surface_scale": {
+    "anyOf": [
+     {
+      "maximum": 16,
+      "minimum": 0,
+      "type": "number"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+    "title": "Surface Scale"
    },
    "z0": {
     "anyOf": [
@@ -777,6 +1283,10 @@ export const PROTOCOL = {
        },
        {
         "type": "string"
+       },
+       {
+        "additionalProperties": true,
+        "type": "object"
        },
        {
         "type": "null"
@@ -939,9 +1449,25 @@ export const PROTOCOL = {
       "camera": {
        "$ref": "#/$defs/CameraSpec"
       },
+      "materials": {
+       "default": [],
+       "items": {
+        "type": "string"
+       },
+       "title": "Materials",
+       "type": "array"
+      },
       "name": {
        "title": "Name",
        "type": "string"
+      },
+      "objects": {
+       "default": [],
+       "items": {
+        "type": "string"
+       },
+       "title": "Objects",
+       "type": "array"
       },
       "paint": {
        "additionalProperties": true,
@@ -1054,9 +1580,15 @@ export const ENGINE_DEFAULTS = {
  "lambda_e": 0.0,
  "z0": null,
  "noise": 0.0,
+ "surface_noise": 0.0,
+ "surface_scale": 0.0,
+ "grain": 0.05,
+ "hatch": false,
  "seed": 0,
  "z_max": null,
  "method": "raytrace",
  "edge": "mirror",
- "fast": true
+ "fast": true,
+ "objects": {},
+ "materials": {}
 };

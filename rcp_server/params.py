@@ -116,6 +116,12 @@ class PaintParams:
         changed = {name: value for name, s in PAINT_SETTINGS.items() if (value := getattr(self, name)) != s.default}
         return changed | {per: as_dict(table) for per in PER if (table := getattr(self, per))}
 
+    def settings(self) -> dict[str, Any]:
+        """Every setting by name, the overrides per object and per material as ``{name: {setting: value}}``."""
+        return {name: getattr(self, name) for name in PAINT_SETTINGS} | {
+            per: as_dict(getattr(self, per)) for per in PER
+        }
+
     def overridden(self, object: str | None, material: str | None) -> PaintParams:
         """The painting of a pixel that shows ``object`` made of ``material`` (None: a miss, or no name):
         these settings, then the material's overrides, then the object's (the more particular wins)."""

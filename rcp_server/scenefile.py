@@ -383,6 +383,7 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
             paint,
             spec.z_max,
         )
+        scene.check_names(paint)  # a [materials] table's painting for a material no object is made of
         # ---- the cameras and lights of the objects' glTF files, by name ----
         if isinstance(spec.light, str):
             scene.light = named.light(spec.light, scene)

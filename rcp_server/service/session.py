@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import time as _time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import partial
 
 from fastapi import WebSocket, WebSocketDisconnect
@@ -25,7 +25,6 @@ from ..painting import Abandoned, PaintResult, PaintState
 from ..params import PaintParams
 from ..scene import Scene
 from ..scenefile import one_line
-from ..styles import with_style
 from . import protocol
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
@@ -187,7 +186,7 @@ class Session:
     def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> PaintParams:
         """The view's painting settings, validated once here; refuses a view whose paintings could not be made:
         a bad setting, or more work than one may take."""
-        params = with_style(scene.paint, overrides)
+        params = scene.painting(overrides)
         self.settings.check_painting(width, height, params)
         return params
 
@@ -286,7 +285,7 @@ class Session:
             final=plan.final,
             temporal=plan.continues,
             quality=frame_quality(plan, job.quality),
-            paint=asdict(plan.params),
+            paint=plan.params.settings(),
             camera_id=job.camera_id,
             time=plan.time,
             dropped=0,

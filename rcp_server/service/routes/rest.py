@@ -13,7 +13,6 @@ from ... import images
 from ...camera import Camera, CameraError
 from ...cluster import ClusterError
 from ...painting import Abandoned
-from ...styles import with_style
 from .. import protocol
 from ..access import admits
 from ..state import ServiceDep
@@ -61,7 +60,7 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         camera = scene.camera if body.camera is None else Camera(**body.camera.model_dump())
-        params = with_style(scene.paint, body.paint.given())
+        params = scene.painting(body.paint.given())
         settings.check_painting(body.width, body.height, params)
     except (CameraError, ValueError) as exc:
         raise HTTPException(422, str(exc)) from None
