@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -351,6 +351,30 @@ def temporal_section(scene: Scene, width: int, height: int, params: PaintParams,
     }
 
 
+def walk(camera: Camera, distance: float) -> Camera:
+    """The camera walked ``distance`` scene units along its view (eye and look-at together)."""
+    step = camera.basis()[2] * distance
+    return camera.moved(eye=tuple(np.add(camera.eye, step)), look_at=tuple(np.add(camera.look_at, step)))
+
+
+def noise_section(scene: Scene, width: int, height: int, frames: int, step: float) -> dict:
+    """Walk flicker of the noisy styles (``styles.py``) on the paper's two kinds of randomness: each style as it
+    is (surface noise: a function of the world point) and with the same strength of screen noise instead (a
+    fixed vector per pixel, what the styles were before). Per-frame paintings of a walk of ``step`` scene units
+    a frame; flicker as in :func:`flicker`."""
+    cameras = [walk(scene.camera, step * k) for k in range(frames)]
+    plains = [paint(scene, c, width, height, replace(scene.paint, iterations=1, spp=1)).image for c in cameras]
+    out = {}
+    for name in ("fractured", "cross-hatching"):
+        surface = scene.painting({"style": name})
+        screen = replace(surface, noise=max(surface.surface_noise, surface.surface_scale), surface_noise=0.0)
+        screen = replace(screen, surface_scale=0.0, hatch=False)
+        for kind, params in (("surface", surface), ("screen", screen)):
+            images = [paint(scene, c, width, height, params).image for c in cameras]
+            out[f"{name} {kind}"] = flicker(images, plains)
+    return {"frames": frames, "step": step, "runs": out}
+
+
 # ---- the report ----
 
 
@@ -445,25 +469,31 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run(out: Path, quick: bool = False) -> dict:
-    """Measure, write ``out/stability.json`` and ``out/stability.png``, print a summary; returns the report."""
+def run(out: Path, quick: bool = False, noise_only: bool = False) -> dict:
+    """Measure, write ``out/stability.json`` and ``out/stability.png``, print a summary; returns the report.
+    ``noise_only``: the walk flicker of the two kinds of noise alone (:func:`noise_section`), printed."""
     width, height = (320, 180) if quick else (640, 360)
     frames = 8 if quick else 16
     started = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     scene = load_scene("default")
+    noise = noise_section(scene, width, height, frames, 0.05)
+    if noise_only:
+        noise_summary(noise, width, height)
+        return {"noise": noise}
     base = replace(scene.paint, lambda_e=0.0, spp=1)
     base = replace(base, lambda_p=base.lambda_p * height / 360)  # the same painting at any resolution
     edges, crops = edges_section(scene, width, height, base)
     report: dict[str, Any] = {
         "scene": "default",
         "size": [width, height],
-        "params": asdict(base),
+        "params": base.settings(),
         "edges": edges,
         "eye_displacement": eye_section(scene, width, height, base, 0.08),
         "extremes": extremes_section(scene, width, height, base, (1, 4, 16, 64, 256, 1024)),
         "convergence": convergence_section(scene, width, height, base, 20),
         "temporal": temporal_section(scene, width, height, base, frames, 0.25),
+        "noise": noise,
     }
     report["seconds"] = time.perf_counter() - started
     (out / "stability.json").write_text(json.dumps(report, indent=1))
@@ -471,6 +501,16 @@ def run(out: Path, quick: bool = False) -> dict:
     summary(report)
     print(f"wrote {out / 'stability.json'} and {out / 'stability.png'} in {report['seconds']:.0f} s")
     return report
+
+
+def noise_summary(noise: dict, width: int, height: int) -> None:
+    print(
+        f"walk of {noise['step']} units/frame over {noise['frames']} frames, {width}x{height}, per-frame paintings: "
+        "mean flicker (change beyond the plain render's) of each noisy style, on its surface noise and on screen "
+        "noise of the same strength:"
+    )
+    for name, values in noise["runs"].items():
+        print(f"  {name:26s} {np.mean(values):+.4f}")
 
 
 def summary(report: dict) -> None:
@@ -526,3 +566,4 @@ def summary(report: dict) -> None:
     print(f"temporal drift: PSNR (dB) of each ray-traced temporal frame to its camera's painting: {drift}")
     plain = ", ".join(f"{v:.1f}" for v in t["plain_psnr_to_per_frame"])
     print(f"  (the plain render's, for scale: {plain})")
+    noise_summary(report["noise"], *report["size"])

@@ -332,10 +332,10 @@ def shade(
                         acc_ar += r
                         acc_ag += g
                         acc_ab += b
-                    if need_position and finite:  # the sky: a point z_max along the ray
-                        acc_px += origins[s, 0] + z_max * dx
-                        acc_py += origins[s, 1] + z_max * dy
-                        acc_pz += origins[s, 2] + z_max * dz
+                    if need_position and finite:  # the sky: its direction alone (it stays as the eye walks)
+                        acc_px += dx
+                        acc_py += dy
+                        acc_pz += dz
                 acc_r += min(max(r, 0.0), 1.0)
                 acc_g += min(max(g, 0.0), 1.0)
                 acc_b += min(max(b, 0.0), 1.0)
