@@ -7,13 +7,15 @@ and which one each (object, material) pair takes. Its field is then
     ``V_p = lambda_p p (D (1 + surface_scale h) + surface_noise v + noise n)``,  ``V_e`` alike with ``lambda_e``
 
 ``D`` the mapping's field (``mappings.py``), ``n`` the screen noise (a fixed random vector per pixel, in the
-camera's frame: ``raytrace.setup_tile``), and ``h, v`` the **surface noise**: a seeded value noise of the
-world point the pixel saw, ``grain`` scene units a cell, so a stroke stays on its wall as the camera moves
-(:func:`surface_noise`). With ``hatch`` it is read along the line across the smudge only, so it is constant
-along the displacement and varies across it: hatch lines.
+camera's frame: ``raytrace.setup_tile``), and ``h, v`` the **surface noise** (:func:`surface_noise`): one
+seeded value per cell of ``grain`` scene units of the world, so a stroke stays on its wall as the camera
+moves. It is read where the pixel's first ray of the painting met the scene (the plain render's point), not
+where ``I_{n-1}``'s displaced ray did: read there, each iteration's noise moved the point the next one read,
+and a walk's small steps came out as flicker. With ``hatch`` it is read along the line across the smudge
+only, so it is constant along the displacement and varies across it: hatch lines.
 
 :func:`displacements` is the one full statement; ``kernels.cast_rays`` computes the common case fused (one
-look, a built-in mapping, no surface noise: :func:`fused`), checked against it in ``tests/engine``.
+look, a built-in mapping, no surface noise: :meth:`Looks.fused`), checked against it in ``tests/engine``.
 """
 
 from __future__ import annotations
@@ -82,36 +84,27 @@ class Looks:
         return any(look.lambda_e != 0.0 for look in self.looks)
 
 
+_OBLIQUE = np.linalg.qr(np.array([[0.8, 0.3, -0.5], [-0.2, 0.9, 0.4], [0.6, -0.3, 0.7]]))[0]
+"""A fixed turn of the surface noise's cells: walls square to the world's axes ran straight across floors
+and facades, one seam the width of the view."""
+
+
 def surface_noise(
     seed: int, position: np.ndarray, grain: float, across: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The surface noise at world points: ``h`` (n,) and ``v`` (n, 3) float64 in [-1, 1], smooth (trilinear
-    between cells of ``grain`` scene units, seeded values at their corners), the same at the same point
-    whatever the camera. ``across`` (n, 3) unit vectors: read only along them (and along ``position``'s
-    own normal direction is not known here), so the noise is constant across every plane they are normal to.
-    """
-    p = np.asarray(position, np.float64) / grain
+    """The surface noise at world points: ``h`` (n,) and ``v`` (n, 3) float64 in [-1, 1], one seeded value per
+    cell of ``grain`` scene units (the cells' walls are where a smudge breaks: shards), the same at the same
+    point whatever the camera, 0 where there is no point (NaN: the sky). ``across`` (n, 3) unit vectors: read
+    along them only (slabs instead of cubes), so it is constant across every plane they are normal to: with
+    the smudge in that plane, hatch lines."""
+    p = np.asarray(position, np.float64) @ _OBLIQUE / grain
     if across is not None:
-        p = np.stack([np.einsum("ij,ij->i", p, across), np.zeros(len(p)), np.zeros(len(p))], axis=1)
-    p = np.where(np.isfinite(p), p, 0.0)
-    cell = np.floor(p)
-    f = p - cell
-    w = f * f * (3.0 - 2.0 * f)  # smoothstep: no creases at the cell walls
-    corner = cell.astype(np.int64)
-    total = np.zeros((len(p), 4))
-    for dx in (0, 1):
-        for dy in (0, 1):
-            for dz in (0, 1):
-                key = (corner + np.array([dx, dy, dz])).astype(np.uint64)  # two's complement: negatives differ too
-                values = uniform(seed, STREAM_SURFACE, key[:, :1], key[:, 1:2], key[:, 2:], np.arange(4))
-                weight = (
-                    (w[:, 0] if dx else 1.0 - w[:, 0])
-                    * (w[:, 1] if dy else 1.0 - w[:, 1])
-                    * (w[:, 2] if dz else 1.0 - w[:, 2])
-                )
-                total += weight[:, None] * values
-    signed = 2.0 * total - 1.0
-    return signed[:, 0], signed[:, 1:]
+        p = np.einsum("ij,ij->i", p, across @ _OBLIQUE)[:, None] * np.array([1.0, 0.0, 0.0])
+    point = np.isfinite(p).all(axis=1, keepdims=True)  # the sky has none: no noise there
+    cell = np.floor(np.where(point, p, 0.0)).astype(np.int64).astype(np.uint64)  # negatives wrap
+    values = 2.0 * uniform(seed, STREAM_SURFACE, cell[:, :1], cell[:, 1:2], cell[:, 2:], np.arange(4)) - 1.0
+    values = np.where(point, values, 0.0)
+    return values[:, 0], values[:, 1:]
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -119,18 +112,18 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return np.divide(v, length, out=np.zeros_like(v), where=length > 0)
 
 
-def _field(data: MappingInput, look: PaintParams, mapping: str, state: PaintState, pick, screen) -> np.ndarray:
-    """``D (1 + surface_scale h) + surface_noise v + noise n`` of one look at the pixels ``pick``: (m, 3)."""
+def _field(data: MappingInput, look: PaintParams, mapping: str, points, pick, screen) -> np.ndarray:
+    """``D (1 + surface_scale h) + surface_noise v + noise n`` of one look at the pixels ``pick``: (m, 3);
+    ``points`` (n, 3): where each pixel reads the surface noise."""
     d = np.asarray(get_mapping(mapping).field(data), np.float64)
     if look.surface_noise or look.surface_scale:
-        assert state.position is not None  # recorded: PaintParams.reads asks for it
         across = None
         if look.hatch:  # along the surface, at right angles to the smudge
-            assert state.normal is not None
-            normal = np.asarray(state.normal[pick], np.float64)
+            assert data.normal is not None  # recorded: PaintParams.reads asks for it
+            normal = np.asarray(data.normal, np.float64)
             normal = np.where((np.linalg.norm(normal, axis=1) > 0)[:, None], normal, data.forward)
             across = _unit(np.cross(normal, d))
-        h, v = surface_noise(look.seed, state.position[pick], look.grain, across)
+        h, v = surface_noise(look.seed, points[pick], look.grain, across)
         d = d * (1.0 + look.surface_scale * h)[:, None] + look.surface_noise * v
     if look.noise and screen is not None:
         d = d + look.noise * screen[pick]
@@ -138,11 +131,19 @@ def _field(data: MappingInput, look: PaintParams, mapping: str, state: PaintStat
 
 
 def displacements(
-    state: PaintState, data: MappingInput, looks: Looks, pitch: float, screen: np.ndarray | None
+    state: PaintState,
+    data: MappingInput,
+    looks: Looks,
+    pitch: float,
+    screen: np.ndarray | None,
+    anchor: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(V_p, V_e)`` of every pixel from ``I_{n-1}``: two (n, 3) float64, scene units, each pixel with its own
     look (``looks.rows``). ``data``: the mapping input of the whole state; ``screen``: (n, 3) the screen noise,
-    or None. A non-finite displacement moves nothing."""
+    or None; ``anchor`` (n, 3): the world points where the surface noise is read (the painting's first
+    iteration's, ``raytrace.TracedTile``), default the points ``I_{n-1}`` recorded. A non-finite displacement
+    moves nothing."""
+    points = anchor if anchor is not None else state.position
     n = state.region.pixel_count
     v_p, v_e = np.zeros((n, 3)), np.zeros((n, 3))
     rows = looks.rows(state)
@@ -154,7 +155,7 @@ def displacements(
         for out, mapping, scale in ((v_p, look.mapping, look.lambda_p * pitch), (v_e, look.eye_mapping, look.lambda_e)):
             if scale != 0.0:
                 with np.errstate(all="ignore"):  # non-finite input moves nothing, below
-                    out[pick] = scale * _field(part, look, mapping, state, pick, screen)
+                    out[pick] = scale * _field(part, look, mapping, points, pick, screen)
     for v in (v_p, v_e):
         v[~np.isfinite(v)] = 0.0
     return v_p, v_e

@@ -123,11 +123,12 @@ def tile_iteration(
     edge = EDGES.index(params.edge)
     source = kernels.channels(plain)
     v_p = np.zeros((region.pixel_count, 3))
+    anchor = plain.rows(region).position  # the surface noise is read on the plain render's points
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
         with watch.stage("camera"):
             # V_p, the same fields as the traced method
-            cast = cameras(state, setup, params, z0, looks)
+            cast = cameras(state, setup, params, z0, looks, anchor=anchor)
             field = cast.target
             if field.kind != kernels.FIELD_ZERO:
                 kernels.fill_field(

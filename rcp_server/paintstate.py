@@ -44,8 +44,8 @@ class PaintState:
     triangle's own normal, on the shading normal's side;  object, material : (n,) float32 index into the
     scene's objects and materials (``scene.Geometry``), -1 on a miss;  albedo : (n, 3) float32 the surface's
     unlit colour (texture included), the sky's colour on a miss;  uv : (n, 2) float32 texture coordinates, 0
-    on a miss;  position : (n, 3) float32 world point seen (a miss: its direction, a point of the unit sphere:
-    the sky is infinitely far, and stays put as the eye walks).
+    on a miss;  position : (n, 3) float32 world point seen (NaN on a miss, and on a pixel
+    whose samples saw the sky in part: the sky has no point).
     Samples average, but object and material are the first sample's.
     """
 

@@ -66,17 +66,23 @@ def setup_tile(camera: Camera, region: Region, params: PaintParams) -> TileSetup
 
 
 def displacements(
-    state: PaintState, setup: TileSetup, params: PaintParams, z0: float, looks: Looks | None = None
+    state: PaintState,
+    setup: TileSetup,
+    params: PaintParams,
+    z0: float,
+    looks: Looks | None = None,
+    anchor: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(V_p, V_e)`` per pixel from ``I_{n-1}`` in plain numpy: two (n, 3) float64, scene units
-    (``fields.displacements``; ``looks``: the settings per object and material, default only ``params``).
+    (``fields.displacements``; ``looks``: the settings per object and material, default only ``params``;
+    ``anchor``: where the surface noise is read).
 
     The reference for what ``kernels.cast_rays`` computes fused; a non-finite displacement moves nothing.
     """
     i, j = setup.region.pixel_coords()
     data = MappingInput.of(state, setup.basis, z0, i, j)
     pitch = setup.camera.pixel_pitch(setup.region.full_height)
-    return fields.displacements(state, data, looks or Looks.single(params), pitch, setup.noise)
+    return fields.displacements(state, data, looks or Looks.single(params), pitch, setup.noise, anchor)
 
 
 @dataclass
@@ -105,6 +111,7 @@ def cameras(
     z0: float,
     looks: Looks | None = None,
     write_origins: bool = True,
+    anchor: np.ndarray | None = None,
 ) -> kernels.Cast:
     """The tile's cameras from ``I_{n-1}`` as ``kernels.cast_rays`` takes them (``write_origins``: False when the
     eyes rest and the ray buffers already hold the eye). The common case (``Looks.fused``) leaves the fields
@@ -121,7 +128,7 @@ def cameras(
             eye_field = kernels.Field(get_mapping(params.eye_mapping).fused, params.lambda_e, target.given)
         noise_scale = float(params.noise)
     elif moves:
-        v_p, v_e = displacements(state, setup, params, z0, looks)
+        v_p, v_e = displacements(state, setup, params, z0, looks, anchor)
         if looks.targets_move:
             target = kernels.Field(kernels.FIELD_GIVEN, 1.0, v_p.astype(np.float32))
         if looks.eyes_move:
@@ -271,12 +278,13 @@ class TracedTile:
         self.at_eye = False  # every origin in the ray buffers already is the camera's eye
         self.last: PaintState | None = None  # the state the iteration before started from
         self.clock = np.zeros(3, np.int64)
+        self.anchor: np.ndarray | None = None  # where the surface noise is read: the plain render's points
 
     def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
         params, reads, before = self.params, self.reads, self.last
         self.last = state
         compare = params.fast and before is not None and not (before.blank or state.blank) and before.has(reads)
-        cast = cameras(state, self.setup, params, self.z0, self.frame.looks)
+        cast = cameras(state, self.setup, params, self.z0, self.frame.looks, anchor=self.anchor)
         eyes_rest = cast.eye_field.kind == kernels.FIELD_ZERO
         cast = cast._replace(write_origins=not (eyes_rest and self.at_eye))
         self.at_eye = eyes_rest
@@ -304,6 +312,8 @@ class TracedTile:
             clock=self.clock,
         )
         watch.share(time.perf_counter() - clock, dict(zip(("camera", "intersect", "shade"), self.clock, strict=True)))
+        if state.blank and out.position is not None:
+            self.anchor = out.position.copy()
         if self.record_seen is not None and state.blank and params.spp == 1:
             self.record_seen.face[:] = self.scratch.hits.face
             self.record_seen.distance[:] = self.scratch.hits.t

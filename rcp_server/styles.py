@@ -80,7 +80,7 @@ STYLES: dict[str, Style] = {
             mapping="normal",
             lambda_p=14.0,
             surface_noise=0.6,
-            grain=0.3,
+            grain=0.8,
             spp=4,
         ),
         _style(
@@ -94,7 +94,7 @@ STYLES: dict[str, Style] = {
             surface_scale=1.0,
             surface_noise=0.2,
             hatch=True,
-            grain=0.06,
+            grain=0.25,
             iterations=10,
             spp=2,
         ),

@@ -357,22 +357,66 @@ def walk(camera: Camera, distance: float) -> Camera:
     return camera.moved(eye=tuple(np.add(camera.eye, step)), look_at=tuple(np.add(camera.look_at, step)))
 
 
-def noise_section(scene: Scene, width: int, height: int, frames: int, step: float) -> dict:
-    """Walk flicker of the noisy styles (``styles.py``) on the paper's two kinds of randomness: each style as it
-    is (surface noise: a function of the world point) and with the same strength of screen noise instead (a
-    fixed vector per pixel, what the styles were before). Per-frame paintings of a walk of ``step`` scene units
-    a frame; flicker as in :func:`flicker`."""
-    cameras = [walk(scene.camera, step * k) for k in range(frames)]
-    plains = [paint(scene, c, width, height, replace(scene.paint, iterations=1, spp=1)).image for c in cameras]
+def _world_points(scene: Scene, camera: Camera, width: int, height: int) -> np.ndarray:
+    """What the pixel centres see, (W*H, 3) float64 world points (NaN: the sky)."""
+    register_mapping("bench-points", {"position"}, lambda data: np.zeros((len(data.color), 3)))
+    try:
+        probe = PaintParams(iterations=1, lambda_p=0.0, lambda_e=1.0, eye_mapping="bench-points")
+        state = paint(scene, camera, width, height, probe).state
+    finally:
+        unregister_mapping("bench-points")
+    assert state.position is not None  # the probe reads it
+    return state.position.astype(np.float64)
+
+
+def carried_flicker(
+    paintings: list[np.ndarray], plains: list[np.ndarray], cameras: list[Camera], scene: Scene
+) -> list[float]:
+    """Flicker beyond the scene's own motion, per consecutive pair of frames: frame k + 1 against frame k
+    carried with the scene (each pixel looks up frame k where the world point it sees projects in frame k's
+    camera), the painting's mean difference minus the plain render's, over what both frames see of the
+    scene (not the sky). A pattern that stays on its surfaces scores 0 however fine; one that stays on the
+    screen scores what the scene moves under it."""
+    h, w = paintings[0].shape[:2]
+    out = []
+    for k in range(len(paintings) - 1):
+        points = _world_points(scene, cameras[k + 1], w, h)
+        x, y = project(cameras[k], w, h, points - np.asarray(cameras[k].eye))  # the sky (NaN) is left out
+        inside = (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
+
+        residuals = []
+        for images in (paintings, plains):
+            carried = bilinear(images[k], x[inside], y[inside], "clamp")
+            residuals.append(float(np.abs(images[k + 1].reshape(-1, 3)[inside] - carried).mean()))
+        out.append(residuals[0] - residuals[1])
+    return out
+
+
+def noise_section(scene: Scene, width: int, height: int, frames: int, step: float, degrees: float) -> dict:
+    """The noisy styles (``styles.py``) on the paper's two kinds of randomness: each style as it is (surface
+    noise, a function of the world point) and with screen noise of the same strength instead (a fixed vector
+    per pixel, what the styles were before). Per-frame paintings of a walk (``step`` scene units a frame) and
+    of a pan (``degrees`` a frame): flicker carried with the scene (:func:`carried_flicker`) and frame to frame
+    (:func:`flicker`, which counts a fine pattern moving with its surfaces as change)."""
+    moves = {
+        "walk": [walk(scene.camera, step * k) for k in range(frames)],
+        "pan": [pan(scene.camera, degrees * k) for k in range(frames)],
+    }
+    plain = replace(scene.paint, iterations=1, spp=1)
+    plains = {how: [paint(scene, c, width, height, plain).image for c in cameras] for how, cameras in moves.items()}
     out = {}
     for name in ("fractured", "cross-hatching"):
         surface = scene.painting({"style": name})
         screen = replace(surface, noise=max(surface.surface_noise, surface.surface_scale), surface_noise=0.0)
         screen = replace(screen, surface_scale=0.0, hatch=False)
         for kind, params in (("surface", surface), ("screen", screen)):
-            images = [paint(scene, c, width, height, params).image for c in cameras]
-            out[f"{name} {kind}"] = flicker(images, plains)
-    return {"frames": frames, "step": step, "runs": out}
+            run: dict[str, Any] = {}
+            for how, cameras in moves.items():
+                images = [paint(scene, c, width, height, params).image for c in cameras]
+                run[f"{how}_flicker"] = carried_flicker(images, plains[how], cameras, scene)
+                run[f"{how}_change"] = flicker(images, plains[how])
+            out[f"{name} {kind}"] = run
+    return {"frames": frames, "step": step, "degrees": degrees, "runs": out}
 
 
 # ---- the report ----
@@ -477,7 +521,7 @@ def run(out: Path, quick: bool = False, noise_only: bool = False) -> dict:
     started = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     scene = load_scene("default")
-    noise = noise_section(scene, width, height, frames, 0.05)
+    noise = noise_section(scene, width, height, frames, 0.5, 0.25)
     if noise_only:
         noise_summary(noise, width, height)
         return {"noise": noise}
@@ -505,12 +549,15 @@ def run(out: Path, quick: bool = False, noise_only: bool = False) -> dict:
 
 def noise_summary(noise: dict, width: int, height: int) -> None:
     print(
-        f"walk of {noise['step']} units/frame over {noise['frames']} frames, {width}x{height}, per-frame paintings: "
-        "mean flicker (change beyond the plain render's) of each noisy style, on its surface noise and on screen "
-        "noise of the same strength:"
+        f"noisy styles, per-frame paintings at {width}x{height} over {noise['frames']} frames, a walk of "
+        f"{noise['step']} units/frame and a pan of {noise['degrees']} degrees/frame: mean flicker carried with "
+        "the scene (beyond the plain render's) / frame-to-frame change (beyond the plain render's):"
     )
-    for name, values in noise["runs"].items():
-        print(f"  {name:26s} {np.mean(values):+.4f}")
+    for name, run in noise["runs"].items():
+        walk_, pan_ = (
+            f"{np.mean(run[f'{how}_flicker']):+.4f} / {np.mean(run[f'{how}_change']):+.4f}" for how in ("walk", "pan")
+        )
+        print(f"  {name:24s} walk {walk_}   pan {pan_}")
 
 
 def summary(report: dict) -> None:

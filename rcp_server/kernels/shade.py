@@ -332,10 +332,8 @@ def shade(
                         acc_ar += r
                         acc_ag += g
                         acc_ab += b
-                    if need_position and finite:  # the sky: its direction alone (it stays as the eye walks)
-                        acc_px += dx
-                        acc_py += dy
-                        acc_pz += dz
+                    if need_position:  # the sky has no point (a pixel partly sky neither)
+                        acc_px = acc_py = acc_pz = math.nan
                 acc_r += min(max(r, 0.0), 1.0)
                 acc_g += min(max(g, 0.0), 1.0)
                 acc_b += min(max(b, 0.0), 1.0)

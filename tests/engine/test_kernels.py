@@ -366,8 +366,7 @@ def ref_shade(
     geometric[hit] = np.where(((g * nr).sum(axis=1) < 0)[:, None], -g, g)
     uv_all = np.zeros((n, 2))
     uv_all[hit] = uvs
-    ends = np.where(hit[:, None], o + t.astype(np.float64)[:, None] * d, d)
-    position = np.where(finite[:, None], ends, 0.0)
+    position = np.where(hit[:, None], o + t.astype(np.float64)[:, None] * d, np.nan)
     front = face.reshape(-1, spp)[:, 0]
     obj = np.where(front >= 0, face_object[front], -1).astype(np.float32)
     material = np.where(front >= 0, face_material[front], -1).astype(np.float32)
