@@ -13,6 +13,8 @@ from __future__ import annotations
 
 import math
 import numbers
+import pickle
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, get_args, get_type_hints
@@ -20,7 +22,7 @@ from typing import Any, get_args, get_type_hints
 import numpy as np
 
 from .camera import Camera
-from .mappings import BUILT_IN, get_mapping
+from .mappings import BUILT_IN, MAPPINGS, get_mapping, register_mapping
 
 METHODS = ("raytrace", "image")
 """How later iterations see their displaced targets: traced (right everywhere), or looked up in the plain
@@ -116,6 +118,13 @@ class PaintParams:
         changed = {name: value for name, s in PAINT_SETTINGS.items() if (value := getattr(self, name)) != s.default}
         return changed | {per: as_dict(table) for per in PER if (table := getattr(self, per))}
 
+    def __reduce__(self):
+        """Pickled with the registered mappings it paints with (a built-in one travels by name): a painting
+        sent to another process (a Ray worker) paints there as here, though nobody registered them there."""
+        names = {name for look in self.looks() for name in (look.mapping, look.eye_mapping)}
+        carried = tuple(_by_value(get_mapping(name)) for name in sorted(names) if name not in BUILT_IN)
+        return _unpickled, (self.settings(), carried)
+
     def settings(self) -> dict[str, Any]:
         """Every setting by name, the overrides per object and per material as ``{name: {setting: value}}``."""
         return {name: getattr(self, name) for name in PAINT_SETTINGS} | {
@@ -149,6 +158,32 @@ class PaintParams:
             if look.surface_noise or look.surface_scale:
                 channels |= {"position", "normal"} if look.hatch else {"position"}
         return channels
+
+
+def _by_value(mapping) -> bytes:
+    """A registered mapping pickled with its function's code (cloudpickle, which Ray brings), not a reference
+    to the module that defined it: a Ray worker need not be able to import a script's or a test's module."""
+    try:
+        import cloudpickle
+    except ImportError:  # no Ray either: a process of ours, by reference
+        return pickle.dumps(mapping)
+    module = sys.modules.get(mapping.field.__module__)
+    if module is None or module.__name__ == "__main__":  # cloudpickle sends those by value anyway
+        return cloudpickle.dumps(mapping)
+    cloudpickle.register_pickle_by_value(module)
+    try:
+        return cloudpickle.dumps(mapping)
+    finally:
+        cloudpickle.unregister_pickle_by_value(module)
+
+
+def _unpickled(settings: dict[str, Any], carried: tuple[bytes, ...]) -> PaintParams:
+    """A pickled :class:`PaintParams` again, its registered mappings registered here first (if this process
+    does not know them by those names)."""
+    for mapping in map(pickle.loads, carried):
+        if mapping.name not in MAPPINGS:
+            register_mapping(mapping.name, mapping.reads, mapping.field)
+    return PaintParams(**settings)
 
 
 @dataclass(frozen=True)
