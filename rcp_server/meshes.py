@@ -53,6 +53,7 @@ class Material:
     drawn as a mask at 0.5; OBJ's map_d); 0: opaque
     name : what paintings call it (per-material settings); ""  has none
     bands : toon shading, the light in this many flat bands (``kernels.shade``); 0: smooth
+    outline : how dark the ink where the object, the surface normal or the depth jumps (``outlines.py``); 0 none
     """
 
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -62,6 +63,7 @@ class Material:
     alpha_texture: np.ndarray | None = None
     name: str = ""
     bands: int = 0
+    outline: float = 0.0
 
     @property
     def plain(self) -> bool:
@@ -72,6 +74,7 @@ class Material:
             and not self.alpha_cutoff
             and not self.name
             and not self.bands
+            and not self.outline
         )
 
 

@@ -128,7 +128,9 @@ def paint(
     if previous is None or previous.region != region:
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
-    frame = raytrace.Frame.of(scene, time, camera, params)  # the scene as every tile's kernels take it, once
+    frame = raytrace.Frame.of(
+        scene, time, camera, params, width, height
+    )  # the scene as every tile's kernels take it, once
     tiles = region.tiles(tile_rows(region, threads, params.spp * params.iterations))
     keep = [np.empty((height, width, 3), np.float32) for _ in range(params.iterations)] if keep_iterations else None
     if keep is not None and region != Region(width, height):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import fields, kernels
+from . import fields, kernels, outlines
 from .alphamask import pass_masked, step_floor
 from .camera import RAY_DTYPE, Camera, Region, plane_points
 from .fields import Looks
@@ -213,7 +213,10 @@ class Frame:
     looks: Looks  # the settings per object and material, as the scene's indices select them
 
     @classmethod
-    def of(cls, scene: Scene, time: float, camera: Camera, params: PaintParams) -> Frame:
+    def of(
+        cls, scene: Scene, time: float, camera: Camera, params: PaintParams, width: int = 1, height: int = 1
+    ) -> Frame:
+        """The frame of a ``width x height`` painting (its size: where outlines are drawn)."""
         geometry, tracer = scene.geometry(time)
         light = scene.light
         reads = params.reads()
@@ -226,6 +229,7 @@ class Frame:
             lit=light is not None,
             z_max=float(z_max),
             records=kernels.records(reads),
+            ink=outlines.ink(scene, time, camera, width, height),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
         trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry))

@@ -112,6 +112,7 @@ class Geometry:
     material_unlit: np.ndarray = field(default_factory=lambda: np.zeros(1, np.bool_))
     material_alpha_cutoff: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
     material_bands: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
+    material_outline: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
     material_names: list[str] = field(default_factory=lambda: [""])
     face_object: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
     object_names: list[str] = field(default_factory=list)
@@ -278,6 +279,7 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
         material_unlit=np.array([m.unlit for m in materials], dtype=np.bool_),
         material_alpha_cutoff=np.array([m.alpha_cutoff for m in materials], dtype=np.float32),
         material_bands=np.array([m.bands for m in materials], dtype=np.int32),
+        material_outline=np.array([m.outline for m in materials], dtype=np.float32),
         material_names=[m.name for m in materials],
         face_object=np.concatenate(face_objects) if face_objects else np.zeros(0, np.int32),
         object_names=names,

@@ -171,6 +171,7 @@ class MaterialSpec(_Model):
 
     shading: Literal["lit", "toon"] = "lit"
     bands: Annotated[int, Field(ge=1, le=16)] = 3  # toon: flat bands of light
+    outline: Annotated[float, Field(ge=0, le=1)] = 0.0  # ink where object, normal or depth jump (0: none)
     paint: dict[str, str | int | float | bool] = {}
 
 
@@ -360,7 +361,8 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
                 raise SceneError("light.direction must not be zero")
             light = Light(tuple(d / np.linalg.norm(d)), spec.light.ambient)
         materials = {
-            name: Material(name=name, bands=m.bands if m.shading == "toon" else 0) for name, m in spec.materials.items()
+            name: Material(name=name, bands=m.bands if m.shading == "toon" else 0, outline=m.outline)
+            for name, m in spec.materials.items()
         }
         objects = []
         for index, obj in enumerate(spec.objects):

@@ -93,6 +93,7 @@ class Surfaces(NamedTuple):
     material_unlit: np.ndarray  # (M,) bool
     material_alpha_cutoff: np.ndarray  # (M,) float32, 0 opaque (``alpha.py`` reads it)
     material_bands: np.ndarray  # (M,) int32 toon shading's bands of light, 0: smooth
+    material_outline: np.ndarray  # (M,) float32 how dark its outlines (``outlines.py``), 0: none
 
 
 class Cast(NamedTuple):
@@ -131,6 +132,21 @@ class Trace(NamedTuple):
     floor: float
 
 
+class Ink(NamedTuple):
+    """Where outlines are drawn (``outlines.py``): per pixel of the frame camera's full image, row-major, the
+    ink there and the view depth it belongs to; the camera's image plane to find a hit's pixel (perspective,
+    ``camera.py``). ``any`` False: no material draws outlines (the arrays are dummies)."""
+
+    any: bool
+    ink: np.ndarray  # (H*W,) float32 in [0, 1]
+    depth: np.ndarray  # (H*W,) float32 view depth of the surface the ink is on
+    basis: np.ndarray  # (3, 3) float64 rows r, u, f
+    tan_half: float
+    aspect: float
+    width: int
+    height: int
+
+
 class Shading(NamedTuple):
     """What ``shade.shade`` needs of a painting beyond the rays, and the channels it records."""
 
@@ -141,6 +157,7 @@ class Shading(NamedTuple):
     lit: bool
     z_max: float
     records: Records  # the channels beside color to record
+    ink: Ink  # outlines
 
 
 class Scratch(NamedTuple):

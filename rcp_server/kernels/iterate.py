@@ -121,6 +121,7 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
         z_max=shading.z_max,
         out=out,
         need=shading.records,
+        ink=shading.ink,
     )
     clock[0] += cast_end - start
     clock[1] += intersect_end - cast_end

@@ -139,6 +139,27 @@ def texel_color(texels, offset, width, height, u, v):
     return _encode(out_r), _encode(out_g), _encode(out_b)
 
 
+@numba.njit(inline="always")
+def _ink_at(ink, x, y, z, eye):
+    """The ink at the frame camera's pixel where world point (x, y, z) projects, if it lies on the surface that
+    pixel saw (its view depth within 2%); 0 elsewhere and off screen."""
+    vx = x - eye[0]
+    vy = y - eye[1]
+    vz = z - eye[2]
+    basis = ink.basis
+    depth = vx * basis[2, 0] + vy * basis[2, 1] + vz * basis[2, 2]
+    if not depth > 0.0:
+        return 0.0
+    sx = (vx * basis[0, 0] + vy * basis[0, 1] + vz * basis[0, 2]) / (depth * ink.aspect * ink.tan_half)
+    ty = (vx * basis[1, 0] + vy * basis[1, 1] + vz * basis[1, 2]) / (depth * ink.tan_half)
+    col = math.floor((sx + 1.0) * 0.5 * ink.width)
+    row = math.floor((1.0 - ty) * 0.5 * ink.height)
+    if not (0 <= col < ink.width and 0 <= row < ink.height):
+        return 0.0
+    k = int(row) * ink.width + int(col)
+    return ink.ink[k] if abs(ink.depth[k] - depth) <= 0.02 * depth else 0.0
+
+
 @jit
 def shade(
     origins,
@@ -156,6 +177,7 @@ def shade(
     z_max,
     out,
     need,
+    ink,
 ):
     """Shade every sample and average the samples of each pixel.
 
@@ -167,7 +189,9 @@ def shade(
     view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
     miss); direction (n, 3) ray direction; and the others ``paintstate.PaintState`` describes.
     need : bundles.Records, the channels beside color to write (the others are not written).
-    A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading).
+    A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading); one with
+    an outline (``surfaces.material_outline``) is inked where ``ink`` (a bundles.Ink) has ink at the hit's
+    pixel of the frame camera, on the surface of that depth.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
@@ -175,6 +199,7 @@ def shade(
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
     face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
     triangles, face_object, material_bands = surfaces.triangles, surfaces.face_object, surfaces.material_bands
+    material_outline = surfaces.material_outline
     need_depth, need_normal, need_direction = need.depth, need.normal, need.direction
     need_geometric, need_albedo, need_uv, need_position = need.geometric, need.albedo, need.uv, need.position
     material_emission, material_emission_texture = surfaces.material_emission, surfaces.material_emission_texture
@@ -282,6 +307,15 @@ def shade(
                         r += er
                         g += eg
                         b += eb
+                        if ink.any and material_outline[mat] > 0.0:
+                            ts = t[s]
+                            hx = origins[s, 0] + ts * dx
+                            hy = origins[s, 1] + ts * dy
+                            hz = origins[s, 2] + ts * dz
+                            inked = 1.0 - material_outline[mat] * _ink_at(ink, hx, hy, hz, eye)
+                            r *= inked
+                            g *= inked
+                            b *= inked
                     if need_depth:
                         ts = t[s]
                         acc_z += (

@@ -11,6 +11,7 @@ import pytest
 
 from rcp_server import kernels
 from rcp_server.camera import Camera, Region, plane_points
+from rcp_server.outlines import NO_INK
 from rcp_server.painting import PaintState
 from rcp_server.paintstate import CHANNELS, channel_shape
 from rcp_server.params import PaintParams
@@ -292,6 +293,7 @@ def ref_shade(
     triangles,
     face_object,
     material_bands,
+    material_outline,
 ):
     """Every channel of ``paintstate.CHANNELS``, in its order, as the shade kernel records them."""
     o = origins.astype(np.float64)
@@ -452,6 +454,7 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
         triangles=rng.normal(size=(n_faces, 3, 3)).astype(np.float32),
         face_object=rng.integers(0, 4, n_faces).astype(np.int32),
         material_bands=np.array([0, 3, 0, 2], np.int32),  # toon on a glowing material: both apply
+        material_outline=np.zeros(4, np.float32),  # outlines: tests/engine/test_outlines.py
     )
 
 
@@ -475,6 +478,7 @@ def _run_shade(inputs, need=CHANNELS[1:]):
         z_max=inputs["z_max"],
         out=kernels.Channels(*out),
         need=kernels.records(need),
+        ink=NO_INK,
     )
     return out
 
