@@ -37,7 +37,7 @@ from .iterate import paint_iteration
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
 from .reuse import REUSE_LEVELS, carry, changed_pixels
 from .seen import cover_thin, resolve_seen
-from .shade import shade
+from .shade import record_surfaces, shade
 from .triangle import place_hits
 
 __all__ = [
@@ -74,6 +74,7 @@ __all__ = [
     "paint_iteration",
     "pass_masked",
     "place_hits",
+    "record_surfaces",
     "records",
     "resolve_seen",
     "shade",

@@ -13,7 +13,7 @@ from .clock import cycles
 from .jit import jit
 from .reuse import carry, changed_pixels
 from .seen import resolve_seen
-from .shade import shade
+from .shade import record_surfaces, shade
 from .triangle import place_hits
 
 
@@ -123,6 +123,18 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
         need=shading.records,
         ink=shading.ink,
     )
+    rec = shading.records
+    if rec.geometric or rec.object or rec.material or rec.albedo or rec.uv or rec.position:
+        record_surfaces(
+            origins=scratch.origins,
+            directions=scratch.directions,
+            hits=hits,
+            spp=spp,
+            pixels=pixels,
+            surfaces=shading.surfaces,
+            out=out,
+            need=rec,
+        )
     clock[0] += cast_end - start
     clock[1] += intersect_end - cast_end
     clock[2] += cycles() - intersect_end

@@ -160,6 +160,27 @@ def _ink_at(ink, x, y, z, eye):
     return ink.ink[k] if abs(ink.depth[k] - depth) <= 0.02 * depth else 0.0
 
 
+@numba.njit(inline="always")
+def _albedo(surfaces, f, w0, w1, w2):
+    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2): its corner colors times its texture,
+    and the texture coordinates there: (r, g, b, u, v)."""
+    colors, uv = surfaces.colors, surfaces.uv
+    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
+    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
+    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
+    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
+    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
+    tid = surfaces.texture_id[f]
+    if tid >= 0:
+        tw = surfaces.texture_width[tid]
+        th = surfaces.texture_height[tid]
+        tr, tg, tb = texel_color(surfaces.texels, surfaces.texture_offset[tid], tw, th, u, v)
+        r *= tr
+        g *= tg
+        b *= tb
+    return r, g, b, u, v
+
+
 @jit
 def shade(
     origins,
@@ -187,21 +208,19 @@ def shade(
     environment : (h, w, 3) float32 equirectangular; light_dir : (3,) float64 travel direction
     out : bundles.Channels of n pixels: color (n, 3) float32 displayed color in [0, 1]; depth (n,) float32
     view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
-    miss); direction (n, 3) ray direction; and the others ``paintstate.PaintState`` describes.
-    need : bundles.Records, the channels beside color to write (the others are not written).
+    miss); direction (n, 3) ray direction. need : bundles.Records, which of those to write (the other
+    channels are :func:`record_surfaces`').
     A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading); one with
     an outline (``surfaces.material_outline``) is inked where ``ink`` (a bundles.Ink) has ink at the hit's
     pixel of the frame camera, on the surface of that depth.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
-    normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
+    normals = surfaces.normals
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
     face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
-    triangles, face_object, material_bands = surfaces.triangles, surfaces.face_object, surfaces.material_bands
-    material_outline = surfaces.material_outline
+    material_bands, material_outline = surfaces.material_bands, surfaces.material_outline
     need_depth, need_normal, need_direction = need.depth, need.normal, need.direction
-    need_geometric, need_albedo, need_uv, need_position = need.geometric, need.albedo, need.uv, need.position
     material_emission, material_emission_texture = surfaces.material_emission, surfaces.material_emission_texture
     out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = len(pixels)
@@ -234,15 +253,6 @@ def shade(
             acc_nx = acc_ny = acc_nz = 0.0
             acc_dx = acc_dy = acc_dz = 0.0
             acc_z = 0.0
-            acc_gx = acc_gy = acc_gz = 0.0
-            acc_ar = acc_ag = acc_ab = 0.0
-            acc_u = acc_v = 0.0
-            acc_px = acc_py = acc_pz = 0.0
-            front = face[m * spp]  # object and material are the first sample's: an index does not average
-            if need.object:
-                out.object[pix] = face_object[front] if front >= 0 else -1.0
-            if need.material:
-                out.material[pix] = face_material[front] if front >= 0 else -1.0
             for s in range(m * spp, (m + 1) * spp):
                 f = face[s]
                 dx = directions[s, 0]
@@ -254,19 +264,7 @@ def shade(
                     w1 = b1[s]
                     w2 = b2[s]
                     w0 = 1.0 - w1 - w2
-                    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
-                    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
-                    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
-                    tid = texture_id[f]
-                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
-                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
-                    if tid >= 0:
-                        tw = texture_width[tid]
-                        th = texture_height[tid]
-                        tr, tg, tb = texel_color(texels, texture_offset[tid], tw, th, u, v)
-                        r *= tr
-                        g *= tg
-                        b *= tb
+                    r, g, b, u, v = _albedo(surfaces, f, w0, w1, w2)
                     nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
                     ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
                     nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
@@ -276,16 +274,13 @@ def shade(
                         ny *= inv
                         nz *= inv
                     mat = face_material[f]
-                    if need_albedo:
-                        acc_ar += r
-                        acc_ag += g
-                        acc_ab += b
                     if lit and not material_unlit[mat]:
                         # two-sided: light the side the ray sees
                         facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
                         lambert = max(-facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2]), 0.0)
-                        bands = material_bands[mat]
-                        if bands > 0 and lambert > 0.0:  # toon: the lit side in flat bands, the last one full light
+                        if mat > 0 and material_bands[mat] > 0 and lambert > 0.0:
+                            # toon: the lit side in flat bands, the last one full light
+                            bands = material_bands[mat]
                             lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
                         k = ambient + (1.0 - ambient) * lambert
                         r *= k
@@ -327,29 +322,6 @@ def shade(
                         acc_nx += nx
                         acc_ny += ny
                         acc_nz += nz
-                    if need_geometric:  # the triangle's own normal, on the side of the shading normal
-                        ax = triangles[f, 1, 0] - triangles[f, 0, 0]
-                        ay = triangles[f, 1, 1] - triangles[f, 0, 1]
-                        az = triangles[f, 1, 2] - triangles[f, 0, 2]
-                        bx = triangles[f, 2, 0] - triangles[f, 0, 0]
-                        by = triangles[f, 2, 1] - triangles[f, 0, 1]
-                        bz = triangles[f, 2, 2] - triangles[f, 0, 2]
-                        gx = ay * bz - az * by
-                        gy = az * bx - ax * bz
-                        gz = ax * by - ay * bx
-                        glen = math.sqrt(gx * gx + gy * gy + gz * gz)
-                        ginv = 0.0 if glen == 0.0 else (-1.0 if gx * nx + gy * ny + gz * nz < 0.0 else 1.0) / glen
-                        acc_gx += gx * ginv
-                        acc_gy += gy * ginv
-                        acc_gz += gz * ginv
-                    if need_uv:
-                        acc_u += u
-                        acc_v += v
-                    if need_position:
-                        ts = t[s]
-                        acc_px += origins[s, 0] + ts * dx
-                        acc_py += origins[s, 1] + ts * dy
-                        acc_pz += origins[s, 2] + ts * dz
                 else:
                     # ---- miss: the environment, equirectangular ----
                     if not finite:
@@ -362,12 +334,6 @@ def shade(
                         r, g, b = _bilinear(env_flat, 0, env_w, env_h, sky[s - base, 0], sky[s - base, 1], False)
                     if need_depth:
                         acc_z += z_max
-                    if need_albedo:
-                        acc_ar += r
-                        acc_ag += g
-                        acc_ab += b
-                    if need_position:  # the sky has no point (a pixel partly sky neither)
-                        acc_px = acc_py = acc_pz = math.nan
                 acc_r += min(max(r, 0.0), 1.0)
                 acc_g += min(max(g, 0.0), 1.0)
                 acc_b += min(max(b, 0.0), 1.0)
@@ -384,24 +350,89 @@ def shade(
                 out_normal[pix, 0] = acc_nx * inv_spp
                 out_normal[pix, 1] = acc_ny * inv_spp
                 out_normal[pix, 2] = acc_nz * inv_spp
-            if need_geometric:
-                out.geometric[pix, 0] = acc_gx * inv_spp
-                out.geometric[pix, 1] = acc_gy * inv_spp
-                out.geometric[pix, 2] = acc_gz * inv_spp
-            if need_albedo:
-                out.albedo[pix, 0] = acc_ar * inv_spp
-                out.albedo[pix, 1] = acc_ag * inv_spp
-                out.albedo[pix, 2] = acc_ab * inv_spp
-            if need_uv:
-                out.uv[pix, 0] = acc_u * inv_spp
-                out.uv[pix, 1] = acc_v * inv_spp
-            if need_position:
-                out.position[pix, 0] = acc_px * inv_spp
-                out.position[pix, 1] = acc_py * inv_spp
-                out.position[pix, 2] = acc_pz * inv_spp
             if need_direction:
                 dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
                 inv = 1.0 / dlen if dlen > 0.0 else 0.0
                 out_direction[pix, 0] = acc_dx * inv
                 out_direction[pix, 1] = acc_dy * inv
                 out_direction[pix, 2] = acc_dz * inv
+
+
+@jit
+def record_surfaces(origins, directions, hits, spp, pixels, surfaces, out, need):
+    """The channels of what the rays hit beyond :func:`shade`'s, a pass of its own that only a painting
+    reading them runs (in ``shade``'s loop they cost every painting a fifth of its shading): per pixel,
+    the mean over its samples of the geometric normal (the triangle's own, on the side of the shading
+    normal), the unlit colour (a miss adds nothing; a pixel all sky has the sky's colour, from ``out.color``,
+    which shade wrote first), the texture coordinates and the world point (NaN if any sample saw the sky);
+    the object and the material of its first sample (-1: the sky). Arguments as :func:`shade`'s; ``need``
+    (bundles.Records) says which of these channels to write.
+    """
+    face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
+    triangles, normals = surfaces.triangles, surfaces.normals
+    inv_spp = 1.0 / spp
+    for m in range(len(pixels)):
+        pix = pixels[m]
+        front = face[m * spp]  # an index does not average: the first sample's
+        if need.object:
+            out.object[pix] = surfaces.face_object[front] if front >= 0 else -1.0
+        if need.material:
+            out.material[pix] = surfaces.face_material[front] if front >= 0 else -1.0
+        gx = gy = gz = ar = ag = ab = u = v = px = py = pz = 0.0
+        misses = 0
+        for s in range(m * spp, (m + 1) * spp):
+            f = face[s]
+            if f < 0:
+                misses += 1
+                continue
+            w1 = b1[s]
+            w2 = b2[s]
+            w0 = 1.0 - w1 - w2
+            r, g, b, su, sv = _albedo(surfaces, f, w0, w1, w2)
+            ar += r
+            ag += g
+            ab += b
+            u += su
+            v += sv
+            ts = t[s]
+            px += origins[s, 0] + ts * directions[s, 0]
+            py += origins[s, 1] + ts * directions[s, 1]
+            pz += origins[s, 2] + ts * directions[s, 2]
+            if need.geometric:
+                ax = triangles[f, 1, 0] - triangles[f, 0, 0]
+                ay = triangles[f, 1, 1] - triangles[f, 0, 1]
+                az = triangles[f, 1, 2] - triangles[f, 0, 2]
+                bx = triangles[f, 2, 0] - triangles[f, 0, 0]
+                by = triangles[f, 2, 1] - triangles[f, 0, 1]
+                bz = triangles[f, 2, 2] - triangles[f, 0, 2]
+                cx = ay * bz - az * by
+                cy = az * bx - ax * bz
+                cz = ax * by - ay * bx
+                nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
+                ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
+                nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
+                length = math.sqrt(cx * cx + cy * cy + cz * cz)
+                side = 0.0 if length == 0.0 else (-1.0 if cx * nx + cy * ny + cz * nz < 0.0 else 1.0) / length
+                gx += cx * side
+                gy += cy * side
+                gz += cz * side
+        if need.geometric:
+            out.geometric[pix, 0] = gx * inv_spp
+            out.geometric[pix, 1] = gy * inv_spp
+            out.geometric[pix, 2] = gz * inv_spp
+        if need.albedo and misses == spp:  # all sky: its colour, as shade drew it
+            out.albedo[pix, 0] = out.color[pix, 0]
+            out.albedo[pix, 1] = out.color[pix, 1]
+            out.albedo[pix, 2] = out.color[pix, 2]
+        elif need.albedo:  # the surface's share (the sky's samples add nothing)
+            out.albedo[pix, 0] = ar * inv_spp
+            out.albedo[pix, 1] = ag * inv_spp
+            out.albedo[pix, 2] = ab * inv_spp
+        if need.uv:
+            out.uv[pix, 0] = u * inv_spp
+            out.uv[pix, 1] = v * inv_spp
+        if need.position:
+            nan = math.nan if misses else 0.0  # the sky has no point
+            out.position[pix, 0] = px * inv_spp + nan
+            out.position[pix, 1] = py * inv_spp + nan
+            out.position[pix, 2] = pz * inv_spp + nan

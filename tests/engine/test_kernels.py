@@ -359,7 +359,7 @@ def ref_shade(
             False,
         )
     rgb[~hit & ~finite] = 0.0
-    unlit[~hit] = rgb[~hit]
+    all_sky = (~hit).reshape(-1, spp).all(axis=1)
     # ---- the other channels: the triangle's own normal on the shading normal's side, indices, uv, points ----
     tri = triangles[f].astype(np.float64)
     g = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -383,7 +383,8 @@ def ref_shade(
     total = np.where(finite[:, None], d, 0.0).reshape(-1, spp, 3).sum(axis=1)
     length = np.linalg.norm(total, axis=1, keepdims=True)
     direction = np.where(length > 0, total / np.where(length > 0, length, 1.0), 0.0)
-    return color, depth, normal, direction, mean(geometric), obj, material, mean(unlit), mean(uv_all), mean(position)
+    albedo = np.where(all_sky[:, None], color, mean(unlit))  # a pixel all sky: the sky's colour
+    return color, depth, normal, direction, mean(geometric), obj, material, albedo, mean(uv_all), mean(position)
 
 
 def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
@@ -479,6 +480,16 @@ def _run_shade(inputs, need=CHANNELS[1:]):
         out=kernels.Channels(*out),
         need=kernels.records(need),
         ink=NO_INK,
+    )
+    kernels.record_surfaces(
+        origins=inputs["origins"],
+        directions=inputs["directions"],
+        hits=Hits(inputs["face"], inputs["t"], inputs["b1"], inputs["b2"]),
+        spp=inputs["spp"],
+        pixels=np.arange(n_pix),
+        surfaces=kernels.Surfaces(**{name: inputs[name] for name in kernels.Surfaces._fields}),
+        out=kernels.Channels(*out),
+        need=kernels.records(need),
     )
     return out
 
