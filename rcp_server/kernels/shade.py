@@ -161,20 +161,19 @@ def _ink_at(ink, x, y, z, eye):
 
 
 @numba.njit(inline="always")
-def _albedo(surfaces, f, w0, w1, w2):
-    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2): its corner colors times its texture,
-    and the texture coordinates there: (r, g, b, u, v)."""
-    colors, uv = surfaces.colors, surfaces.uv
+def _albedo(colors, uv, texture_id, texels, texture_offset, texture_width, texture_height, f, w0, w1, w2):
+    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2), its corner colors times its texture,
+    and the texture coordinates there: (r, g, b, u, v), for :func:`record_surfaces`. ``shade`` writes the
+    same lines out: through this helper (inlined all the same) it ran a fifth slower, through one taking the
+    bundle twice as slow (measured on 200k hits)."""
     r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
     g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
     b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
     u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
     v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
-    tid = surfaces.texture_id[f]
+    tid = texture_id[f]
     if tid >= 0:
-        tw = surfaces.texture_width[tid]
-        th = surfaces.texture_height[tid]
-        tr, tg, tb = texel_color(surfaces.texels, surfaces.texture_offset[tid], tw, th, u, v)
+        tr, tg, tb = texel_color(texels, texture_offset[tid], texture_width[tid], texture_height[tid], u, v)
         r *= tr
         g *= tg
         b *= tb
@@ -215,7 +214,7 @@ def shade(
     pixel of the frame camera, on the surface of that depth.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
-    normals = surfaces.normals
+    normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
     face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
@@ -260,11 +259,23 @@ def shade(
                 dz = directions[s, 2]
                 finite = dx == dx and dy == dy and dz == dz  # a NaN ray misses and sees black
                 if f >= 0:
-                    # ---- surface: albedo from corner colors (times texture), then light ----
+                    # ---- surface: albedo from corner colors (times texture), then light (as _albedo) ----
                     w1 = b1[s]
                     w2 = b2[s]
                     w0 = 1.0 - w1 - w2
-                    r, g, b, u, v = _albedo(surfaces, f, w0, w1, w2)
+                    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
+                    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
+                    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
+                    tid = texture_id[f]
+                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
+                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
+                    if tid >= 0:
+                        tw = texture_width[tid]
+                        th = texture_height[tid]
+                        tr, tg, tb = texel_color(texels, texture_offset[tid], tw, th, u, v)
+                        r *= tr
+                        g *= tg
+                        b *= tb
                     nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
                     ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
                     nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
@@ -388,7 +399,19 @@ def record_surfaces(origins, directions, hits, spp, pixels, surfaces, out, need)
             w1 = b1[s]
             w2 = b2[s]
             w0 = 1.0 - w1 - w2
-            r, g, b, su, sv = _albedo(surfaces, f, w0, w1, w2)
+            r, g, b, su, sv = _albedo(
+                surfaces.colors,
+                surfaces.uv,
+                surfaces.texture_id,
+                surfaces.texels,
+                surfaces.texture_offset,
+                surfaces.texture_width,
+                surfaces.texture_height,
+                f,
+                w0,
+                w1,
+                w2,
+            )
             ar += r
             ag += g
             ab += b
