@@ -675,6 +675,36 @@ export const PROTOCOL = {
    "title": "PaintMessage",
    "type": "object"
   },
+  "pick": {
+   "additionalProperties": false,
+   "description": "Which object and material pixel ``(x, y)`` of the canvas (``width x height`` of the walk) shows, seen by\nthe newest camera: the server answers ``picked``.",
+   "properties": {
+    "type": {
+     "const": "pick",
+     "title": "Type",
+     "type": "string"
+    },
+    "x": {
+     "maximum": 4095,
+     "minimum": 0,
+     "title": "X",
+     "type": "integer"
+    },
+    "y": {
+     "maximum": 4095,
+     "minimum": 0,
+     "title": "Y",
+     "type": "integer"
+    }
+   },
+   "required": [
+    "type",
+    "x",
+    "y"
+   ],
+   "title": "PickMessage",
+   "type": "object"
+  },
   "view": {
    "additionalProperties": false,
    "description": "Resize the canvas or change the JPEG quality without leaving the scene.",
@@ -1361,6 +1391,55 @@ export const PROTOCOL = {
     "dropped"
    ],
    "title": "Frame",
+   "type": "object"
+  },
+  "picked": {
+   "description": "The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``\ntake them), null for the sky; a material with no name is \"\".",
+   "properties": {
+    "material": {
+     "anyOf": [
+      {
+       "type": "string"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "title": "Material"
+    },
+    "object": {
+     "anyOf": [
+      {
+       "type": "string"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "title": "Object"
+    },
+    "type": {
+     "const": "picked",
+     "default": "picked",
+     "title": "Type",
+     "type": "string"
+    },
+    "x": {
+     "title": "X",
+     "type": "integer"
+    },
+    "y": {
+     "title": "Y",
+     "type": "integer"
+    }
+   },
+   "required": [
+    "x",
+    "y",
+    "object",
+    "material"
+   ],
+   "title": "Picked",
    "type": "object"
   },
   "ready": {

@@ -187,6 +187,20 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
     out.distance[:] = hits.t
 
 
+def pick(scene: Scene, time: float, camera: Camera, width: int, height: int, x: int, y: int) -> tuple[str, str] | None:
+    """What pixel ``(x, y)`` of a ``width x height`` view by ``camera`` shows, at its centre: the names of its
+    object and material ("" for a material with no name), or None for the sky (one ray, traced here)."""
+    if not (0 <= x < width and 0 <= y < height):
+        raise ValueError(f"pixel ({x}, {y}) is not in a {width}x{height} view")
+    seen = kernels.Seen.empty(1, 1)
+    visible_faces(scene, time, camera, Region(width, height, x, y, 1, 1), seen)
+    face = int(seen.face[0])
+    if face < 0:
+        return None
+    geometry, _ = scene.geometry(time)
+    return geometry.object_names[geometry.face_object[face]], geometry.material_names[geometry.face_material[face]]
+
+
 def thin_parts(scene: Scene, time: float, camera: Camera, rows: Region, out: kernels.Seen) -> None:
     """Where geometry thinner than the grid lies between the pixel centres of ``rows`` (full-width rows of a
     seen grid), into ``out.near`` (a bundles.Seen of those rows): ``kernels.cover_thin``."""

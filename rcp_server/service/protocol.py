@@ -223,7 +223,18 @@ class ViewMessage(_Model):
     quality: Quality | None = None
 
 
-ClientMessage = Annotated[Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage, Field(discriminator="type")]
+class PickMessage(_Model):
+    """Which object and material pixel ``(x, y)`` of the canvas (``width x height`` of the walk) shows, seen by
+    the newest camera: the server answers ``picked``."""
+
+    type: Literal["pick"]
+    x: Annotated[int, Field(ge=0, le=4095)]
+    y: Annotated[int, Field(ge=0, le=4095)]
+
+
+ClientMessage = Annotated[
+    Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage | PickMessage, Field(discriminator="type")
+]
 client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 
 
@@ -269,12 +280,23 @@ class Error(BaseModel):
     message: str
 
 
+class Picked(BaseModel):
+    """The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``
+    take them), null for the sky; a material with no name is ""."""
+
+    type: Literal["picked"] = "picked"
+    x: int
+    y: int
+    object: str | None
+    material: str | None
+
+
 def client_module() -> str:
     """``client/protocol.js``: the JSON schema of every message, for the browser to build and check against,
     and the engine's painting defaults (``null``: derived per view), for the settings a scene leaves out."""
     schemas = {
         "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in _CLIENT},
-        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error)},
+        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked)},
         "paint": PaintModel.model_json_schema(),
     }
     body = json.dumps(schemas, indent=1, sort_keys=True)
@@ -288,7 +310,7 @@ def client_module() -> str:
     )
 
 
-_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage)
+_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage)
 
 if __name__ == "__main__":
     print(client_module(), end="")

@@ -23,6 +23,7 @@ from .. import images
 from ..camera import Camera, CameraError
 from ..painting import Abandoned, PaintResult, PaintState
 from ..params import PaintParams
+from ..raytrace import pick
 from ..scene import Scene
 from ..scenefile import one_line
 from . import protocol
@@ -59,6 +60,7 @@ class Session:
         self.width = self.height = 0
         self.quality = 80
         self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
+        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
         self.params: PaintParams | None = None  # the scene's with the overrides, validated once when they change
         self.temporal = False  # per-frame paintings: every frame is the painting of its camera
         self.animate = False
@@ -152,6 +154,12 @@ class Session:
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
+        elif isinstance(msg, protocol.PickMessage):  # one ray: answered here, nothing to paint again
+            camera = self.camera or self.scene.camera
+            shown = pick(self.scene, self.shown_time, camera, self.width, self.height, msg.x, msg.y)
+            names = (None, None) if shown is None else shown
+            self._note(protocol.Picked(x=msg.x, y=msg.y, object=names[0], material=names[1]))
+            return
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
             self._check(self.scene, width, height, self.overrides)
@@ -273,6 +281,7 @@ class Session:
         plan = job.plan
         self.planner.frame_painted(plan, seconds)
         self.state = result.state
+        self.shown_time = plan.time
         meta = protocol.Frame(
             seq=0,
             width=plan.width,
