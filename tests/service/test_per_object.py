@@ -104,3 +104,31 @@ def test_the_command_line_refuses_a_bad_file_in_one_line(tmp_path, capsys):
         assert main(["render", SCENE, "--out", str(tmp_path / "x.png"), "--paint", str(bad)]) == 2
         err = capsys.readouterr().err
         assert needle in err and err.count("\n") == 1, err
+
+
+def test_the_walk_through_says_what_a_pixel_shows(live_server, walk_to):
+    walk = walk_to(live_server)
+    walk.send(type="hello", scene=SCENE, width=W, height=H, quality=QUALITY)
+    assert walk.next()["type"] == "ready"
+    scene = live_server.app.state.service.scenes[SCENE]
+    shows = paint(scene, scene.camera, W, H, scene.painting({"objects": {"walls": {}}, "iterations": 1})).state.object
+    names = scene.geometry()[0].object_names
+    answers = {}
+    for x, y in ((W // 2, H - 1), (W // 2, 0), (3, H // 2)):
+        walk.send(type="pick", x=x, y=y)
+        reply = walk.next()
+        while reply["type"] != "picked":
+            assert reply["type"] == "frame", reply
+            walk.ws.recv(30)
+            reply = walk.next()
+        index = int(shows[y * W + x])
+        assert (reply["x"], reply["y"]) == (x, y)
+        assert reply["object"] == (names[index] if index >= 0 else None)
+        answers[x, y] = reply["object"]
+    assert answers[W // 2, 0] is None and answers[W // 2, H - 1] == "ground"  # the sky above, the ground below
+    walk.send(type="pick", x=W, y=0)
+    reply = walk.next()
+    while reply["type"] == "frame":
+        walk.ws.recv(30)
+        reply = walk.next()
+    assert reply["type"] == "error" and f"not in a {W}x{H} view" in reply["message"]
