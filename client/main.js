@@ -11,6 +11,7 @@ import * as walkCamera from "./camera.js";
 import { Connection } from "./connection.js";
 import { FrameView } from "./frames.js";
 import { Overlay } from "./overlay.js";
+import { objectsPanel } from "./objects.js";
 import { paintPanel } from "./panel.js";
 import { stylesPanel } from "./styles.js";
 import { pathPanel } from "./pathpanel.js";
@@ -91,6 +92,7 @@ function sendHello() {
 function receive(msg) {
   if (msg.type === "ready") ready(msg);
   else if (msg.type === "error") refused(msg.message);
+  else if (msg.type === "picked") objects.picked(msg);
 }
 
 function ready(msg) {
@@ -116,6 +118,7 @@ function startScene(scene) {
   showViewpoints(scene);
   state.lastCamera = walkCamera.toCamera(walk.walk); // what the server shows after hello
   state.paint = {};
+  objects.show(state.paint);
   state.defaults = { ...ENGINE_DEFAULTS, z0: Number(walk.walk.distance.toPrecision(3)), ...scene.paint };
   panel.setScene(state.defaults);
   stylesUi?.show(null);
@@ -138,6 +141,7 @@ function refused(text) {
       else delete state.paint[name];
     }
     panel.show(state.paint);
+    objects.show(state.paint);
     lastPaint = null;
     text = `Refused: ${text}`;
   }
@@ -196,6 +200,27 @@ const panel = paintPanel($("paint"), (name, value) => {
   paintChanges[name] = value;
 });
 
+// ---- settings per object and material: a click on the view (a press without a drag) picks ----
+
+const objects = objectsPanel($("objects"), (per, table) => {
+  if (table === null) delete state.paint[per];
+  else state.paint[per] = table;
+  paintChanges[per] = table;
+});
+let pressed = null; // where and when a press on the view began
+canvas.addEventListener("pointerdown", (event) => {
+  pressed = { x: event.clientX, y: event.clientY, at: performance.now() };
+});
+canvas.addEventListener("pointerup", (event) => {
+  const click = pressed && Math.hypot(event.clientX - pressed.x, event.clientY - pressed.y) < 4;
+  if (!click || performance.now() - pressed.at > 400 || !state.scene) return;
+  const box = canvas.getBoundingClientRect();
+  const [width, height] = state.size;
+  const x = Math.min(width - 1, Math.max(0, Math.floor(((event.clientX - box.left) / box.width) * width)));
+  const y = Math.min(height - 1, Math.max(0, Math.floor(((event.clientY - box.top) / box.height) * height)));
+  send(MESSAGES.pick(x, y));
+});
+
 // ---- styles and presets ----
 
 let stylesUi = null; // the Style section, once the styles are known
@@ -213,6 +238,7 @@ function showPaint() {
   const { style, ...changed } = state.paint;
   panel.setScene({ ...state.defaults, ...(state.styles[style]?.settings ?? {}) });
   panel.show(changed);
+  objects.show(state.paint);
 }
 
 async function loadStyles() {
@@ -420,5 +446,5 @@ const path = pathPanel($("path"), {
   notice,
 });
 
-window.rcp = { state, sent, overlay, walk, connection, panel, path, canvas, uploads, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+window.rcp = { state, sent, overlay, walk, connection, panel, objects, path, canvas, uploads, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

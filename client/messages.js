@@ -92,4 +92,6 @@ export const MESSAGES = {
   paint: (changes) => message("paint", changes),
   mode: (temporal, animate) => message("mode", { temporal, animate }),
   view: (width, height, quality) => message("view", { width, height, quality }),
+  /** What pixel (x, y) of the view shows; the server answers `picked`. */
+  pick: (x, y) => message("pick", { x, y }),
 };

@@ -17,7 +17,11 @@ const PAINT_UI = {
   z0: { label: "Focus depth z0", unit: "units", slider: [0.1, 1000], log: true },
   spp: { label: "Samples / pixel", slider: [1, 16], step: 1 },
   eye_mapping: { label: "Eye mapping", more: true },
-  noise: { label: "Noise", slider: [0, 4], step: 0.05, more: true },
+  noise: { label: "Screen noise", slider: [0, 4], step: 0.05, more: true },
+  surface_noise: { label: "Surface noise", slider: [0, 4], step: 0.05, more: true },
+  surface_scale: { label: "Surface noise × smudge", slider: [0, 4], step: 0.05, more: true },
+  grain: { label: "Surface noise grain", unit: "units", slider: [0.001, 10], log: true, more: true },
+  hatch: { label: "Hatch lines", more: true },
   seed: { label: "Seed", slider: [0, 99], step: 1, more: true },
   z_max: { label: "Miss depth z_max", unit: "units", slider: [1, 10000], log: true, more: true },
   edge: { label: "Edge (image method)", more: true },
@@ -138,7 +142,8 @@ function numberControl(name, schema, ui, emit) {
 export function paintPanel(container, onChange) {
   const properties = PROTOCOL.paint.properties;
   const names = [...Object.keys(PAINT_UI).filter((n) => n in properties), ...Object.keys(properties).filter((n) => !(n in PAINT_UI))]
-    .filter((n) => n !== "style"); // the style has its own picker (styles.js)
+    .filter((n) => !["style", "objects", "materials"].includes(n)); // the style has its own picker (styles.js),
+  // the settings per object and material theirs (objects.js)
   const more = element("details", { class: "more" }, element("summary", { text: "More painting settings" }));
   const controls = {};
   let defaults = {};

@@ -227,6 +227,157 @@ export const PROTOCOL = {
    "type": "object"
   },
   "paint": {
+   "$defs": {
+    "OwnPaintModel": {
+     "additionalProperties": false,
+     "description": "The painting settings an object or a material may set for itself (those that vary per pixel).",
+     "properties": {
+      "eye_mapping": {
+       "anyOf": [
+        {
+         "enum": [
+          "color",
+          "depth",
+          "normal",
+          "cubist"
+         ],
+         "type": "string"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "eye displacement mapping",
+       "title": "Eye Mapping"
+      },
+      "grain": {
+       "anyOf": [
+        {
+         "exclusiveMinimum": 0,
+         "maximum": 1000000.0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "size of the surface noise's cells, in scene units",
+       "title": "Grain"
+      },
+      "hatch": {
+       "anyOf": [
+        {
+         "type": "boolean"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+       "title": "Hatch"
+      },
+      "lambda_e": {
+       "anyOf": [
+        {
+         "maximum": 100,
+         "minimum": -100,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "largest eye displacement, in scene units",
+       "title": "Lambda E"
+      },
+      "lambda_p": {
+       "anyOf": [
+        {
+         "maximum": 1000000.0,
+         "minimum": -1000000.0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "largest target displacement, in pixels",
+       "title": "Lambda P"
+      },
+      "mapping": {
+       "anyOf": [
+        {
+         "enum": [
+          "color",
+          "depth",
+          "normal",
+          "cubist"
+         ],
+         "type": "string"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "target displacement mapping",
+       "title": "Mapping"
+      },
+      "noise": {
+       "anyOf": [
+        {
+         "maximum": 16,
+         "minimum": 0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "screen noise: strength of a seeded random vector added per pixel",
+       "title": "Noise"
+      },
+      "surface_noise": {
+       "anyOf": [
+        {
+         "maximum": 16,
+         "minimum": 0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+       "title": "Surface Noise"
+      },
+      "surface_scale": {
+       "anyOf": [
+        {
+         "maximum": 16,
+         "minimum": 0,
+         "type": "number"
+        },
+        {
+         "type": "null"
+        }
+       ],
+       "default": null,
+       "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+       "title": "Surface Scale"
+      }
+     },
+     "title": "OwnPaintModel",
+     "type": "object"
+    }
+   },
    "additionalProperties": false,
    "description": "Change painting settings; given fields replace earlier ones, ``null`` restores the scene's default.",
    "properties": {
@@ -254,7 +405,8 @@ export const PROTOCOL = {
        "enum": [
         "color",
         "depth",
-        "normal"
+        "normal",
+        "cubist"
        ],
        "type": "string"
       },
@@ -278,6 +430,34 @@ export const PROTOCOL = {
      "default": null,
      "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
      "title": "Fast"
+    },
+    "grain": {
+     "anyOf": [
+      {
+       "exclusiveMinimum": 0,
+       "maximum": 1000000.0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "size of the surface noise's cells, in scene units",
+     "title": "Grain"
+    },
+    "hatch": {
+     "anyOf": [
+      {
+       "type": "boolean"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+     "title": "Hatch"
     },
     "iterations": {
      "anyOf": [
@@ -330,7 +510,8 @@ export const PROTOCOL = {
        "enum": [
         "color",
         "depth",
-        "normal"
+        "normal",
+        "cubist"
        ],
        "type": "string"
       },
@@ -341,6 +522,27 @@ export const PROTOCOL = {
      "default": null,
      "description": "target displacement mapping",
      "title": "Mapping"
+    },
+    "materials": {
+     "anyOf": [
+      {
+       "additionalProperties": {
+        "$ref": "#/$defs/OwnPaintModel"
+       },
+       "maxProperties": 256,
+       "propertyNames": {
+        "maxLength": 200,
+        "minLength": 1
+       },
+       "type": "object"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "settings per material of the scene, by name (merged into the scene's own)",
+     "title": "Materials"
     },
     "method": {
      "anyOf": [
@@ -371,8 +573,29 @@ export const PROTOCOL = {
       }
      ],
      "default": null,
-     "description": "strength of a seeded random vector added per pixel",
+     "description": "screen noise: strength of a seeded random vector added per pixel",
      "title": "Noise"
+    },
+    "objects": {
+     "anyOf": [
+      {
+       "additionalProperties": {
+        "$ref": "#/$defs/OwnPaintModel"
+       },
+       "maxProperties": 256,
+       "propertyNames": {
+        "maxLength": 200,
+        "minLength": 1
+       },
+       "type": "object"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "settings per object of the scene, by name (merged into the scene's own)",
+     "title": "Objects"
     },
     "seed": {
      "anyOf": [
@@ -424,6 +647,36 @@ export const PROTOCOL = {
      "description": "a named look (GET /api/styles); the settings given beside it override its own",
      "title": "Style"
     },
+    "surface_noise": {
+     "anyOf": [
+      {
+       "maximum": 16,
+       "minimum": 0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+     "title": "Surface Noise"
+    },
+    "surface_scale": {
+     "anyOf": [
+      {
+       "maximum": 16,
+       "minimum": 0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+     "title": "Surface Scale"
+    },
     "type": {
      "const": "paint",
      "title": "Type",
@@ -464,6 +717,36 @@ export const PROTOCOL = {
     "type"
    ],
    "title": "PaintMessage",
+   "type": "object"
+  },
+  "pick": {
+   "additionalProperties": false,
+   "description": "Which object and material pixel ``(x, y)`` of the canvas (``width x height`` of the walk) shows, seen by\nthe newest camera: the server answers ``picked``.",
+   "properties": {
+    "type": {
+     "const": "pick",
+     "title": "Type",
+     "type": "string"
+    },
+    "x": {
+     "maximum": 4095,
+     "minimum": 0,
+     "title": "X",
+     "type": "integer"
+    },
+    "y": {
+     "maximum": 4095,
+     "minimum": 0,
+     "title": "Y",
+     "type": "integer"
+    }
+   },
+   "required": [
+    "type",
+    "x",
+    "y"
+   ],
+   "title": "PickMessage",
    "type": "object"
   },
   "view": {
@@ -526,6 +809,157 @@ export const PROTOCOL = {
   }
  },
  "paint": {
+  "$defs": {
+   "OwnPaintModel": {
+    "additionalProperties": false,
+    "description": "The painting settings an object or a material may set for itself (those that vary per pixel).",
+    "properties": {
+     "eye_mapping": {
+      "anyOf": [
+       {
+        "enum": [
+         "color",
+         "depth",
+         "normal",
+         "cubist"
+        ],
+        "type": "string"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "eye displacement mapping",
+      "title": "Eye Mapping"
+     },
+     "grain": {
+      "anyOf": [
+       {
+        "exclusiveMinimum": 0,
+        "maximum": 1000000.0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "size of the surface noise's cells, in scene units",
+      "title": "Grain"
+     },
+     "hatch": {
+      "anyOf": [
+       {
+        "type": "boolean"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+      "title": "Hatch"
+     },
+     "lambda_e": {
+      "anyOf": [
+       {
+        "maximum": 100,
+        "minimum": -100,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "largest eye displacement, in scene units",
+      "title": "Lambda E"
+     },
+     "lambda_p": {
+      "anyOf": [
+       {
+        "maximum": 1000000.0,
+        "minimum": -1000000.0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "largest target displacement, in pixels",
+      "title": "Lambda P"
+     },
+     "mapping": {
+      "anyOf": [
+       {
+        "enum": [
+         "color",
+         "depth",
+         "normal",
+         "cubist"
+        ],
+        "type": "string"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "target displacement mapping",
+      "title": "Mapping"
+     },
+     "noise": {
+      "anyOf": [
+       {
+        "maximum": 16,
+        "minimum": 0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "screen noise: strength of a seeded random vector added per pixel",
+      "title": "Noise"
+     },
+     "surface_noise": {
+      "anyOf": [
+       {
+        "maximum": 16,
+        "minimum": 0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+      "title": "Surface Noise"
+     },
+     "surface_scale": {
+      "anyOf": [
+       {
+        "maximum": 16,
+        "minimum": 0,
+        "type": "number"
+       },
+       {
+        "type": "null"
+       }
+      ],
+      "default": null,
+      "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+      "title": "Surface Scale"
+     }
+    },
+    "title": "OwnPaintModel",
+    "type": "object"
+   }
+  },
   "additionalProperties": false,
   "description": "Painting settings; a field left out takes the scene's value, then the engine's.",
   "properties": {
@@ -553,7 +987,8 @@ export const PROTOCOL = {
       "enum": [
        "color",
        "depth",
-       "normal"
+       "normal",
+       "cubist"
       ],
       "type": "string"
      },
@@ -577,6 +1012,34 @@ export const PROTOCOL = {
     "default": null,
     "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
     "title": "Fast"
+   },
+   "grain": {
+    "anyOf": [
+     {
+      "exclusiveMinimum": 0,
+      "maximum": 1000000.0,
+      "type": "number"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "size of the surface noise's cells, in scene units",
+    "title": "Grain"
+   },
+   "hatch": {
+    "anyOf": [
+     {
+      "type": "boolean"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)",
+    "title": "Hatch"
    },
    "iterations": {
     "anyOf": [
@@ -629,7 +1092,8 @@ export const PROTOCOL = {
       "enum": [
        "color",
        "depth",
-       "normal"
+       "normal",
+       "cubist"
       ],
       "type": "string"
      },
@@ -640,6 +1104,27 @@ export const PROTOCOL = {
     "default": null,
     "description": "target displacement mapping",
     "title": "Mapping"
+   },
+   "materials": {
+    "anyOf": [
+     {
+      "additionalProperties": {
+       "$ref": "#/$defs/OwnPaintModel"
+      },
+      "maxProperties": 256,
+      "propertyNames": {
+       "maxLength": 200,
+       "minLength": 1
+      },
+      "type": "object"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "settings per material of the scene, by name (merged into the scene's own)",
+    "title": "Materials"
    },
    "method": {
     "anyOf": [
@@ -670,8 +1155,29 @@ export const PROTOCOL = {
      }
     ],
     "default": null,
-    "description": "strength of a seeded random vector added per pixel",
+    "description": "screen noise: strength of a seeded random vector added per pixel",
     "title": "Noise"
+   },
+   "objects": {
+    "anyOf": [
+     {
+      "additionalProperties": {
+       "$ref": "#/$defs/OwnPaintModel"
+      },
+      "maxProperties": 256,
+      "propertyNames": {
+       "maxLength": 200,
+       "minLength": 1
+      },
+      "type": "object"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "settings per object of the scene, by name (merged into the scene's own)",
+    "title": "Objects"
    },
    "seed": {
     "anyOf": [
@@ -722,6 +1228,36 @@ export const PROTOCOL = {
     "default": null,
     "description": "a named look (GET /api/styles); the settings given beside it override its own",
     "title": "Style"
+   },
+   "surface_noise": {
+    "anyOf": [
+     {
+      "maximum": 16,
+      "minimum": 0,
+      "type": "number"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+    "title": "Surface Noise"
+   },
+   "surface_scale": {
+    "anyOf": [
+     {
+      "maximum": 16,
+      "minimum": 0,
+      "type": "number"
+     },
+     {
+      "type": "null"
+     }
+    ],
+    "default": null,
+    "description": "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])",
+    "title": "Surface Scale"
    },
    "z0": {
     "anyOf": [
@@ -823,6 +1359,10 @@ export const PROTOCOL = {
         "type": "string"
        },
        {
+        "additionalProperties": true,
+        "type": "object"
+       },
+       {
         "type": "null"
        }
       ]
@@ -895,6 +1435,55 @@ export const PROTOCOL = {
     "dropped"
    ],
    "title": "Frame",
+   "type": "object"
+  },
+  "picked": {
+   "description": "The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``\ntake them), null for the sky; a material with no name is \"\".",
+   "properties": {
+    "material": {
+     "anyOf": [
+      {
+       "type": "string"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "title": "Material"
+    },
+    "object": {
+     "anyOf": [
+      {
+       "type": "string"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "title": "Object"
+    },
+    "type": {
+     "const": "picked",
+     "default": "picked",
+     "title": "Type",
+     "type": "string"
+    },
+    "x": {
+     "title": "X",
+     "type": "integer"
+    },
+    "y": {
+     "title": "Y",
+     "type": "integer"
+    }
+   },
+   "required": [
+    "x",
+    "y",
+    "object",
+    "material"
+   ],
+   "title": "Picked",
    "type": "object"
   },
   "ready": {
@@ -1027,9 +1616,25 @@ export const PROTOCOL = {
       "camera": {
        "$ref": "#/$defs/CameraSpec"
       },
+      "materials": {
+       "default": [],
+       "items": {
+        "type": "string"
+       },
+       "title": "Materials",
+       "type": "array"
+      },
       "name": {
        "title": "Name",
        "type": "string"
+      },
+      "objects": {
+       "default": [],
+       "items": {
+        "type": "string"
+       },
+       "title": "Objects",
+       "type": "array"
       },
       "paint": {
        "additionalProperties": true,
@@ -1142,9 +1747,15 @@ export const ENGINE_DEFAULTS = {
  "lambda_e": 0.0,
  "z0": null,
  "noise": 0.0,
+ "surface_noise": 0.0,
+ "surface_scale": 0.0,
+ "grain": 0.05,
+ "hatch": false,
  "seed": 0,
  "z_max": null,
  "method": "raytrace",
  "edge": "mirror",
- "fast": true
+ "fast": true,
+ "objects": {},
+ "materials": {}
 };

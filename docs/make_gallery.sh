@@ -10,6 +10,11 @@ rcp -q render sea --out "$out/sea.jpg" --time 2.5
 rcp -q render sky --out "$out/sky.jpg" --lambda-p 24
 rcp -q render default --out "$out/default-normal.jpg" --mapping normal --lambda-p 14 --noise 0.35 --spp 4
 rcp -q render default --out "$out/default-eye.jpg" --lambda-e 0.08 --lambda-p 6
+# a painting per object and material, toon shading and outlines (scenes/figures.toml); the cubist eye mapping
+rcp -q render figures --out "$out/figures.jpg"
+rcp -q render figures --out "$out/figures-plain.jpg" --iterations 1
+rcp -q render figures --out "$out/figures-cubist.jpg" --eye-mapping cubist --lambda-e 0.2 --lambda-p 0
+rcp -q render default --out "$out/default-sharp-trees.jpg" --paint docs/sharp-trees.json
 # the paper's figure 2: iterations 1 to 6, side by side
 its=$(mktemp -d)
 rcp -q render default --out "$its/final.png" --width 320 --height 180 --save-iterations "$its"

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import signal
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -18,11 +20,12 @@ from .camera import CAMERA_FIELDS, Camera, CameraError
 from .camerapath import PathError, PathFrame, load_path
 from .cluster import ClusterError
 from .painting import PaintState, paint
-from .params import PAINT_SETTINGS, PaintParams
+from .params import PAINT_SETTINGS, PER, PaintParams
+from .scene import Scene
 from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 from .sequence import paint_sequence
 from .service.store import DataFolderError
-from .styles import STYLE, STYLES, with_style
+from .styles import STYLE, STYLES
 from .tracer import EmbreeMissing
 
 log = logging.getLogger("rcp")
@@ -41,6 +44,13 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
     """One option per painting setting (``--lambda-p`` for ``lambda_p``), from its declaration; the bounds
     are checked once, by :class:`PaintParams`."""
     g = p.add_argument_group("painting (defaults: the scene's [paint] table, then the engine's)")
+    g.add_argument(
+        "--paint",
+        type=Path,
+        metavar="FILE",
+        help="painting settings from a JSON or TOML file, settings per object and per material among them "
+        '(\'{"objects": {"figure": {"lambda_p": 0}}}\'); the options below replace its own',
+    )
     g.add_argument(
         "--style",
         choices=tuple(STYLES),
@@ -147,10 +157,35 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def paint_params(scene_defaults: PaintParams, args: argparse.Namespace) -> PaintParams:
-    """The scene's painting settings, with the style and whatever else the command line gives in their place."""
-    given = {name: value for name in (STYLE, *PAINT_SETTINGS) if (value := getattr(args, name, None)) is not None}
-    return with_style(scene_defaults, given)
+def paint_file(path: Path) -> dict:
+    """Painting settings by name from a JSON or TOML file (by its suffix); one line naming it if it is not one."""
+    try:
+        text = path.read_text(encoding="utf-8")
+        values = tomllib.loads(text) if path.suffix.lower() == ".toml" else json.loads(text)
+    except OSError as exc:
+        raise UsageError(f"--paint {path}: cannot read ({exc.strerror})") from None
+    except (ValueError, UnicodeDecodeError) as exc:  # JSON's and TOML's errors are ValueErrors
+        raise UsageError(
+            f"--paint {path}: not valid {'TOML' if path.suffix.lower() == '.toml' else 'JSON'} ({exc})"
+        ) from None
+    if not isinstance(values, dict):
+        raise UsageError(f"--paint {path}: give a table of painting settings, got {type(values).__name__}")
+    unknown = set(values) - {STYLE, *PAINT_SETTINGS, *PER}
+    if unknown:
+        raise UsageError(f"--paint {path}: unknown settings {sorted(unknown)}; known: {sorted(PAINT_SETTINGS)}")
+    return values
+
+
+def paint_params(scene: Scene, args: argparse.Namespace) -> PaintParams:
+    """The scene's painting settings, with the settings of ``--paint``, then the style and whatever else the
+    command line gives in their place."""
+    source = getattr(args, "paint", None)
+    given = paint_file(source) if source is not None else {}
+    given |= {name: value for name in (STYLE, *PAINT_SETTINGS) if (value := getattr(args, name, None)) is not None}
+    try:
+        return scene.painting(given)
+    except ValueError as exc:
+        raise UsageError(f"--paint {source}: {exc}" if source is not None else str(exc)) from None
 
 
 def _camera(default: Camera, args: argparse.Namespace) -> Camera:
@@ -192,7 +227,7 @@ def _render(args: argparse.Namespace) -> None:
     scene = load_scene(args.scene)
     if args.environment is not None:
         scene.environment = load_environment(args.environment, args.exposure)
-    params = paint_params(scene.paint, args)
+    params = paint_params(scene, args)
     base = _camera(scene.camera, args)
     # --width and --height are one eye's image; from here on they are the painting's (both eyes)
     args.width, args.height = base.image_size(args.width, args.height)

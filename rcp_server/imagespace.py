@@ -25,9 +25,10 @@ import numpy as np
 
 from . import kernels
 from .camera import Camera, Region, directions_at, eye_pixels, project
+from .fields import Looks
 from .paintstate import PaintState, TileIteration
 from .params import EDGES, PaintParams
-from .raytrace import TileSetup, field_plan
+from .raytrace import TileSetup, cameras
 from .stopwatch import Stopwatch
 
 
@@ -120,36 +121,37 @@ def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray, edge: str) -> np.n
     return top * (1.0 - fy) + bottom * fy
 
 
-def tile_iteration(plain: PaintState, setup: TileSetup, params: PaintParams) -> TileIteration:
+def tile_iteration(
+    plain: PaintState, setup: TileSetup, params: PaintParams, looks: Looks | None = None
+) -> TileIteration:
     """One image-space iteration of the tile ``setup`` describes: ``I_{n-1} -> I_n``, each pixel looking up
     ``plain`` (the full frame's plain render, every recorded channel) where its displaced target projects,
     one bilinear lookup per pixel at its centre (samples per pixel only antialias the plain render).
 
     Stages: "camera" is the displacement, "shade" the projection and lookup. A state that cannot move a
-    pixel (the canvas, a missing channel) leaves it its plain value.
+    pixel (the canvas, a missing channel) leaves it its plain value. ``looks``: the settings per object and
+    material (``fields.Looks``), as the traced method takes them.
     """
     region = setup.region
     z0 = params.focus(setup.camera)
-    reads = params.reads()
-    pitch = setup.pitch()
     edge = EDGES.index(params.edge)
     source = kernels.channels(plain)
-    noise = kernels.or_dummy(setup.noise, 2)
     v_p = np.zeros((region.pixel_count, 3))
+    anchor = plain.rows(region).position  # the surface noise is read on the plain render's points
 
     def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
         with watch.stage("camera"):
-            # V_p, the same fused fields as the traced method
-            moves = not state.blank and state.has(reads)
-            field = field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves)
+            # V_p, the same fields as the traced method
+            cast = cameras(state, setup, params, z0, looks, anchor=anchor)
+            field = cast.target
             if field.kind != kernels.FIELD_ZERO:
                 kernels.fill_field(
                     field=field,
                     plane=setup.image_plane,
                     previous=kernels.channels(state),
                     z0=float(z0),
-                    noise=noise,
-                    noise_scale=float(params.noise),
+                    noise=cast.noise,
+                    noise_scale=cast.noise_scale,
                     pixels=setup.pixels,
                     out=v_p,
                 )

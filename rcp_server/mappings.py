@@ -15,12 +15,14 @@ Register your own ``W`` with :func:`register_mapping`::
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
 from .kernels import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL
 from .paintstate import CHANNELS
+from .sampling import STREAM_OBJECT, uniform
 
 
 @dataclass(frozen=True)
@@ -31,6 +33,7 @@ class MappingInput:
     normal : (n, 3) float32 world normal (0 on a miss);  direction : (n, 3) float32 previous ray direction
     right, up, forward : (n, 3) float64, each pixel's ``r_ij, u_ij, f_ij`` (camera.py: the camera's own basis
     in every row on an image plane);  z0 : focus depth;  i, j : (n,) pixel column and row
+    geometric, object, material, albedo, uv, position : the other channels (``paintstate.PaintState``)
     A channel the mapping did not declare is None.
     """
 
@@ -44,6 +47,27 @@ class MappingInput:
     z0: float
     i: np.ndarray
     j: np.ndarray
+    geometric: np.ndarray | None = None
+    object: np.ndarray | None = None
+    material: np.ndarray | None = None
+    albedo: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    position: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, state, frames, z0: float, i: np.ndarray, j: np.ndarray) -> MappingInput:
+        """The input of every pixel of ``state`` (a ``PaintState``), each seen in its own frame: ``frames`` is
+        ``(r_ij, u_ij, f_ij)``, each (n, 3) (``camera.pixel_frames``)."""
+        r, u, f = frames
+        return cls(z0=z0, i=i, j=j, right=r, up=u, forward=f, **{name: getattr(state, name) for name in CHANNELS})
+
+    def rows(self, pick: np.ndarray) -> MappingInput:
+        """The input of the pixels ``pick`` (an index array) only."""
+        per_pixel: dict[str, Any] = {
+            name: None if (a := getattr(self, name)) is None else a[pick]
+            for name in (*CHANNELS, "i", "j", "right", "up", "forward")
+        }
+        return replace(self, **per_pixel)
 
     def color_field(self) -> np.ndarray:
         """``(2R-1) r + (2G-1) u + (2B-1) f`` per pixel: (n, 3) float32."""
@@ -116,6 +140,17 @@ def normal_mapping(data: MappingInput) -> np.ndarray:
     """C x N, the previous ray direction across the world normal: smudges along surfaces (section 5)."""
     assert data.direction is not None and data.normal is not None  # recorded: the mapping reads them
     return np.cross(data.direction, data.normal)
+
+
+@register_mapping("cubist", reads={"object"})
+def cubist_mapping(data: MappingInput) -> np.ndarray:
+    """Each object its own viewpoint: a seeded direction across the view per object, none on a miss (the
+    paper's cubist rendering, as an eye mapping: every object is seen from an eye of its own)."""
+    assert data.object is not None  # recorded: the mapping reads it
+    index = data.object.astype(np.int64)
+    angle = 2.0 * np.pi * uniform(0, STREAM_OBJECT, np.maximum(index, 0))
+    sideways = np.cos(angle)[:, None] * data.right + np.sin(angle)[:, None] * data.up
+    return np.where((index >= 0)[:, None], sideways, 0.0).astype(np.float32)
 
 
 BUILT_IN = tuple(MAPPINGS)  # the mappings every server knows; register_mapping adds more for Python callers

@@ -51,6 +51,9 @@ class Material:
     alpha_texture : (h, w) uint8 coverage over the part's UVs, the size of the part's texture, or None;
     alpha_cutoff : a hit where it (in [0, 1]) is below this lets the ray through (glTF's MASK; BLEND is
     drawn as a mask at 0.5; OBJ's map_d); 0: opaque
+    name : what paintings call it (per-material settings); ""  has none
+    bands : toon shading, the light in this many flat bands (``kernels.shade``); 0: smooth
+    outline : how dark the ink where the object, the surface normal or the depth jumps (``outlines.py``); 0 none
     """
 
     emission: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -58,10 +61,21 @@ class Material:
     unlit: bool = False
     alpha_cutoff: float = 0.0
     alpha_texture: np.ndarray | None = None
+    name: str = ""
+    bands: int = 0
+    outline: float = 0.0
 
     @property
     def plain(self) -> bool:
-        return self.emission_texture is None and not any(self.emission) and not self.unlit and not self.alpha_cutoff
+        return (
+            self.emission_texture is None
+            and not any(self.emission)
+            and not self.unlit
+            and not self.alpha_cutoff
+            and not self.name
+            and not self.bands
+            and not self.outline
+        )
 
 
 PLAIN = Material()

@@ -129,10 +129,13 @@ def paint(
     shared = camera.eyes == "shared" and camera.stereo != "mono"
     if shared and (region != Region(width, height) or params.method != "raytrace"):
         raise ValueError("eyes that share their smudges are traced, over the whole painting (the right reads the left)")
+    scene.check_names(params)
     if previous is None or previous.region != region:
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
-    frame = raytrace.Frame.of(scene, time, camera, params)  # the scene as every tile's kernels take it, once
+    frame = raytrace.Frame.of(
+        scene, time, camera, params, width, height
+    )  # the scene as every tile's kernels take it, once
     tiles = region.tiles(tile_rows(region, threads, params.spp * params.iterations))
     keep = [np.empty((height, width, 3), np.float32) for _ in range(params.iterations)] if keep_iterations else None
     if keep is not None and region != Region(width, height):
@@ -234,7 +237,7 @@ def paint(
         lookups = params.iterations if temporal else params.iterations - 1
         kept = (keep if temporal else keep[1:]) if keep is not None else None
         looked = run(
-            lambda tile: imagespace.tile_iteration(plain, setup_tile(camera, tile, params), params),
+            lambda tile: imagespace.tile_iteration(plain, setup_tile(camera, tile, params), params, frame.looks),
             start,
             lookups,
             kept,
@@ -269,7 +272,9 @@ def uses_seen(params: PaintParams, camera: Camera) -> bool:
     of an eye starts at its point: not omnidirectional stereo, ``Camera.one_eye_point``) and targets that
     move (else every iteration casts the first one's rays, and the exact painting costs nothing more), and
     more than one ray a pixel. Not the region's size: a tile must be a crop."""
-    fast = params.fast and params.method == "raytrace" and params.lambda_e == 0.0 and params.lambda_p != 0.0
+    looks = params.looks()
+    eyes_rest = all(look.lambda_e == 0.0 for look in looks)
+    fast = params.fast and params.method == "raytrace" and eyes_rest and any(look.lambda_p != 0.0 for look in looks)
     return fast and camera.one_eye_point and params.iterations * params.spp > 1
 
 

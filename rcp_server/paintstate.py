@@ -15,8 +15,12 @@ import numpy as np
 from .camera import Region
 from .stopwatch import Stopwatch
 
-CHANNELS = ("color", "depth", "normal", "direction")
-"""The per-pixel channels of :class:`PaintState`, in its field order: what a mapping may read."""
+CHANNELS = ("color", "depth", "normal", "direction", "geometric", "object", "material", "albedo", "uv", "position")
+"""The per-pixel channels of :class:`PaintState`, in its field order: what a mapping may read (the paper's
+section 2: colour, z-depth, shading and surface normal, material, object ID, and what a ray saw)."""
+
+SCALAR_CHANNELS = ("depth", "object", "material")
+"""The channels of one number per pixel (object and material: an index as a float32, -1 on a miss)."""
 
 
 class Abandoned(Exception):
@@ -24,15 +28,25 @@ class Abandoned(Exception):
 
 
 def channel_shape(name: str, pixels: int) -> tuple[int, ...]:
-    """The shape of channel ``name`` for ``pixels`` pixels: depth is one number per pixel, the others three."""
-    return (pixels,) if name == "depth" else (pixels, 3)
+    """The shape of channel ``name`` for ``pixels`` pixels: :data:`SCALAR_CHANNELS` one number per pixel, uv
+    two, the others three."""
+    if name in SCALAR_CHANNELS:
+        return (pixels,)
+    return (pixels, 2) if name == "uv" else (pixels, 3)
 
 
 @dataclass
 class PaintState:
     """Per-pixel data of one iteration for a region, row-major. Channels not recorded are None.
 
-    color : (n, 3) float32 in [0, 1];  depth : (n,) float32;  normal, direction : (n, 3) float32
+    color : (n, 3) float32 in [0, 1];  depth : (n,) float32 view depth;  normal : (n, 3) float32 shading
+    normal, 0 on a miss;  direction : (n, 3) float32 ray direction;  geometric : (n, 3) float32 the hit
+    triangle's own normal, on the shading normal's side;  object, material : (n,) float32 index into the
+    scene's objects and materials (``scene.Geometry``), -1 on a miss;  albedo : (n, 3) float32 the surface's
+    unlit colour (texture included), the sky's colour on a miss;  uv : (n, 2) float32 texture coordinates, 0
+    on a miss;  position : (n, 3) float32 world point seen (NaN on a miss, and on a pixel
+    whose samples saw the sky in part: the sky has no point).
+    Samples average, but object and material are the first sample's.
     """
 
     region: Region
@@ -40,6 +54,12 @@ class PaintState:
     depth: np.ndarray | None = None
     normal: np.ndarray | None = None
     direction: np.ndarray | None = None
+    geometric: np.ndarray | None = None
+    object: np.ndarray | None = None
+    material: np.ndarray | None = None
+    albedo: np.ndarray | None = None
+    uv: np.ndarray | None = None
+    position: np.ndarray | None = None
     blank: bool = False  # I_0: the mid-grey canvas that moves no ray
 
     @classmethod

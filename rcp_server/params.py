@@ -13,18 +13,22 @@ from __future__ import annotations
 
 import math
 import numbers
-from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+import pickle
+import sys
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, get_args, get_type_hints
 
 import numpy as np
 
 from .camera import Camera
-from .mappings import BUILT_IN, get_mapping
+from .mappings import BUILT_IN, MAPPINGS, get_mapping, register_mapping
 
 METHODS = ("raytrace", "image")
 """How later iterations see their displaced targets: traced (right everywhere), or looked up in the plain
 render (``imagespace.py``: fast, needs ``lambda_e = 0``, wrong off screen)."""
+Overrides = tuple[tuple[str, tuple[tuple[str, Any], ...]], ...]
+"""Settings per object or per material, frozen: ``((name, ((setting, value), ...)), ...)``, sorted."""
 EDGES = ("clamp", "wrap", "mirror")
 """How the image method reads a lookup that falls off screen (the order is the kernel's code for each)."""
 
@@ -58,7 +62,20 @@ class PaintParams:
     z0: float | None = setting(
         None, "focus depth of the depth mapping (default: the distance to look-at)", gt=0, le=1e6
     )
-    noise: float = setting(0.0, "strength of a seeded random vector added per pixel", ge=0, le=16)
+    noise: float = setting(0.0, "screen noise: strength of a seeded random vector added per pixel", ge=0, le=16)
+    surface_noise: float = setting(
+        0.0,
+        "surface noise: strength of a seeded random vector that belongs to the world point a pixel saw",
+        ge=0,
+        le=16,
+    )
+    surface_scale: float = setting(
+        0.0, "surface noise that scales the displacement: D times (1 + this x a value in [-1, 1])", ge=0, le=16
+    )
+    grain: float = setting(0.05, "size of the surface noise's cells, in scene units", gt=0, le=1e6)
+    hatch: bool = setting(
+        False, "surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)"
+    )
     seed: int = setting(0, "seed of the jitter and the noise", ge=0, le=2**31 - 1)
     z_max: float | None = setting(None, "depth recorded for a miss (default: beyond the scene)", gt=0, le=1e6)
     method: str = setting(
@@ -72,11 +89,15 @@ class PaintParams:
         "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change "
         "(off: trace every ray of every iteration)",
     )
+    objects: Overrides = field(default=(), metadata={"per": "object"})
+    materials: Overrides = field(default=(), metadata={"per": "material"})
 
     def __post_init__(self):
         for declared in PAINT_SETTINGS.values():
             declared.check(getattr(self, declared.name))
-        if self.method == "image" and self.lambda_e != 0.0:
+        for per in PER:
+            object.__setattr__(self, per, overrides(per, getattr(self, per)))
+        if self.method == "image" and any(p.lambda_e != 0.0 for p in self.looks()):
             raise ValueError(
                 f"the image-space method cannot represent eye displacement (lambda_e = {self.lambda_e}): "
                 "use lambda_e 0, or method raytrace"
@@ -84,26 +105,85 @@ class PaintParams:
 
     @classmethod
     def from_dict(cls, values: dict) -> PaintParams:
-        """Settings by name (a scene file's ``[paint]`` table); an unknown name is refused with the known ones."""
-        unknown = set(values) - set(PAINT_SETTINGS)
+        """Settings by name (a scene file's ``[paint]`` table, ``objects`` and ``materials`` among them: name ->
+        settings); an unknown name is refused with the known ones."""
+        unknown = set(values) - set(PAINT_SETTINGS) - set(PER)
         if unknown:
             raise ValueError(f"unknown paint settings {sorted(unknown)}; known: {sorted(PAINT_SETTINGS)}")
         return cls(**values)
 
     def non_defaults(self) -> dict:
-        """The settings that differ from the engine's defaults, name -> value (what a scene changes)."""
-        return {name: value for name, s in PAINT_SETTINGS.items() if (value := getattr(self, name)) != s.default}
+        """The settings that differ from the engine's defaults, name -> value (what a scene changes); the
+        overrides per object and per material as ``{name: {setting: value}}``."""
+        changed = {name: value for name, s in PAINT_SETTINGS.items() if (value := getattr(self, name)) != s.default}
+        return changed | {per: as_dict(table) for per in PER if (table := getattr(self, per))}
+
+    def __reduce__(self):
+        """Pickled with the registered mappings it paints with (a built-in one travels by name): a painting
+        sent to another process (a Ray worker) paints there as here, though nobody registered them there."""
+        names = {name for look in self.looks() for name in (look.mapping, look.eye_mapping)}
+        carried = tuple(_by_value(get_mapping(name)) for name in sorted(names) if name not in BUILT_IN)
+        return _unpickled, (self.settings(), carried)
+
+    def settings(self) -> dict[str, Any]:
+        """Every setting by name, the overrides per object and per material as ``{name: {setting: value}}``."""
+        return {name: getattr(self, name) for name in PAINT_SETTINGS} | {
+            per: as_dict(getattr(self, per)) for per in PER
+        }
+
+    def overridden(self, object: str | None, material: str | None) -> PaintParams:
+        """The painting of a pixel that shows ``object`` made of ``material`` (None: a miss, or no name):
+        these settings, then the material's overrides, then the object's (the more particular wins)."""
+        given = {**dict(dict(self.materials).get(material or "", ())), **dict(dict(self.objects).get(object or "", ()))}
+        return replace(self, objects=(), materials=(), **given) if given else self
+
+    def looks(self) -> list[PaintParams]:
+        """This painting and each of its overrides (what any pixel may paint with)."""
+        return [self, *(self.overridden(name, None) for name, _ in self.objects)] + [
+            self.overridden(None, name) for name, _ in self.materials
+        ]
 
     def focus(self, camera: Camera) -> float:
         """``z0``: the focus depth given, or the view depth of the camera's look-at point."""
         return self.z0 if self.z0 is not None else float(np.linalg.norm(np.subtract(camera.look_at, camera.eye)))
 
     def reads(self) -> frozenset[str]:
-        """The channels of ``I_{n-1}`` this painting reads (the only ones it records)."""
-        channels = get_mapping(self.mapping).reads
-        if self.lambda_e != 0.0:
-            channels |= get_mapping(self.eye_mapping).reads
+        """The channels of ``I_{n-1}`` this painting reads (the only ones it records): its mappings', the
+        object or material a pixel showed where settings vary by them, the world point for surface noise."""
+        channels = frozenset({"object"} if self.objects else ()) | ({"material"} if self.materials else set())
+        for look in self.looks():
+            channels |= get_mapping(look.mapping).reads
+            if look.lambda_e != 0.0:
+                channels |= get_mapping(look.eye_mapping).reads
+            if look.surface_noise or look.surface_scale:
+                channels |= {"position", "normal"} if look.hatch else {"position"}
         return channels
+
+
+def _by_value(mapping) -> bytes:
+    """A registered mapping pickled with its function's code (cloudpickle, which Ray brings), not a reference
+    to the module that defined it: a Ray worker need not be able to import a script's or a test's module."""
+    try:
+        import cloudpickle
+    except ImportError:  # no Ray either: a process of ours, by reference
+        return pickle.dumps(mapping)
+    module = sys.modules.get(mapping.field.__module__)
+    if module is None or module.__name__ == "__main__":  # cloudpickle sends those by value anyway
+        return cloudpickle.dumps(mapping)
+    cloudpickle.register_pickle_by_value(module)
+    try:
+        return cloudpickle.dumps(mapping)
+    finally:
+        cloudpickle.unregister_pickle_by_value(module)
+
+
+def _unpickled(settings: dict[str, Any], carried: tuple[bytes, ...]) -> PaintParams:
+    """A pickled :class:`PaintParams` again, its registered mappings registered here first (if this process
+    does not know them by those names)."""
+    for mapping in map(pickle.loads, carried):
+        if mapping.name not in MAPPINGS:
+            register_mapping(mapping.name, mapping.reads, mapping.field)
+    return PaintParams(**settings)
 
 
 @dataclass(frozen=True)
@@ -159,10 +239,58 @@ class PaintSetting:
             raise ValueError(f"{self.name} must be at most {self.le}, got {value}")
 
 
+PER = ("objects", "materials")
+"""The fields of :class:`PaintParams` that hold settings per object and per material: name -> settings."""
+
+PER_PIXEL = (
+    "mapping",
+    "eye_mapping",
+    "lambda_p",
+    "lambda_e",
+    "noise",
+    "surface_noise",
+    "surface_scale",
+    "grain",
+    "hatch",
+)
+"""The settings an object or a material may set for itself: those that can vary from pixel to pixel."""
+
+
+def overrides(per: str, table) -> Overrides:
+    """``table`` (name -> settings, as a dict or as :data:`Overrides`) checked and frozen: every setting one of
+    :data:`PER_PIXEL` and valid; refused in one line naming the object or material otherwise."""
+    items = table.items() if isinstance(table, Mapping) else table
+    frozen = []
+    for name, settings in items:
+        if not isinstance(name, str) or not isinstance(settings, Mapping | tuple):
+            raise ValueError(f"{per}: give each a name and a table of settings, got {name!r}")
+        values = dict(settings)
+        unknown = set(values) - set(PER_PIXEL)
+        if unknown:
+            raise ValueError(
+                f"{per}.{name}: {', '.join(sorted(map(str, unknown)))} cannot vary per pixel; these can: "
+                f"{', '.join(PER_PIXEL)}"
+            )
+        for key, value in values.items():
+            try:
+                PAINT_SETTINGS[key].check(value)
+            except ValueError as exc:
+                raise ValueError(f"{per}.{name}: {exc}") from None
+        frozen.append((name, tuple(sorted(values.items()))))
+    return tuple(sorted(frozen))
+
+
+def as_dict(table: Overrides) -> dict[str, dict[str, Any]]:
+    """:data:`Overrides` as plain data: name -> {setting: value}."""
+    return {name: dict(settings) for name, settings in table}
+
+
 def _declared() -> dict[str, PaintSetting]:
     hints = get_type_hints(PaintParams)
     declared = {}
     for f in fields(PaintParams):
+        if f.name in PER:
+            continue
         kinds = get_args(hints[f.name]) or (hints[f.name],)
         kind = next(k for k in kinds if k is not type(None))
         declared[f.name] = PaintSetting(f.name, kind, type(None) in kinds, f.default, **f.metadata)

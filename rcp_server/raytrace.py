@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import kernels
+from . import fields, kernels, outlines
 from .alphamask import pass_masked, step_floor
 from .camera import RAY_DTYPE, Camera, Region, pixel_frames, sample_targets
+from .fields import Looks
 from .mappings import MappingInput, get_mapping
 from .paintstate import PaintState
 from .params import PaintParams
@@ -57,40 +58,37 @@ class TileSetup:
 def setup_tile(camera: Camera, region: Region, params: PaintParams) -> TileSetup:
     """The constants of ``region``'s iterations seen by ``camera``: exactly those of the same pixels of the
     full image (counter-based sampling), so a tile is a crop."""
-    if params.spp == 1 and params.noise == 0:  # the common case needs no pixel coordinates at all
+    noisy = any(look.noise for look in params.looks())
+    if params.spp == 1 and not noisy:  # the common case needs no pixel coordinates at all
         half = np.full((region.pixel_count, 1), 0.5)
         return TileSetup(camera, region, half, half, None)
     i, j = region.pixel_coords()
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
     noise = None
-    if params.noise:  # in each pixel's own frame, so that it means the same all around a panorama
+    if noisy:  # in each pixel's own frame, so that it means the same all around a panorama
         _, r, u, f = pixel_frames(camera, region, i, j)
         v = noise_vectors(params.seed, i, j)
         noise = (v[:, :1] * r + v[:, 1:2] * u + v[:, 2:] * f).astype(np.float32)
     return TileSetup(camera, region, xi, eta, noise)
 
 
-def _mapping_input(state: PaintState, setup: TileSetup, z0: float) -> MappingInput:
-    _, r, u, f = setup.frames()
-    i, j = setup.region.pixel_coords()
-    return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
-
-
-def displacements(state: PaintState, setup: TileSetup, params: PaintParams, z0: float) -> tuple[np.ndarray, np.ndarray]:
-    """``(V_p, V_e)`` per pixel from ``I_{n-1}`` in plain numpy: two (n, 3) float64, scene units.
+def displacements(
+    state: PaintState,
+    setup: TileSetup,
+    params: PaintParams,
+    z0: float,
+    looks: Looks | None = None,
+    anchor: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(V_p, V_e)`` per pixel from ``I_{n-1}`` in plain numpy: two (n, 3) float64, scene units
+    (``fields.displacements``; ``looks``: the settings per object and material, default only ``params``;
+    ``anchor``: where the surface noise is read).
 
     The reference for what ``kernels.cast_rays`` computes fused; a non-finite displacement moves nothing.
     """
-    data = _mapping_input(state, setup, z0)
-    noise = 0.0 if setup.noise is None else params.noise * setup.noise
-
-    def scaled(mapping: str, scale: float) -> np.ndarray:
-        if scale == 0.0:
-            return np.zeros((state.region.pixel_count, 3))
-        d = scale * (np.asarray(get_mapping(mapping).field(data), dtype=np.float64) + noise)
-        return np.where(np.isfinite(d), d, 0.0)
-
-    return scaled(params.mapping, params.lambda_p * setup.pitch()), scaled(params.eye_mapping, params.lambda_e)
+    i, j = setup.region.pixel_coords()
+    data = MappingInput.of(state, setup.frames()[1:], z0, i, j)
+    return fields.displacements(state, data, looks or Looks.single(params), setup.pitch(), setup.noise, anchor)
 
 
 @dataclass
@@ -112,38 +110,45 @@ class Rays:
         )
 
 
-def field_plan(
-    state: PaintState, setup: TileSetup, z0: float, mapping: str, scale: float, moves: bool
-) -> kernels.Field:
-    """How ``kernels.fill_field`` computes the displacement field of ``mapping`` times ``scale`` for
-    ``state``: fused for a built-in mapping, given (computed here, in numpy) for a registered one;
-    FIELD_ZERO when nothing ``moves`` or the scale is 0."""
-    fused = get_mapping(mapping).fused
-    if not moves or scale == 0.0:
-        return kernels.Field(kernels.FIELD_ZERO, 0.0, kernels.or_dummy(None, 2))
-    if fused != kernels.FIELD_GIVEN:
-        return kernels.Field(fused, scale, kernels.or_dummy(None, 2))
-    given = get_mapping(mapping).field(_mapping_input(state, setup, z0))
-    return kernels.Field(kernels.FIELD_GIVEN, scale, np.ascontiguousarray(given, dtype=np.float32))
-
-
 def cameras(
-    state: PaintState, setup: TileSetup, params: PaintParams, z0: float, write_origins: bool = True
+    state: PaintState,
+    setup: TileSetup,
+    params: PaintParams,
+    z0: float,
+    looks: Looks | None = None,
+    write_origins: bool = True,
+    anchor: np.ndarray | None = None,
 ) -> kernels.Cast:
     """The tile's cameras from ``I_{n-1}`` as ``kernels.cast_rays`` takes them (``write_origins``: False when the
-    eyes rest and the ray buffers already hold the eye)."""
+    eyes rest and the ray buffers already hold the eye). The common case (``Looks.fused``) leaves the fields
+    to the kernel; any other is computed here (:func:`displacements`) and given to it as it is."""
+    looks = looks or Looks.single(params)
     pitch = setup.pitch()
     moves = not state.blank and state.has(params.reads())
+    still = kernels.Field(kernels.FIELD_ZERO, 0.0, kernels.or_dummy(None, 2))
+    target, eye_field, noise_scale = still, still, 0.0
+    if moves and looks.fused():
+        if params.lambda_p != 0.0:
+            target = kernels.Field(get_mapping(params.mapping).fused, params.lambda_p * pitch, target.given)
+        if params.lambda_e != 0.0:
+            eye_field = kernels.Field(get_mapping(params.eye_mapping).fused, params.lambda_e, target.given)
+        noise_scale = float(params.noise)
+    elif moves:
+        v_p, v_e = displacements(state, setup, params, z0, looks, anchor)
+        if looks.targets_move:
+            target = kernels.Field(kernels.FIELD_GIVEN, 1.0, v_p.astype(np.float32))
+        if looks.eyes_move:
+            eye_field = kernels.Field(kernels.FIELD_GIVEN, 1.0, v_e.astype(np.float32))
     return kernels.Cast(
         eye=np.asarray(setup.camera.eye, np.float64),
         plane=setup.image_plane,
         xi=setup.xi,
         eta=setup.eta,
         z0=float(z0),
-        target=field_plan(state, setup, z0, params.mapping, params.lambda_p * pitch, moves),
-        eye_field=field_plan(state, setup, z0, params.eye_mapping, params.lambda_e, moves),
+        target=target,
+        eye_field=eye_field,
         noise=kernels.or_dummy(setup.noise, 2),
-        noise_scale=float(params.noise) if moves else 0.0,
+        noise_scale=noise_scale,
         write_origins=write_origins,
     )
 
@@ -188,6 +193,20 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
     out.distance[:] = hits.t
 
 
+def pick(scene: Scene, time: float, camera: Camera, width: int, height: int, x: int, y: int) -> tuple[str, str] | None:
+    """What pixel ``(x, y)`` of a ``width x height`` view by ``camera`` shows, at its centre: the names of its
+    object and material ("" for a material with no name), or None for the sky (one ray, traced here)."""
+    if not (0 <= x < width and 0 <= y < height):
+        raise ValueError(f"pixel ({x}, {y}) is not in a {width}x{height} view")
+    seen = kernels.Seen.empty(1, 1)
+    visible_faces(scene, time, camera, Region(width, height, x, y, 1, 1), seen)
+    face = int(seen.face[0])
+    if face < 0:
+        return None
+    geometry, _ = scene.geometry(time)
+    return geometry.object_names[geometry.face_object[face]], geometry.material_names[geometry.face_material[face]]
+
+
 def thin_parts(scene: Scene, time: float, camera: Camera, rows: Region, out: kernels.Seen) -> None:
     """Where geometry thinner than the grid lies between the pixel centres of ``rows`` (full-width rows of a
     seen grid), into ``out.near`` (a bundles.Seen of those rows): ``kernels.cover_thin``."""
@@ -211,9 +230,13 @@ class Frame:
     trace: kernels.Trace
     shading: kernels.Shading
     tracer: Tracer | None  # held while the painting lives: ``trace`` has only its native handle
+    looks: Looks  # the settings per object and material, as the scene's indices select them
 
     @classmethod
-    def of(cls, scene: Scene, time: float, camera: Camera, params: PaintParams) -> Frame:
+    def of(
+        cls, scene: Scene, time: float, camera: Camera, params: PaintParams, width: int = 1, height: int = 1
+    ) -> Frame:
+        """The frame of a ``width x height`` painting (its size: where outlines are drawn)."""
         geometry, tracer = scene.geometry(time)
         light = scene.light
         reads = params.reads()
@@ -225,13 +248,12 @@ class Frame:
             ambient=float(light.ambient if light else 1.0),
             lit=light is not None,
             z_max=float(z_max),
-            depth="depth" in reads,
-            normal="normal" in reads,
-            direction="direction" in reads,
+            records=kernels.records(reads),
+            ink=outlines.ink(scene, time, camera, width, height),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
         trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry))
-        return cls(trace, shading, tracer)
+        return cls(trace, shading, tracer, Looks.of(params, geometry.object_names, geometry.material_names))
 
 
 class TracedTile:
@@ -281,6 +303,7 @@ class TracedTile:
         self.last: PaintState | None = None  # the state the iteration before started from
         self.source: PaintState | None = None  # what the next iteration's fields read, when not its own state
         self.clock = np.zeros(3, np.int64)
+        self.anchor: np.ndarray | None = None  # where the surface noise is read: the plain render's points
 
     def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
         params, reads, before = self.params, self.reads, self.last
@@ -288,7 +311,7 @@ class TracedTile:
         source = self.source if self.source is not None else state
         compare = params.fast and before is not None and not (before.blank or state.blank) and before.has(reads)
         compare = compare and self.source is None  # a shared source changes with other pixels than this one
-        cast = cameras(source, self.setup, params, self.z0)
+        cast = cameras(source, self.setup, params, self.z0, self.frame.looks, anchor=self.anchor)
         eyes_rest = cast.eye_field.kind == kernels.FIELD_ZERO
         cast = cast._replace(write_origins=not (eyes_rest and self.at_eye))
         # with two eyes, ray m is another pixel's, and so another eye's, when the pixels painted change
@@ -302,11 +325,9 @@ class TracedTile:
             compare=kernels.Compare(
                 any=compare,
                 color="color" in reads,
-                depth="depth" in reads,
-                normal="normal" in reads,
-                direction="direction" in reads,
+                channels=kernels.records(reads),
                 # colors compare in display levels while the eyes rest; with moving eyes every shortcut is exact
-                color_levels=kernels.REUSE_LEVELS if params.lambda_e == 0.0 else 0,
+                color_levels=kernels.REUSE_LEVELS if not self.frame.looks.eyes_move else 0,
             ),
             before=kernels.channels(before if compare else state),
             previous=kernels.channels(state),
@@ -320,6 +341,8 @@ class TracedTile:
             clock=self.clock,
         )
         watch.share(time.perf_counter() - clock, dict(zip(("camera", "intersect", "shade"), self.clock, strict=True)))
+        if state.blank and out.position is not None:
+            self.anchor = out.position.copy()
         if self.record_seen is not None and state.blank and params.spp == 1:
             self.record_seen.face[:] = self.scratch.hits.face
             self.record_seen.distance[:] = self.scratch.hits.t

@@ -15,6 +15,8 @@ STREAM_JITTER_X = 1
 STREAM_JITTER_Y = 2
 STREAM_STRATA = 3
 STREAM_NOISE = 4
+STREAM_SURFACE = 5  # surface noise: keyed by a cell of world space, not a pixel
+STREAM_OBJECT = 6  # the cubist mapping: keyed by an object
 
 
 def _mix(x: np.ndarray) -> np.ndarray:

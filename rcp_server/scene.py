@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .camera import Camera
 from .meshes import PLAIN, Material, Part, corner_normals, rgb8
 from .params import PaintParams
+from .styles import with_style
 from .tracer import Tracer
 
 
@@ -68,6 +70,11 @@ class SceneObject:
     instances: list[tuple[np.ndarray, Part]]  # (world_from_object at time 0, the part as tinted there)
     motion: Callable[[float], np.ndarray] | None = None  # world_from_object change at a time, 4x4
     waves: tuple[Waves, ...] = ()
+    label: str = ""  # what paintings call it (per-object settings; the parts of one mesh share it): "" its name
+
+    @property
+    def called(self) -> str:
+        return self.label or self.name
 
     @property
     def animated(self) -> bool:
@@ -104,6 +111,11 @@ class Geometry:
     material_emission_texture: np.ndarray = field(default_factory=lambda: np.full(1, -1, np.int32))
     material_unlit: np.ndarray = field(default_factory=lambda: np.zeros(1, np.bool_))
     material_alpha_cutoff: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    material_bands: np.ndarray = field(default_factory=lambda: np.zeros(1, np.int32))
+    material_outline: np.ndarray = field(default_factory=lambda: np.zeros(1, np.float32))
+    material_names: list[str] = field(default_factory=lambda: [""])
+    face_object: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int32))
+    object_names: list[str] = field(default_factory=list)
     bounds: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))  # (2, 3) min and max corner
 
     @property
@@ -114,6 +126,17 @@ class Geometry:
     def masked(self) -> bool:
         """Some surface has texels that rays pass through (``kernels.alpha``); without, nothing is checked."""
         return bool((self.material_alpha_cutoff > 0).any())
+
+
+def object_names(objects: list[SceneObject]) -> list[str]:
+    """The objects a painting can tell apart, by name, in order: the index the object channel records."""
+    return list(dict.fromkeys(obj.called for obj in objects))
+
+
+def material_names(objects: list[SceneObject]) -> list[str]:
+    """The named materials of the objects' parts, each once, in order."""
+    names = (part.material.name for obj in objects for _, part in obj.instances)
+    return [name for name in dict.fromkeys(names) if name]
 
 
 def _transform_points(m: np.ndarray, p: np.ndarray) -> np.ndarray:
@@ -209,7 +232,8 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
     re-places only what moves. Each array is made once, in the dtype it keeps (the staircase interior's
     geometry is 262k triangles: a copy of each array is tens of MB).
     """
-    tris, normals, colors, uvs, tex_ids, face_materials = [], [], [], [], [], []
+    tris, normals, colors, uvs, tex_ids, face_materials, face_objects = [], [], [], [], [], [], []
+    names = object_names(objects)
     packer = _Packer()
     packer.material(PLAIN)  # row 0: every part without a material of its own
     for obj in objects:
@@ -226,11 +250,11 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
             index = packer.texture(part.texture)
             packer.alpha(index, part.material.alpha_texture)
             row = 0 if part.material.plain else packer.material(part.material)
-            corner_uv = part.corner_uv
-            keep_uv = corner_uv is not None and (index >= 0 or part.material.emission_texture is not None)
-            uvs.append(corner_uv if keep_uv and corner_uv is not None else np.zeros((len(tri), 3, 2), np.float32))
+            corner_uv = part.corner_uv  # kept untextured too: the uv channel reads them
+            uvs.append(corner_uv if corner_uv is not None else np.zeros((len(tri), 3, 2), np.float32))
             tex_ids.append(np.full(len(tri), index, np.int32))
             face_materials.append(np.full(len(tri), row, np.int32))
+            face_objects.append(np.full(len(tri), names.index(obj.called), np.int32))
     images = [image for _, image in sorted(packer.textures.values(), key=lambda item: item[0])]
     store = _store_of(images)
     materials = [m for _, m in sorted(packer.materials.values(), key=lambda item: item[0])]
@@ -254,6 +278,11 @@ def build_geometry(objects: list[SceneObject], time: float, static_cache: dict |
         material_emission_texture=np.array([packer.texture(m.emission_texture) for m in materials], dtype=np.int32),
         material_unlit=np.array([m.unlit for m in materials], dtype=np.bool_),
         material_alpha_cutoff=np.array([m.alpha_cutoff for m in materials], dtype=np.float32),
+        material_bands=np.array([m.bands for m in materials], dtype=np.int32),
+        material_outline=np.array([m.outline for m in materials], dtype=np.float32),
+        material_names=[m.name for m in materials],
+        face_object=np.concatenate(face_objects) if face_objects else np.zeros(0, np.int32),
+        object_names=names,
         bounds=np.stack([points.min(axis=0), points.max(axis=0)]).astype(np.float64),
     )
 
@@ -293,6 +322,23 @@ class Scene:
                     self._cache.pop(next(iter(self._cache)))
                 self._cache[key] = (geometry, tracer)
             return self._cache[key]
+
+    def painting(self, settings: Mapping[str, Any]) -> PaintParams:
+        """This scene's painting with ``settings`` (``styles.with_style``: a style, then settings by name, the
+        overrides per object and per material merged into the scene's); ``ValueError`` in one line for a
+        setting it cannot take or an object or material this scene does not have."""
+        params = with_style(self.paint, settings)
+        self.check_names(params)
+        return params
+
+    def check_names(self, params: PaintParams) -> None:
+        """``ValueError`` (one line, with the names it has) unless the objects and materials that ``params``
+        sets apart are this scene's."""
+        for per, names in (("objects", object_names(self.objects)), ("materials", material_names(self.objects))):
+            unknown = [name for name, _ in getattr(params, per) if name not in names]
+            if unknown:
+                have = ", ".join(repr(n) for n in names[:12]) + (" ..." if len(names) > 12 else "") or "none"
+                raise ValueError(f"{per}: this scene has no {', '.join(map(repr, unknown))} (it has: {have})")
 
     def depth_of_miss(self, eye, time: float = 0.0) -> float:
         """``z_max``: the depth recorded where a ray sees only the environment, seen from ``eye``.

@@ -27,6 +27,7 @@ from .camera import COORDINATE_LIMIT, Camera, CameraError
 from .camerawire import CameraSpec, camera_of
 from .meshes import (
     DEFAULT_ALBEDO,
+    Material,
     MeshError,
     Model,
     Part,
@@ -147,6 +148,8 @@ class ObjectSpec(Placement):
     spin: SpinSpec | None = None
     bob: BobSpec | None = None
     waves: list[WaveSpec] = []
+    material: str | None = None  # a name from the scene's [materials]
+    paint: dict[str, str | int | float | bool] = {}  # this object's own painting (params.PER_PIXEL)
 
     @model_validator(mode="after")
     def _one_placement_list(self):
@@ -155,13 +158,23 @@ class ObjectSpec(Placement):
         return self
 
 
+class MaterialSpec(_Model):
+    """A material objects refer to by name: how it is shaded, and its own painting (``params.PER_PIXEL``)."""
+
+    shading: Literal["lit", "toon"] = "lit"
+    bands: Annotated[int, Field(ge=1, le=16)] = 3  # toon: flat bands of light
+    outline: Annotated[float, Field(ge=0, le=1)] = 0.0  # ink where object, normal or depth jump (0: none)
+    paint: dict[str, str | int | float | bool] = {}
+
+
 class SceneSpec(_Model):
     title: str = ""
     camera: CameraSpec | str  # type: ignore[valid-type]  # or the name of a camera in one of the objects' glTF files
     environment: EnvironmentSpec = EnvironmentSpec(color=(0.55, 0.62, 0.72))
     light: LightSpec | str | None = None  # or the name of a light (KHR_lights_punctual) in one of them
-    paint: dict[str, str | int | float] = {}
+    paint: dict[str, str | int | float | bool] = {}
     z_max: Annotated[float, Field(gt=0)] | None = None
+    materials: dict[str, MaterialSpec] = {}
     objects: list[ObjectSpec] = []
 
 
@@ -265,7 +278,11 @@ def _listed(names) -> str:
     return ", ".join(repr(n) for n in list(names)[:8]) or "none"
 
 
-def _scene_object(spec: ObjectSpec, folder: Path, where: str, named: _Named | None = None) -> list[SceneObject]:
+def _scene_object(
+    spec: ObjectSpec, folder: Path, where: str, named: _Named | None = None, material: Material | None = None
+) -> list[SceneObject]:
+    """The parts of one object of a scene file; ``material``: the one its ``material`` names (over the parts'
+    own, keeping their emission and cut-outs)."""
     objects = []
     texture = read_image(folder / spec.texture) if spec.texture else None
     placements = [m @ spec.matrix() for m in _instances(spec)]
@@ -282,11 +299,17 @@ def _scene_object(spec: ObjectSpec, folder: Path, where: str, named: _Named | No
         # 'color' multiplies the colors a part carries (and any texture); a plain part takes it as albedo
         if not part.colored:
             part = replace(part, corner_colors=np.ones_like(part.corner_colors))
+        if material is not None:
+            shared = (
+                material if part.material.plain else replace(part.material, name=material.name, bands=material.bands)
+            )
+            part = replace(part, material=shared)
         white = part.colored or part.texture is not None
         base = spec.color if spec.color is not None else ((1.0, 1.0, 1.0) if white else DEFAULT_ALBEDO)
         tints = _tints(spec, len(placements), base)
         instances = [(m, part.tinted(tint)) for m, tint in zip(placements, tints, strict=True)]
-        objects.append(SceneObject(f"{spec.name or where}#{k}", part, instances, motion, waves))
+        name = spec.name or where
+        objects.append(SceneObject(f"{name}#{k}", part, instances, motion, waves, label=name))
     return objects
 
 
@@ -329,11 +352,20 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
             if np.linalg.norm(d) == 0:
                 raise SceneError("light.direction must not be zero")
             light = Light(tuple(d / np.linalg.norm(d)), spec.light.ambient)
+        materials = {
+            name: Material(name=name, bands=m.bands if m.shading == "toon" else 0, outline=m.outline)
+            for name, m in spec.materials.items()
+        }
         objects = []
         for index, obj in enumerate(spec.objects):
             where = f"objects.{index}" + (f" ({obj.name})" if obj.name else "")
-            objects.extend(_scene_object(obj, folder, where, named))
-        paint = PaintParams.from_dict(spec.paint)  # refuse bad painting settings now, not at the first render
+            if obj.material is not None and obj.material not in materials:
+                raise SceneError(f"{where}: no material {obj.material!r} in [materials] (it has: {_listed(materials)})")
+            objects.extend(_scene_object(obj, folder, where, named, materials.get(obj.material or "")))
+        per_object = {obj.name or f"objects.{index}": obj.paint for index, obj in enumerate(spec.objects) if obj.paint}
+        per_material = {name: m.paint for name, m in spec.materials.items() if m.paint}
+        # refuse bad painting settings now, not at the first render
+        paint = PaintParams.from_dict({**spec.paint, "objects": per_object, "materials": per_material})
         stand_in = Camera((0.0, 0.0, 1.0), (0.0, 0.0, 0.0))  # until the named camera is placed in the scene
         scene = Scene(
             name or path.stem,
@@ -345,6 +377,7 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
             paint,
             spec.z_max,
         )
+        scene.check_names(paint)  # a [materials] table's painting for a material no object is made of
         # ---- the cameras and lights of the objects' glTF files, by name ----
         if isinstance(spec.light, str):
             scene.light = named.light(spec.light, scene)

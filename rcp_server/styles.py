@@ -13,12 +13,24 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-from .params import PAINT_SETTINGS, PaintParams
+from .params import PAINT_SETTINGS, PER, PaintParams, as_dict
 
 STYLE = "style"
 """The name under which a style travels among painting settings (a ``paint`` body or message)."""
 
-LOOK = ("mapping", "eye_mapping", "iterations", "spp", "lambda_p", "lambda_e", "noise")
+LOOK = (
+    "mapping",
+    "eye_mapping",
+    "iterations",
+    "spp",
+    "lambda_p",
+    "lambda_e",
+    "noise",
+    "surface_noise",
+    "surface_scale",
+    "grain",
+    "hatch",
+)
 """The settings every style sets: the engine's default where a style says nothing, so that no style leaks
 another's look (or the scene's) into its own."""
 
@@ -62,22 +74,27 @@ STYLES: dict[str, Style] = {
         _style(
             "fractured",
             "Fractured",
-            "paper section 5: smudges along surfaces (camera direction x normal) plus a random jump per pixel, "
-            "which breaks edges into shards",
+            "paper section 5, the first randomness: smudges along surfaces (camera direction x normal) plus a "
+            "random jump that belongs to the surface point (cells a third of a unit wide), which breaks edges "
+            "into shards that stay on their walls as you walk",
             mapping="normal",
             lambda_p=14.0,
-            noise=0.35,
+            surface_noise=0.6,
+            grain=0.8,
             spp=4,
         ),
         _style(
             "cross-hatching",
             "Cross-hatching",
-            "paper section 5, the other randomness: long smudges along surfaces over ten iterations, broken by a "
-            "faint random vector per pixel, so outlines and roofs turn into scratchy strokes that follow each "
-            "surface (an approximation: the engine's noise is one random vector per pixel, not drawn along lines)",
+            "paper section 5, the other randomness: long smudges along surfaces over ten iterations, their length "
+            "scaled by a noise of the surface point that is constant along the smudge and varies across it, so "
+            "outlines and roofs turn into strokes drawn in lines that follow each surface",
             mapping="normal",
             lambda_p=30.0,
-            noise=0.1,
+            surface_scale=1.0,
+            surface_noise=0.2,
+            hatch=True,
+            grain=0.25,
             iterations=10,
             spp=2,
         ),
@@ -106,8 +123,18 @@ def get_style(name: str) -> Style:
 
 def with_style(base: PaintParams, settings: Mapping[str, Any]) -> PaintParams:
     """``base`` (a scene's painting) with the style that ``settings`` names (under :data:`STYLE`, if any),
-    then the other ``settings`` (name -> value), in their place: explicit settings beat the style's."""
+    then the other ``settings`` (name -> value), in their place: explicit settings beat the style's. Settings
+    per object and per material (``objects``, ``materials``: name -> settings) merge into the base's, name by
+    name and setting by setting."""
     given = dict(settings)
     name = given.pop(STYLE, None)
     style = {} if name is None else get_style(name).settings
+    for per in PER:
+        if per in given:
+            merged = as_dict(getattr(base, per))
+            for key, values in dict(given[per]).items():
+                merged[key] = {**merged.get(key, {}), **(values if isinstance(values, Mapping) else {})}
+                if not isinstance(values, Mapping):
+                    raise ValueError(f"{per}.{key}: give a table of settings, got {values!r}")
+            given[per] = merged
     return replace(base, **{**style, **given})

@@ -104,7 +104,10 @@ def test_camera_path_orbits_around_the_target_and_walks_forward():
     [
         (["render", "nowhere-scene", "--out", "x.png"], "unknown scene 'nowhere-scene'"),
         (["render", "{scene}", "--out", "x.gif"], "unknown image type"),
-        (["render", "{scene}", "--out", "x.png", "--mapping", "swirly"], "valid mappings: color, depth, normal"),
+        (
+            ["render", "{scene}", "--out", "x.png", "--mapping", "swirly"],
+            "valid mappings: color, cubist, depth, normal",
+        ),
         (["render", "{scene}", "--out", "x.png", "--width", "0"], "positive integer"),
         (["render", "{scene}", "--out", "x.png", "--lambda-p", "nan"], "finite"),
         (

@@ -376,3 +376,25 @@ def test_a_server_whose_ray_failed_paints_here_meanwhile_and_says_so_at_once(pai
             ):
                 cluster.render(busy_scene, busy_scene.camera, W, H, PaintParams(iterations=2))
             assert time.monotonic() - clock < 5
+
+
+def _swirl(data):
+    """A mapping registered in this process only: the color field turned about the view axis."""
+    return np.cross(data.forward, data.color_field()).astype(np.float32)
+
+
+def test_a_registered_mapping_paints_on_ray_as_on_threads(painter, busy_scene):
+    from rcp_server.mappings import register_mapping, unregister_mapping
+
+    register_mapping("test-swirl", {"color"}, _swirl)
+    try:
+        params = PaintParams(iterations=3, mapping="test-swirl", lambda_p=8.0, objects={"red": {"lambda_p": 0.0}})
+        expected = images.to_uint8(paint(busy_scene, busy_scene.camera, W, H, params, threads=2).image)
+        assert not np.array_equal(
+            expected, images.to_uint8(paint(busy_scene, busy_scene.camera, W, H, replace(params, iterations=1)).image)
+        )
+        np.testing.assert_array_equal(painter.render(busy_scene, busy_scene.camera, W, H, params), expected)
+        frames = list(painter.images(busy_scene, shots(busy_scene), W, H, params, None))
+        np.testing.assert_array_equal(frames, threaded(busy_scene, params))
+    finally:
+        unregister_mapping("test-swirl")

@@ -101,7 +101,7 @@ def _stability(args: argparse.Namespace) -> None:
     require("stability", MATPLOTLIB)
     from .stability import run
 
-    run(args.out, quick=args.quick)
+    run(args.out, quick=args.quick, noise_only=args.noise_only)
 
 
 def _memory(args: argparse.Namespace) -> None:
@@ -214,6 +214,7 @@ def add_bench_commands(subparsers) -> None:
 
     p = command("stability", "where each method breaks (needs the bench extra)")
     _out_and_quick(p)
+    p.add_argument("--noise-only", action="store_true", help="only the walk flicker of the two kinds of noise")
     p.set_defaults(run_bench=_stability)
 
     p = command("memory", "resident memory per loaded scene, and its peak once painted, over the interpreter")

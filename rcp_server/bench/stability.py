@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -345,6 +345,74 @@ def temporal_section(scene: Scene, width: int, height: int, params: PaintParams,
     }
 
 
+def walk(camera: Camera, distance: float) -> Camera:
+    """The camera walked ``distance`` scene units along its view (eye and look-at together)."""
+    step = camera.basis()[2] * distance
+    return camera.moved(eye=tuple(np.add(camera.eye, step)), look_at=tuple(np.add(camera.look_at, step)))
+
+
+def _world_points(scene: Scene, camera: Camera, width: int, height: int) -> np.ndarray:
+    """What the pixel centres see, (W*H, 3) float64 world points (NaN: the sky)."""
+    register_mapping("bench-points", {"position"}, lambda data: np.zeros((len(data.color), 3)))
+    try:
+        probe = PaintParams(iterations=1, lambda_p=0.0, lambda_e=1.0, eye_mapping="bench-points")
+        state = paint(scene, camera, width, height, probe).state
+    finally:
+        unregister_mapping("bench-points")
+    assert state.position is not None  # the probe reads it
+    return state.position.astype(np.float64)
+
+
+def carried_flicker(
+    paintings: list[np.ndarray], plains: list[np.ndarray], cameras: list[Camera], scene: Scene
+) -> list[float]:
+    """Flicker beyond the scene's own motion, per consecutive pair of frames: frame k + 1 against frame k
+    carried with the scene (each pixel looks up frame k where the world point it sees projects in frame k's
+    camera), the painting's mean difference minus the plain render's, over what both frames see of the
+    scene (not the sky). A pattern that stays on its surfaces scores 0 however fine; one that stays on the
+    screen scores what the scene moves under it."""
+    h, w = paintings[0].shape[:2]
+    out = []
+    for k in range(len(paintings) - 1):
+        points = _world_points(scene, cameras[k + 1], w, h)
+        x, y = project(cameras[k], w, h, points - np.asarray(cameras[k].eye))  # the sky (NaN) is left out
+        inside = (x >= 0) & (x <= w - 1) & (y >= 0) & (y <= h - 1)
+
+        residuals = []
+        for images in (paintings, plains):
+            carried = bilinear(images[k], x[inside], y[inside], "clamp")
+            residuals.append(float(np.abs(images[k + 1].reshape(-1, 3)[inside] - carried).mean()))
+        out.append(residuals[0] - residuals[1])
+    return out
+
+
+def noise_section(scene: Scene, width: int, height: int, frames: int, step: float, degrees: float) -> dict:
+    """The noisy styles (``styles.py``) on the paper's two kinds of randomness: each style as it is (surface
+    noise, a function of the world point) and with screen noise of the same strength instead (a fixed vector
+    per pixel, what the styles were before). Per-frame paintings of a walk (``step`` scene units a frame) and
+    of a pan (``degrees`` a frame): flicker carried with the scene (:func:`carried_flicker`) and frame to frame
+    (:func:`flicker`, which counts a fine pattern moving with its surfaces as change)."""
+    moves = {
+        "walk": [walk(scene.camera, step * k) for k in range(frames)],
+        "pan": [pan(scene.camera, degrees * k) for k in range(frames)],
+    }
+    plain = replace(scene.paint, iterations=1, spp=1)
+    plains = {how: [paint(scene, c, width, height, plain).image for c in cameras] for how, cameras in moves.items()}
+    out = {}
+    for name in ("fractured", "cross-hatching"):
+        surface = scene.painting({"style": name})
+        screen = replace(surface, noise=max(surface.surface_noise, surface.surface_scale), surface_noise=0.0)
+        screen = replace(screen, surface_scale=0.0, hatch=False)
+        for kind, params in (("surface", surface), ("screen", screen)):
+            run: dict[str, Any] = {}
+            for how, cameras in moves.items():
+                images = [paint(scene, c, width, height, params).image for c in cameras]
+                run[f"{how}_flicker"] = carried_flicker(images, plains[how], cameras, scene)
+                run[f"{how}_change"] = flicker(images, plains[how])
+            out[f"{name} {kind}"] = run
+    return {"frames": frames, "step": step, "degrees": degrees, "runs": out}
+
+
 # ---- the report ----
 
 
@@ -439,25 +507,31 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run(out: Path, quick: bool = False) -> dict:
-    """Measure, write ``out/stability.json`` and ``out/stability.png``, print a summary; returns the report."""
+def run(out: Path, quick: bool = False, noise_only: bool = False) -> dict:
+    """Measure, write ``out/stability.json`` and ``out/stability.png``, print a summary; returns the report.
+    ``noise_only``: the walk flicker of the two kinds of noise alone (:func:`noise_section`), printed."""
     width, height = (320, 180) if quick else (640, 360)
     frames = 8 if quick else 16
     started = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     scene = load_scene("default")
+    noise = noise_section(scene, width, height, frames, 0.5, 0.25)
+    if noise_only:
+        noise_summary(noise, width, height)
+        return {"noise": noise}
     base = replace(scene.paint, lambda_e=0.0, spp=1)
     base = replace(base, lambda_p=base.lambda_p * height / 360)  # the same painting at any resolution
     edges, crops = edges_section(scene, width, height, base)
     report: dict[str, Any] = {
         "scene": "default",
         "size": [width, height],
-        "params": asdict(base),
+        "params": base.settings(),
         "edges": edges,
         "eye_displacement": eye_section(scene, width, height, base, 0.08),
         "extremes": extremes_section(scene, width, height, base, (1, 4, 16, 64, 256, 1024)),
         "convergence": convergence_section(scene, width, height, base, 20),
         "temporal": temporal_section(scene, width, height, base, frames, 0.25),
+        "noise": noise,
     }
     report["seconds"] = time.perf_counter() - started
     (out / "stability.json").write_text(json.dumps(report, indent=1))
@@ -465,6 +539,19 @@ def run(out: Path, quick: bool = False) -> dict:
     summary(report)
     print(f"wrote {out / 'stability.json'} and {out / 'stability.png'} in {report['seconds']:.0f} s")
     return report
+
+
+def noise_summary(noise: dict, width: int, height: int) -> None:
+    print(
+        f"noisy styles, per-frame paintings at {width}x{height} over {noise['frames']} frames, a walk of "
+        f"{noise['step']} units/frame and a pan of {noise['degrees']} degrees/frame: mean flicker carried with "
+        "the scene (beyond the plain render's) / frame-to-frame change (beyond the plain render's):"
+    )
+    for name, run in noise["runs"].items():
+        walk_, pan_ = (
+            f"{np.mean(run[f'{how}_flicker']):+.4f} / {np.mean(run[f'{how}_change']):+.4f}" for how in ("walk", "pan")
+        )
+        print(f"  {name:24s} walk {walk_}   pan {pan_}")
 
 
 def summary(report: dict) -> None:
@@ -520,3 +607,4 @@ def summary(report: dict) -> None:
     print(f"temporal drift: PSNR (dB) of each ray-traced temporal frame to its camera's painting: {drift}")
     plain = ", ".join(f"{v:.1f}" for v in t["plain_psnr_to_per_frame"])
     print(f"  (the plain render's, for scale: {plain})")
+    noise_summary(report["noise"], *report["size"])

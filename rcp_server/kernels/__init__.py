@@ -21,6 +21,8 @@ from .bundles import (
     Compare,
     Field,
     ImagePlane,
+    Ink,
+    Records,
     Scratch,
     Seen,
     Shading,
@@ -28,13 +30,14 @@ from .bundles import (
     Trace,
     channels,
     or_dummy,
+    records,
 )
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
 from .iterate import paint_iteration
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
 from .reuse import REUSE_LEVELS, carry, changed_pixels
 from .seen import cover_thin, resolve_seen
-from .shade import shade
+from .shade import record_surfaces, shade
 from .triangle import place_hits
 
 __all__ = [
@@ -52,6 +55,8 @@ __all__ = [
     "Compare",
     "Field",
     "ImagePlane",
+    "Ink",
+    "Records",
     "Scratch",
     "Seen",
     "Shading",
@@ -69,6 +74,8 @@ __all__ = [
     "paint_iteration",
     "pass_masked",
     "place_hits",
+    "record_surfaces",
+    "records",
     "resolve_seen",
     "shade",
 ]

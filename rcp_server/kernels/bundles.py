@@ -16,12 +16,25 @@ from ..camera import PROJECTIONS, STEREO, Camera, Region
 from ..paintstate import CHANNELS, channel_shape
 from ..tracer import Hits
 
-Channels = namedtuple("Channels", CHANNELS)
+_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
+
+Channels = namedtuple("Channels", CHANNELS, defaults=[_DUMMY[len(channel_shape(name, 1))] for name in CHANNELS[1:]])
 Channels.__doc__ = """Per-pixel data of n pixels, row-major, as PaintState holds it (fields: ``paintstate.CHANNELS``).
 
-color : (n, 3) float32;  depth : (n,) float32;  normal, direction : (n, 3) float32. A channel that is
-not recorded is a dummy (:func:`channels`): numba needs an array of the right type even where it
-reads or writes nothing."""
+color : (n, 3) float32;  depth, object, material : (n,) float32;  uv : (n, 2) float32;  the others
+(n, 3) float32 (``paintstate.PaintState`` says what each holds). A channel that is not recorded is a
+dummy (:func:`channels`; the default of every channel but color): numba needs an array of the right type
+even where it reads or writes nothing."""
+
+
+Records = namedtuple("Records", CHANNELS[1:])  # type: ignore[misc]  # fields from the one list of channels
+Records.__doc__ = """Which channels beside color an iteration records (and compares and carries): a bool each, by
+the names of ``paintstate.CHANNELS``."""
+
+
+def records(channels) -> Records:
+    """The :data:`Records` of the channel names in ``channels``."""
+    return Records(*(name in channels for name in CHANNELS[1:]))
 
 
 class ImagePlane(NamedTuple):
@@ -85,6 +98,7 @@ class Field(NamedTuple):
 class Surfaces(NamedTuple):
     """What shading reads of the scene's triangles (``scene.Geometry`` has the shapes)."""
 
+    triangles: np.ndarray  # (F, 3, 3) float32 world corners (the geometric normal)
     normals: np.ndarray  # (F, 3, 3) float32 unit shading normals per corner
     colors: np.ndarray  # (F, 3, 3) float32 albedo per corner
     uv: np.ndarray  # (F, 3, 2) float32
@@ -95,11 +109,14 @@ class Surfaces(NamedTuple):
     texture_height: np.ndarray  # (K,) int64
     alpha_texels: np.ndarray  # (A,) uint8 coverage of the textures that have one (``alpha.py`` reads it)
     texture_alpha_offset: np.ndarray  # (K,) int64 where a texture's coverage starts in alpha_texels, -1 none
+    face_object: np.ndarray  # (F,) int32 the scene's object (``Geometry.object_names``)
     face_material: np.ndarray  # (F,) int32 row of the material tables; row 0 is plain
     material_emission: np.ndarray  # (M, 3) float32 display color added after the light
     material_emission_texture: np.ndarray  # (M,) int32, -1 none
     material_unlit: np.ndarray  # (M,) bool
     material_alpha_cutoff: np.ndarray  # (M,) float32, 0 opaque (``alpha.py`` reads it)
+    material_bands: np.ndarray  # (M,) int32 toon shading's bands of light, 0: smooth
+    material_outline: np.ndarray  # (M,) float32 how dark its outlines (``outlines.py``), 0: none
 
 
 class Cast(NamedTuple):
@@ -123,9 +140,7 @@ class Compare(NamedTuple):
 
     any: bool
     color: bool
-    depth: bool
-    normal: bool
-    direction: bool
+    channels: Records  # the other channels, each compared as bits
     color_levels: int
 
 
@@ -140,6 +155,16 @@ class Trace(NamedTuple):
     floor: float
 
 
+class Ink(NamedTuple):
+    """Where outlines are drawn (``outlines.py``): per pixel of the painting, row-major, the ink there and the
+    distance from its eye to the surface it is on (``projection.to_pixel`` finds a hit's pixel). ``any`` False:
+    no material draws outlines (the arrays are dummies)."""
+
+    any: bool
+    ink: np.ndarray  # (H*W,) float32 in [0, 1]
+    distance: np.ndarray  # (H*W,) float32 from the pixel's eye to the surface the ink is on
+
+
 class Shading(NamedTuple):
     """What ``shade.shade`` needs of a painting beyond the rays, and the channels it records."""
 
@@ -149,9 +174,8 @@ class Shading(NamedTuple):
     ambient: float
     lit: bool
     z_max: float
-    depth: bool  # record depth, normal, direction
-    normal: bool
-    direction: bool
+    records: Records  # the channels beside color to record
+    ink: Ink  # outlines
 
 
 class Scratch(NamedTuple):
@@ -199,9 +223,6 @@ class Seen(NamedTuple):
         """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""
         rows = slice(tile.y0 * self.width, (tile.y0 + tile.height) * self.width)
         return Seen(self.face[rows], self.distance[rows], self.near[rows], self.width, tile.height)
-
-
-_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
 
 
 def or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:

@@ -13,7 +13,7 @@ from .clock import cycles
 from .jit import jit
 from .reuse import carry, changed_pixels
 from .seen import resolve_seen
-from .shade import shade
+from .shade import record_surfaces, shade
 from .triangle import place_hits
 
 
@@ -41,14 +41,12 @@ def paint_iteration(cast, compare, before, previous, source, out, trace, seen, u
             before=before,
             after=previous,
             color=compare.color,
-            depth=compare.depth,
-            normal=compare.normal,
-            direction=compare.direction,
+            channels=compare.channels,
             color_levels=compare.color_levels,
             out=scratch.changed,
         )
         pixels = scratch.changed[:count]
-        carry(previous, out, pixels, shading.depth, shading.normal, shading.direction)
+        carry(previous, out, pixels, shading.records)
     else:
         count = n
         pixels = scratch.every[:n]
@@ -126,10 +124,21 @@ def paint_iteration(cast, compare, before, previous, source, out, trace, seen, u
         plane=cast.plane,
         z_max=shading.z_max,
         out=out,
-        need_depth=shading.depth,
-        need_normal=shading.normal,
-        need_direction=shading.direction,
+        need=shading.records,
+        ink=shading.ink,
     )
+    rec = shading.records
+    if rec.geometric or rec.object or rec.material or rec.albedo or rec.uv or rec.position:
+        record_surfaces(
+            origins=scratch.origins,
+            directions=scratch.directions,
+            hits=hits,
+            spp=spp,
+            pixels=pixels,
+            surfaces=shading.surfaces,
+            out=out,
+            need=rec,
+        )
     clock[0] += cast_end - start
     clock[1] += intersect_end - cast_end
     clock[2] += cycles() - intersect_end

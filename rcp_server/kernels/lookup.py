@@ -58,6 +58,10 @@ def look_up(v_p, moves, plane, edge, plain, out):
     has_depth = depth.shape[0] == n_full
     has_normal = normal.shape[0] == n_full
     has_direction = direction.shape[0] == n_full
+    mixed = (plain.geometric, plain.albedo, plain.uv, plain.position)  # the other channels, bilinear too
+    mixed_out = (out.geometric, out.albedo, out.uv, out.position)
+    has_object = plain.object.shape[0] == n_full
+    has_material = plain.material.shape[0] == n_full
     rows = n_pix // width
     span_x = float(eye_w) if edge == EDGE_WRAP else 2.0 * eye_w
     span_y = float(eye_h) if edge == EDGE_WRAP else 2.0 * eye_h
@@ -149,3 +153,14 @@ def look_up(v_p, moves, plane, edge, plain, out):
                 out_direction[pix, 0] = dx * inv
                 out_direction[pix, 1] = dy * inv
                 out_direction[pix, 2] = dz * inv
+            for k in range(4):
+                if mixed[k].shape[0] == n_full:
+                    src, dst = mixed[k], mixed_out[k]
+                    for q in range(dst.shape[1]):
+                        dst[pix, q] = w00 * src[a0, q] + w01 * src[a1, q] + w10 * src[b0, q] + w11 * src[b1, q]
+            # an index does not mix: the nearest of the four
+            nearest = a0 if fx < 0.5 and fy < 0.5 else (a1 if fy < 0.5 else (b0 if fx < 0.5 else b1))
+            if has_object:
+                out.object[pix] = plain.object[nearest]
+            if has_material:
+                out.material[pix] = plain.material[nearest]

@@ -9,14 +9,13 @@ checked by a test, so the two sides cannot drift apart.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
 from typing import Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
 from ..camerapath import PathSpec
 from ..camerawire import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
-from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
+from ..params import PAINT_SETTINGS, PER, PER_PIXEL, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
 from ..styles import STYLE, STYLES
 
@@ -50,6 +49,15 @@ def _wire(declared: PaintSetting) -> tuple[Any, Any]:
     return kind | None, Field(None, description=declared.help)
 
 
+OwnPaintModel = create_model(  # type: ignore[call-overload]  # its fields are declared once, in params.py
+    "OwnPaintModel",
+    __base__=_Paint,
+    __doc__="The painting settings an object or a material may set for itself (those that vary per pixel).",
+    **{name: _wire(PAINT_SETTINGS[name]) for name in PER_PIXEL},
+)
+
+ObjectName = Annotated[str, Field(min_length=1, max_length=200)]
+
 PaintModel = create_model(  # type: ignore[call-overload]  # its fields are declared once, in params.py
     "PaintModel",
     __base__=_Paint,
@@ -59,7 +67,18 @@ PaintModel = create_model(  # type: ignore[call-overload]  # its fields are decl
         STYLE: (
             Literal[tuple(STYLES)] | None,
             Field(None, description="a named look (GET /api/styles); the settings given beside it override its own"),
-        )
+        ),
+        **{
+            per: (
+                dict[ObjectName, OwnPaintModel] | None,  # type: ignore[valid-type]
+                Field(
+                    None,
+                    max_length=256,
+                    description=f"settings per {per[:-1]} of the scene, by name (merged into the scene's own)",
+                ),
+            )
+            for per in PER
+        },
     },
 )
 
@@ -136,6 +155,8 @@ class SceneInfo(BaseModel):
     camera: CameraModel
     viewpoints: list[Viewpoint] = []
     paint: dict  # the scene's painting settings that differ from the engine's (client/protocol.js)
+    objects: list[str] = []  # what settings per object are called by (the object channel's index)
+    materials: list[str] = []  # the named materials, likewise
     animated: bool
     triangles: int
     uploaded: bool = False  # a visitor's (POST /api/scenes): never listed, removed when idle
@@ -176,7 +197,13 @@ class PaintMessage(PaintModel):  # type: ignore[misc,valid-type]
     type: Literal["paint"]
 
     def changes(self) -> dict:
-        return {name: getattr(self, name) for name in self.model_fields_set if name != "type"}
+        """The settings given, name -> value (``null`` among them); ``objects`` and ``materials`` whole, each
+        replacing the walk's earlier ones (then merged into the scene's)."""
+        given = {name: getattr(self, name) for name in self.model_fields_set if name != "type"}
+        for per in PER:
+            if given.get(per) is not None:
+                given[per] = {name: own.given() for name, own in given[per].items()}
+        return given
 
 
 class ModeMessage(_Model):
@@ -196,7 +223,18 @@ class ViewMessage(_Model):
     quality: Quality | None = None
 
 
-ClientMessage = Annotated[Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage, Field(discriminator="type")]
+class PickMessage(_Model):
+    """Which object and material pixel ``(x, y)`` of the canvas (``width x height`` of the walk) shows, seen by
+    the newest camera: the server answers ``picked``."""
+
+    type: Literal["pick"]
+    x: Annotated[int, Field(ge=0, le=4095)]
+    y: Annotated[int, Field(ge=0, le=4095)]
+
+
+ClientMessage = Annotated[
+    Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage | PickMessage, Field(discriminator="type")
+]
 client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 
 
@@ -231,7 +269,7 @@ class Frame(BaseModel):
     final: bool
     temporal: bool
     quality: int  # of the JPEG: lower while walking
-    paint: dict[str, bool | int | float | str | None]  # every painting setting of this image (spp included)
+    paint: dict[str, bool | int | float | str | dict | None]  # every painting setting of this image (spp included)
     camera_id: int | None
     time: float
     dropped: int  # frames rendered but never sent, because a newer one replaced them
@@ -242,16 +280,27 @@ class Error(BaseModel):
     message: str
 
 
+class Picked(BaseModel):
+    """The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``
+    take them), null for the sky; a material with no name is ""."""
+
+    type: Literal["picked"] = "picked"
+    x: int
+    y: int
+    object: str | None
+    material: str | None
+
+
 def client_module() -> str:
     """``client/protocol.js``: the JSON schema of every message, for the browser to build and check against,
     and the engine's painting defaults (``null``: derived per view), for the settings a scene leaves out."""
     schemas = {
         "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in _CLIENT},
-        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error)},
+        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked)},
         "paint": PaintModel.model_json_schema(),
     }
     body = json.dumps(schemas, indent=1, sort_keys=True)
-    defaults = json.dumps(asdict(PaintParams()), indent=1)
+    defaults = json.dumps(PaintParams().settings(), indent=1)
     return (
         "// Generated by `python -m rcp_server.service.protocol > client/protocol.js`; do not edit.\n"
         "// The JSON schemas of the WebSocket messages (rcp_server/service/protocol.py).\n"
@@ -261,7 +310,7 @@ def client_module() -> str:
     )
 
 
-_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage)
+_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage)
 
 if __name__ == "__main__":
     print(client_module(), end="")

@@ -13,7 +13,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import time as _time
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from functools import partial
 
 from fastapi import WebSocket, WebSocketDisconnect
@@ -24,9 +24,9 @@ from ..camera import Camera, CameraError
 from ..camerawire import camera_of
 from ..painting import Abandoned, PaintResult, PaintState
 from ..params import PaintParams
+from ..raytrace import pick
 from ..scene import Scene
 from ..scenefile import one_line
-from ..styles import with_style
 from . import protocol
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
@@ -61,6 +61,7 @@ class Session:
         self.width = self.height = 0
         self.quality = 80
         self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
+        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
         self.params: PaintParams | None = None  # the scene's with the overrides, validated once when they change
         self.temporal = False  # per-frame paintings: every frame is the painting of its camera
         self.animate = False
@@ -159,6 +160,13 @@ class Session:
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
+        elif isinstance(msg, protocol.PickMessage):  # one ray: answered here, nothing to paint again
+            camera = self.camera or self.scene.camera
+            size = camera.image_size(self.width, self.height)  # the painting the client shows: both eyes
+            shown = pick(self.scene, self.shown_time, camera, *size, msg.x, msg.y)
+            names = (None, None) if shown is None else shown
+            self._note(protocol.Picked(x=msg.x, y=msg.y, object=names[0], material=names[1]))
+            return
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
             self._check(self.scene, self.camera, width, height, self.overrides)
@@ -194,7 +202,7 @@ class Session:
         """The view's painting settings, validated once here; refuses a view whose paintings could not be made:
         a bad setting, a size the camera's projection does not take (``width x height`` is one eye's image),
         or more work than one may take."""
-        params = with_style(scene.paint, overrides)
+        params = scene.painting(overrides)
         self.settings.check_painting(*(camera or scene.camera).image_size(width, height), params)
         return params
 
@@ -281,6 +289,7 @@ class Session:
         plan = job.plan
         self.planner.frame_painted(plan, seconds)
         self.state = result.state
+        self.shown_time = plan.time
         meta = protocol.Frame(
             seq=0,
             width=result.state.region.full_width,
@@ -293,7 +302,7 @@ class Session:
             final=plan.final,
             temporal=plan.continues,
             quality=frame_quality(plan, job.quality),
-            paint=asdict(plan.params),
+            paint=plan.params.settings(),
             camera_id=job.camera_id,
             time=plan.time,
             dropped=0,

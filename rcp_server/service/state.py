@@ -16,7 +16,7 @@ from starlette.requests import HTTPConnection
 from ..camerawire import spec_of
 from ..painting import paint
 from ..params import PaintParams
-from ..scene import Scene
+from ..scene import Scene, material_names, object_names
 from ..scenefile import SceneError, load_scene, scene_names
 from . import protocol
 from .settings import Settings
@@ -152,6 +152,8 @@ def scene_info(scene: Scene) -> protocol.SceneInfo:
         camera=spec_of(scene.camera),
         viewpoints=[protocol.Viewpoint(name=name, camera=spec_of(c)) for name, c in scene.viewpoints.items()],
         paint=scene.paint.non_defaults(),
+        objects=object_names(scene.objects),
+        materials=material_names(scene.objects),
         animated=scene.animated,
         triangles=scene.geometry(0.0)[0].face_count,
     )

@@ -31,7 +31,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import Literal
@@ -125,7 +125,7 @@ class VideoJob:
             "path": path_spec(self.path),
             "width": self.width,
             "height": self.height,
-            "params": asdict(self.params),
+            "params": self.params.settings(),
             "temporal": self.temporal,
         }
 

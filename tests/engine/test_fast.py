@@ -58,7 +58,7 @@ def hard_scene():
     return make_scene(objects, light=light, environment=wavy_sky())
 
 
-LAMBDA = {"color": 12.0, "depth": 3.0, "normal": 14.0}  # the smudge of a painting that looks painted
+LAMBDA = {"color": 12.0, "depth": 3.0, "normal": 14.0, "cubist": 6.0}  # the smudge of a painting that looks painted
 
 
 def _close_share(a: np.ndarray, b: np.ndarray) -> float:
@@ -224,9 +224,13 @@ def test_changed_pixels_matches_numpy(reads, levels):
     after.depth[5] = np.nan
     before.depth[6] = after.depth[6] = np.nan  # the same NaN is no change
     out = np.empty(n, np.int64)
-    channels = {name: name in reads for name in ("color", "depth", "normal", "direction")}
     count = kernels.changed_pixels(
-        before=kernels.channels(before), after=kernels.channels(after), **channels, color_levels=levels, out=out
+        before=kernels.channels(before),
+        after=kernels.channels(after),
+        color="color" in reads,
+        channels=kernels.records(reads),
+        color_levels=levels,
+        out=out,
     )
     expected = _ref_changed(before, after, reads, levels)
     np.testing.assert_array_equal(out[:count], expected)

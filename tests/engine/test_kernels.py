@@ -11,7 +11,9 @@ import pytest
 
 from rcp_server import kernels
 from rcp_server.camera import Camera, Region, pixel_frames, sample_targets
+from rcp_server.outlines import NO_INK
 from rcp_server.painting import PaintState
+from rcp_server.paintstate import CHANNELS, channel_shape
 from rcp_server.params import PaintParams
 from rcp_server.raytrace import displacements, setup_tile
 from rcp_server.tracer import Hits
@@ -316,7 +318,12 @@ def ref_shade(
     eye,
     camera,
     z_max,
+    triangles,
+    face_object,
+    material_bands,
+    material_outline,
 ):
+    """Every channel of ``paintstate.CHANNELS``, in its order, as the shade kernel records them."""
     o = origins.astype(np.float64)
     d = directions.astype(np.float64)
     n = len(face)
@@ -341,10 +348,15 @@ def ref_shade(
         albedo[textured] *= ref_texel_color(texels, texture_offset[k], tw, th, uvs[textured, 0], uvs[textured, 1])
     dh = d[hit]
     mat = face_material[f]
+    unlit = np.zeros((n, 3))
+    unlit[hit] = albedo
     if lit:
         facing = np.where((nr * dh).sum(axis=1) > 0, -1.0, 1.0)
-        lambert = -facing * (nr @ np.asarray(light_dir, np.float64))
-        k = ambient + (1 - ambient) * np.maximum(lambert, 0.0)
+        lambert = np.maximum(-facing * (nr @ np.asarray(light_dir, np.float64)), 0.0)
+        bands = material_bands[mat]
+        toon = (bands > 0) & (lambert > 0)
+        lambert[toon] = np.minimum(np.floor(lambert[toon] * bands[toon]) + 1, bands[toon]) / bands[toon]
+        k = ambient + (1 - ambient) * lambert
         albedo *= np.where(material_unlit[mat], 1.0, k)[:, None]
     emission = material_emission[mat].astype(np.float64)
     etid = material_emission_texture[mat]
@@ -378,6 +390,23 @@ def ref_shade(
             False,
         )
     rgb[~hit & ~finite] = 0.0
+    all_sky = (~hit).reshape(-1, spp).all(axis=1)
+    # ---- the other channels: the triangle's own normal on the shading normal's side, indices, uv, points ----
+    tri = triangles[f].astype(np.float64)
+    g = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    geometric = np.zeros((n, 3))
+    geometric[hit] = np.where(((g * nr).sum(axis=1) < 0)[:, None], -g, g)
+    uv_all = np.zeros((n, 2))
+    uv_all[hit] = uvs
+    position = np.where(hit[:, None], o + t.astype(np.float64)[:, None] * d, np.nan)
+    front = face.reshape(-1, spp)[:, 0]
+    obj = np.where(front >= 0, face_object[front], -1).astype(np.float32)
+    material = np.where(front >= 0, face_material[front], -1).astype(np.float32)
+
+    def mean(a):
+        return a.reshape(-1, spp, a.shape[1]).mean(axis=1)
+
     # ---- per-pixel means ----
     color = np.clip(rgb, 0.0, 1.0).reshape(-1, spp, 3).mean(axis=1)
     depth = z.reshape(-1, spp).mean(axis=1)
@@ -385,7 +414,8 @@ def ref_shade(
     total = np.where(finite[:, None], d, 0.0).reshape(-1, spp, 3).sum(axis=1)
     length = np.linalg.norm(total, axis=1, keepdims=True)
     direction = np.where(length > 0, total / np.where(length > 0, length, 1.0), 0.0)
-    return color, depth, normal, direction
+    albedo = np.where(all_sky[:, None], color, mean(unlit))  # a pixel all sky: the sky's colour
+    return color, depth, normal, direction, mean(geometric), obj, material, albedo, mean(uv_all), mean(position)
 
 
 def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
@@ -453,17 +483,17 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
         eye=np.array([0.2, -0.1, 0.3]),
         camera=Camera((0.2, -0.1, 0.3), (0.2, 0.5, -0.5)),
         z_max=50.0,
+        triangles=rng.normal(size=(n_faces, 3, 3)).astype(np.float32),
+        face_object=rng.integers(0, 4, n_faces).astype(np.int32),
+        material_bands=np.array([0, 3, 0, 2], np.int32),  # toon on a glowing material: both apply
+        material_outline=np.zeros(4, np.float32),  # outlines: tests/engine/test_outlines.py
     )
 
 
-def _run_shade(inputs, need=(True, True, True)):
+def _run_shade(inputs, need=CHANNELS[1:]):
+    """Every channel, those not in ``need`` left at -9."""
     n_pix = len(inputs["face"]) // inputs["spp"]
-    out = (
-        np.full((n_pix, 3), -9.0, np.float32),
-        np.full(n_pix, -9.0, np.float32),
-        np.full((n_pix, 3), -9.0, np.float32),
-        np.full((n_pix, 3), -9.0, np.float32),
-    )
+    out = tuple(np.full(channel_shape(name, n_pix), -9.0, np.float32) for name in CHANNELS)
     kernels.shade(
         origins=inputs["origins"],
         directions=inputs["directions"],
@@ -479,9 +509,18 @@ def _run_shade(inputs, need=(True, True, True)):
         plane=kernels.ImagePlane.of(inputs["camera"], Region(n_pix, 1)),
         z_max=inputs["z_max"],
         out=kernels.Channels(*out),
-        need_depth=need[0],
-        need_normal=need[1],
-        need_direction=need[2],
+        need=kernels.records(need),
+        ink=NO_INK,
+    )
+    kernels.record_surfaces(
+        origins=inputs["origins"],
+        directions=inputs["directions"],
+        hits=Hits(inputs["face"], inputs["t"], inputs["b1"], inputs["b2"]),
+        spp=inputs["spp"],
+        pixels=np.arange(n_pix),
+        surfaces=kernels.Surfaces(**{name: inputs[name] for name in kernels.Surfaces._fields}),
+        out=kernels.Channels(*out),
+        need=kernels.records(need),
     )
     return out
 
@@ -505,11 +544,14 @@ def _check_shade(seed, spp, lit, camera):
     inputs["lit"] = lit
     if camera is not None:
         inputs["camera"] = camera
-    color, depth, normal, direction = _run_shade(inputs)
+    got = _run_shade(inputs)
+    color, depth, normal, direction = got[:4]
     ref = ref_shade(**inputs)
     if camera is not None:  # depth is what this one checks
         np.testing.assert_allclose(depth, ref[1], rtol=1e-6, atol=1e-5)
         return
+    for name, value, expected in zip(CHANNELS[4:], got[4:], ref[4:], strict=True):
+        np.testing.assert_allclose(value, expected, rtol=1e-5, atol=2e-4 if name == "albedo" else 1e-5, err_msg=name)
     # the panorama's longitude and latitude come from an atan2 good to 1e-5 rad: 1e-5 texels here; a
     # texture's display value is encoded through a 4096-step table, interpolated: within 2e-4
     np.testing.assert_allclose(color, ref[0], rtol=0, atol=2e-4)
@@ -541,10 +583,11 @@ def test_shade_textured_faces_really_are_textured_and_the_sky_really_is_sampled(
 
 def test_shade_constant_environment_and_channels_not_needed_are_not_written():
     inputs = _shade_inputs(2, spp=2, env_shape=(1, 1))
-    color, depth, normal, direction = _run_shade(inputs, need=(False, False, False))
+    got = _run_shade(inputs, need=())
     ref = ref_shade(**inputs)
+    color = got[0]
     np.testing.assert_allclose(color, ref[0], rtol=0, atol=2e-4)
-    assert np.all(depth == -9.0) and np.all(normal == -9.0) and np.all(direction == -9.0)
+    assert all(np.all(channel == -9.0) for channel in got[1:])
     sky_only = (inputs["face"].reshape(-1, 2) < 0).all(axis=1) & np.isfinite(inputs["directions"]).all(axis=1).reshape(
         -1, 2
     ).all(axis=1)

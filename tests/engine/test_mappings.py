@@ -132,8 +132,8 @@ def test_register_mapping_adds_color_and_refuses_unknown_channels():
     assert m.reads == {"color", "depth"} and m.field is decorated and m.description == "First line."
     register_mapping("test-mappings-direct", {"normal"}, lambda data: data.normal)
     assert get_mapping("test-mappings-direct").reads == {"color", "normal"}
-    with pytest.raises(ValueError, match="albedo"):
-        register_mapping("test-mappings-bad", {"albedo"}, lambda data: data.color)
+    with pytest.raises(ValueError, match="roughness"):
+        register_mapping("test-mappings-bad", {"roughness"}, lambda data: data.color)
     assert "test-mappings-bad" not in MAPPINGS
 
 

@@ -321,3 +321,74 @@ def test_scatter_that_cannot_place_every_copy_says_so(tmp_path, caplog):
         scene = load_scene_file(path)
     assert [len(obj.instances) for obj in scene.objects] == [0]
     assert any("scatter placed 0 of 5" in r.getMessage() for r in caplog.records if r.name == "rcp")
+
+
+PER_OBJECT_SCENE = """
+[camera]
+eye = [0, 1.2, 3.2]
+look_at = [0, 0.8, 0]
+[environment]
+color = [0.3, 0.5, 0.8]
+[light]
+direction = [-0.5, -1, -0.4]
+ambient = 0.2
+[paint]
+lambda_p = 10.0
+iterations = 4
+[materials.clay]
+shading = "toon"
+bands = 2
+paint = { mapping = "normal", lambda_p = 16.0 }
+[[objects]]
+name = "figure"
+primitive = { type = "sphere", radius = 0.7 }
+translate = [-0.8, 0.7, 0]
+color = [0.9, 0.3, 0.2]
+paint = { lambda_p = 0 }
+[[objects]]
+name = "pot"
+primitive = { type = "sphere", radius = 0.7 }
+translate = [0.8, 0.7, 0]
+material = "clay"
+[[objects]]
+name = "floor"
+primitive = { type = "grid", size = [8, 8] }
+material = "clay"
+paint = { lambda_p = 3 }
+"""
+
+
+def test_a_scene_file_paints_per_object_and_per_material(tmp_path):
+    path = tmp_path / "figures.toml"
+    path.write_text(PER_OBJECT_SCENE)
+    scene = load_scene_file(path)
+    assert scene.paint.non_defaults()["objects"] == {"figure": {"lambda_p": 0}, "floor": {"lambda_p": 3}}
+    assert scene.paint.non_defaults()["materials"] == {"clay": {"mapping": "normal", "lambda_p": 16.0}}
+    # the file's painting is the engine's with the same settings given in code
+    given = PaintParams(
+        lambda_p=10.0,
+        iterations=4,
+        objects={"figure": {"lambda_p": 0}, "floor": {"lambda_p": 3}},
+        materials={"clay": {"mapping": "normal", "lambda_p": 16.0}},
+    )
+    assert scene.paint == given
+    painted = paint(scene, scene.camera, 64, 40, scene.paint).image
+    plain = paint(scene, scene.camera, 64, 40, PaintParams(iterations=1)).image
+    shows = paint(scene, scene.camera, 64, 40, PaintParams(iterations=1, objects={"figure": {}})).state.object
+    figure, pot = ((shows == scene.geometry()[0].object_names.index(n)).reshape(40, 64) for n in ("figure", "pot"))
+    assert figure.mean() > 0.05
+    np.testing.assert_array_equal(painted[figure], plain[figure])  # the figure stays sharp
+    assert (np.abs(painted - plain).max(axis=2) > 2 / 255)[pot].mean() > 0.2  # the clay pot is painted
+    # the clay is toon-shaded: its lit side in two flat bands, so few distinct shades on the pot
+    geometry = scene.geometry()[0]
+    assert list(geometry.material_bands) == [0, 2] and geometry.material_names == ["", "clay"]
+
+
+def test_a_scene_file_refuses_unknown_materials_and_settings(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text(PER_OBJECT_SCENE.replace('material = "clay"\npaint = { lambda_p = 3 }', 'material = "glass"'))
+    with pytest.raises(SceneError, match=r"objects.2 \(floor\): no material 'glass' in \[materials\]"):
+        load_scene_file(path)
+    path.write_text(PER_OBJECT_SCENE.replace("paint = { lambda_p = 0 }", "paint = { spp = 4 }"))
+    with pytest.raises(SceneError, match="objects.figure: spp cannot vary per pixel"):
+        load_scene_file(path)

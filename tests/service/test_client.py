@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import base64
 import contextlib
-import dataclasses
 import io
 import struct
 from pathlib import Path
@@ -20,6 +19,7 @@ import pytest
 from PIL import Image
 
 from rcp_server.bench.harness import BackgroundServer
+from rcp_server.painting import paint
 from rcp_server.params import PaintParams
 from rcp_server.service import protocol
 
@@ -101,6 +101,12 @@ def difference(a: np.ndarray, b: np.ndarray) -> float:
 
 def sent(page, kind: str | None = None) -> list[dict]:
     return page.evaluate("([kind]) => rcp.sent.filter((m) => kind === null || m.type === kind)", [kind])
+
+
+def click_view(page, x: int, y: int) -> None:
+    """A click (no drag) on pixel (x, y) of the painting, wherever the canvas shows it."""
+    box = page.locator("#view").bounding_box()
+    page.mouse.click(box["x"] + (x + 0.5) * box["width"] / SIZE[0], box["y"] + (y + 0.5) * box["height"] / SIZE[1])
 
 
 def set_slider(page, field: str, value: float) -> None:
@@ -273,9 +279,13 @@ def test_a_dropped_connection_comes_back_with_the_same_view(page):
 def test_every_message_the_client_sends_is_in_the_protocol(page):
     schema = page.evaluate("rcp.PROTOCOL")
     # the panel has a control for every painting field, and no other (the style has its own picker)
-    assert sorted(page.evaluate("rcp.panel.fields")) == sorted(set(schema["paint"]["properties"]) - {"type", "style"})
+    # (the style has its own picker, the settings per object and material their section)
+    own = {"type", "style", "objects", "materials"}
+    assert sorted(page.evaluate("rcp.panel.fields")) == sorted(set(schema["paint"]["properties"]) - own)
     # engine defaults the panel shows for fields a scene leaves out are the engine's
-    assert page.evaluate("rcp.ENGINE_DEFAULTS") == dataclasses.asdict(PaintParams())
+    assert page.evaluate("rcp.ENGINE_DEFAULTS") == PaintParams().settings()
+    click_view(page, SIZE[0] // 2, SIZE[1] - 5)  # a pick: what the view shows there
+    page.wait_for_function("document.querySelector('#picked').textContent.includes('ground')", timeout=WAIT_MS)
 
     # use every control that sends something
     page.click('#paint-mapping [data-value="depth"]')
@@ -313,6 +323,44 @@ def test_every_message_the_client_sends_is_in_the_protocol(page):
     assert {"type": "mode", "animate": True} in messages
     (refusal,) = page.evaluate("rcp.state.errors")  # the server accepted every other one
     assert refusal.startswith("Refused: ") and "lambda_e" in refusal
+
+
+def test_a_click_picks_an_object_and_the_section_gives_it_settings_of_its_own(browser, live_server):
+    scene = live_server.app.state.service.scenes["figures"]
+    names = scene.geometry()[0].object_names
+    shows = paint(scene, scene.camera, *SIZE, PaintParams(iterations=1, objects={"houses": {}})).state.object
+    rows, columns = np.nonzero(shows.reshape(SIZE[1], SIZE[0]) == names.index("houses"))
+    with client(browser, live_server.url, scene="figures") as page:
+        before = canvas(page)
+        click_view(page, int(columns[len(columns) // 2]), int(rows[len(rows) // 2]))
+        page.wait_for_function("document.querySelector('#picked').textContent.includes('houses')", timeout=WAIT_MS)
+        assert "material plaster" in page.text_content("#picked")
+        seq = page.evaluate("rcp.overlay.frame.seq")
+        page.fill("#own-lambda_p", "0")
+        page.dispatch_event("#own-lambda_p", "change")
+        page.wait_for_function(
+            "rcp.sent.some((m) => m.type === 'paint' && m.objects && m.objects.houses.lambda_p === 0)", timeout=WAIT_MS
+        )
+        assert page.locator('[data-override="objects:houses"]').count() == 1
+        frame = wait_final(page, seq)
+        assert frame["paint"]["objects"]["houses"] == {"lambda_p": 0}
+        assert frame["paint"]["objects"]["figure"] == {"lambda_p": 0}  # the scene's own stays, merged
+        still = canvas(page)
+        assert difference(still, before) > 0.1  # the houses no longer smudge
+        # the houses as the engine paints them with that setting, not as without it (up to the JPEG's error)
+        houses = (shows == names.index("houses")).reshape(SIZE[1], SIZE[0])
+
+        def engine(settings):
+            image = paint(scene, scene.camera, *SIZE, scene.painting({**settings, "spp": frame["spp"]})).image
+            return (image[houses] * 255).round().astype(np.uint8)
+
+        with_it = difference(still[houses], engine({"objects": {"houses": {"lambda_p": 0}}}))
+        assert with_it < 4 and with_it < difference(still[houses], engine({})) / 2
+        seq = frame["seq"]
+        page.click('[data-override="objects:houses"] button')
+        page.wait_for_function("rcp.sent.some((m) => m.type === 'paint' && m.objects === null)", timeout=WAIT_MS)
+        assert page.locator("[data-override]").count() == 0
+        assert "houses" not in wait_final(page, seq)["paint"]["objects"]
 
 
 def test_a_busy_server_is_retried_until_a_walk_through_ends(browser):

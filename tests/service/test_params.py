@@ -21,13 +21,13 @@ from PIL import Image
 from rcp_server import images
 from rcp_server.cli import main
 from rcp_server.painting import paint
-from rcp_server.params import PAINT_SETTINGS, PaintParams
+from rcp_server.params import PAINT_SETTINGS, PER, PaintParams
 from rcp_server.service import protocol
 
 from .conftest import decode
 
 ROOT = Path(__file__).resolve().parents[2]
-FIELDS = [f.name for f in dataclasses.fields(PaintParams)]
+FIELDS = [f.name for f in dataclasses.fields(PaintParams) if f.name not in PER]  # per object: test_per_object.py
 SCENE = "sky"  # quick to load, and every setting below changes its painting at this size
 W, H = 48, 27
 QUALITY = 95
@@ -42,6 +42,10 @@ CHANGED = {
     "lambda_e": (0.1, {}),
     "z0": (2.0, {"mapping": "depth"}),
     "noise": (0.5, {}),
+    "surface_noise": (0.5, {}),
+    "surface_scale": (0.5, {}),
+    "grain": (0.5, {"surface_noise": 0.5}),
+    "hatch": (True, {"surface_noise": 0.5}),
     "seed": (7, {"noise": 0.5}),
     "z_max": (5.0, {"mapping": "depth"}),
     "method": ("image", {}),

@@ -14,7 +14,6 @@ from ...camera import CameraError
 from ...camerawire import camera_of
 from ...cluster import ClusterError
 from ...painting import Abandoned
-from ...styles import with_style
 from .. import protocol
 from ..access import admits
 from ..state import ServiceDep
@@ -62,7 +61,7 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         camera = scene.camera if body.camera is None else camera_of(body.camera)
-        params = with_style(scene.paint, body.paint.given())
+        params = scene.painting(body.paint.given())
         size = camera.image_size(body.width, body.height)  # width x height is one eye's image
         settings.check_painting(*size, params)
     except (CameraError, ValueError) as exc:

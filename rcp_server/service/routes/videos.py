@@ -9,7 +9,6 @@ from starlette.concurrency import run_in_threadpool
 from ...camera import CameraError
 from ...camerapath import PathError
 from ...camerawire import spec_of
-from ...styles import with_style
 from .. import protocol
 from ..state import ServiceDep
 from ..videos import VideoJob, VideoRefused
@@ -83,7 +82,7 @@ async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.V
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
-        params = with_style(scene.paint, body.paint.given())
+        params = scene.painting(body.paint.given())
         width, height = path.cameras[0].image_size(body.width, body.height)  # one eye's size -> the video's
         if width % 2 or height % 2:
             raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {width}x{height}")
