@@ -118,6 +118,7 @@ function startScene(scene) {
   showViewpoints(scene);
   state.lastCamera = walkCamera.toCamera(walk.walk); // what the server shows after hello
   state.paint = {};
+  objects.setScene(scene.paint);
   objects.show(state.paint);
   state.defaults = { ...ENGINE_DEFAULTS, z0: Number(walk.walk.distance.toPrecision(3)), ...scene.paint };
   panel.setScene(state.defaults);

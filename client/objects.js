@@ -44,10 +44,11 @@ function control(name, onValue) {
 
 /**
  * The section in `container`. `onChange(per, table)` gets the whole table of `per` ("objects" or "materials")
- * after each edit (null: none left). Returns {picked(msg), show(paint), clear()}.
+ * after each edit (null: none left). Returns {picked(msg), setScene(paint), show(paint)}.
  */
 export function objectsPanel(container, onChange) {
-  const tables = { objects: {}, materials: {} };
+  const tables = { objects: {}, materials: {} }; // the user's
+  let scene = { objects: {}, materials: {} }; // the scene's own, listed beneath (the user's merge into them)
   let target = null; // [per, name]: what the controls set
   const info = element("p", { class: "muted small", id: "picked", text: "Click the view to pick an object." });
   const which = element("div", { class: "choices", role: "group", id: "own-target" });
@@ -98,6 +99,12 @@ export function objectsPanel(container, onChange) {
         });
         list.append(element("li", { "data-override": `${per}:${name}` }, element("span", { text }), remove));
       }
+      for (const [name, settings] of Object.entries(scene[per] ?? {})) {
+        const text = `${per === "objects" ? "object" : "material"} ${name}: ${Object.entries(settings)
+          .map(([k, v]) => `${k} ${v}`)
+          .join(", ")} (the scene's)`;
+        list.append(element("li", { "data-scene-override": `${per}:${name}`, class: "muted" }, element("span", { text })));
+      }
     }
   }
 
@@ -120,6 +127,11 @@ export function objectsPanel(container, onChange) {
         which.append(button);
       }
       aim("objects", msg.object);
+    },
+    /** The scene's own settings per object and material (its `paint`), listed beneath the user's. */
+    setScene(paint) {
+      scene = { objects: paint.objects ?? {}, materials: paint.materials ?? {} };
+      render();
     },
     /** Show the overrides of `paint` (the user's settings: objects and materials among them). */
     show(paint) {

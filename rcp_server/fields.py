@@ -41,16 +41,25 @@ class Looks:
 
     @classmethod
     def of(cls, params: PaintParams, object_names: list[str], material_names: list[str]) -> Looks:
-        """The looks of ``params`` in a scene whose objects and material rows are called so."""
+        """The looks of ``params`` in a scene whose objects and material rows are called so (only the names
+        the overrides give are visited: a large model has thousands of parts)."""
         looks = [params]
         table = np.zeros((len(object_names) + 1, len(material_names) + 1), np.int64)
-        if params.objects or params.materials:
-            for o, obj in enumerate([None, *object_names]):
-                for m, material in enumerate([None, *material_names]):
-                    look = params.overridden(obj, material or None) if obj is not None else params
-                    if look not in looks:
-                        looks.append(look)
-                    table[o, m] = looks.index(look)
+
+        def look(obj: str | None, material: str | None) -> int:
+            settings = params.overridden(obj, material)
+            if settings not in looks:
+                looks.append(settings)
+            return looks.index(settings)
+
+        materials = [(m + 1, name) for m, name in enumerate(material_names) if name in dict(params.materials)]
+        for column, name in materials:
+            table[1:, column] = look(None, name)  # any object made of it (row 0: a miss, which has none)
+        for o, name in enumerate(object_names):
+            if name in dict(params.objects):
+                table[o + 1, :] = look(name, None)
+                for column, material in materials:
+                    table[o + 1, column] = look(name, material)
         return cls(tuple(looks), table)
 
     @classmethod

@@ -44,7 +44,9 @@ class PaintParams:
     """How to paint. ``lambda_p`` in pixels, ``lambda_e`` in scene units; ``z0`` (focus depth) defaults to
     the distance from the eye to ``look_at``; ``z_max`` (depth of a miss) to the scene's size.
     ``method`` is one of :data:`METHODS`; ``edge`` (one of :data:`EDGES`) is how the image method reads
-    off screen.
+    off screen. ``objects`` and ``materials`` hold settings per object and per material of the scene, by
+    name (:data:`Overrides`, only :data:`PER_PIXEL` settings): a pixel paints by those of the object and
+    material it showed in ``I_{n-1}`` (:meth:`overridden`; ``fields.Looks``).
 
     One set of bounds serves the engine, the wire and the command line: they keep numbers sane (finite,
     the right sign, nothing a painting cannot mean), not cost. ``lambda_p`` reaches 1e6 pixels because the

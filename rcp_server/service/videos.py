@@ -264,8 +264,15 @@ class Videos:
         return job
 
     def scenes_in_progress(self) -> list[Scene]:
-        """The scenes of the jobs queued or painting (an uploaded one among them is in use)."""
-        return [j.scene for j in list(self._jobs.values()) if j.state not in FINISHED and j.scene is not None]
+        """The scenes of the jobs queued or painting, or finished less than ``upload_idle_s`` ago (an uploaded
+        one among them is in use: a job uses its scene up to its end, and a job that ended before anyone
+        looked must not leave its scene idle since long before)."""
+        recent = time.time() - self.settings.upload_idle_s
+        return [
+            j.scene
+            for j in list(self._jobs.values())
+            if j.scene is not None and (j.state not in FINISHED or (j.finished or 0.0) > recent)
+        ]
 
     # ---- the work ----
 

@@ -17,7 +17,7 @@ FLAGS = {
     "latency": {"--scene", "--seconds", "--steps"},
     "soak": {"--seconds", "--clients", "--rest"},
     "accuracy": {"--out", "--quick", "--threads"},
-    "stability": {"--out", "--quick"},
+    "stability": {"--out", "--quick", "--noise-only"},
     "levels": {"--width", "--height"},
     "cluster": {"--scene", "--width", "--height", "--frames", "--ray", "--gbps", "--cores"},
     "memory": {"--width", "--height", "--threads"},

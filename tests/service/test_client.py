@@ -342,6 +342,7 @@ def test_a_click_picks_an_object_and_the_section_gives_it_settings_of_its_own(br
             "rcp.sent.some((m) => m.type === 'paint' && m.objects && m.objects.houses.lambda_p === 0)", timeout=WAIT_MS
         )
         assert page.locator('[data-override="objects:houses"]').count() == 1
+        assert page.locator('[data-scene-override="objects:figure"]').count() == 1  # the scene's own, listed
         frame = wait_final(page, seq)
         assert frame["paint"]["objects"]["houses"] == {"lambda_p": 0}
         assert frame["paint"]["objects"]["figure"] == {"lambda_p": 0}  # the scene's own stays, merged

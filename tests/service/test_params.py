@@ -42,7 +42,7 @@ CHANGED = {
     "lambda_e": (0.1, {}),
     "z0": (2.0, {"mapping": "depth"}),
     "noise": (0.5, {}),
-    "surface_noise": (0.5, {}),
+    "surface_noise": (0.5, {}),  # surface noise needs surfaces (the sky has no point): on SURFACES
     "surface_scale": (0.5, {}),
     "grain": (0.5, {"surface_noise": 0.5}),
     "hatch": (True, {"surface_noise": 0.5}),
@@ -52,6 +52,14 @@ CHANGED = {
     "edge": ("wrap", {"method": "image"}),
     "fast": (False, {}),  # the sky has no triangles: fast only keeps pixels whose color settled (to 1/255 here)
 }
+
+
+SURFACES = "figures"  # a small scene with surfaces
+ON_SURFACES = {"surface_noise", "surface_scale", "grain", "hatch"}
+
+
+def _scene_name(name: str) -> str:
+    return SURFACES if name in ON_SURFACES else SCENE
 
 
 def _settings(name: str) -> tuple[dict, dict]:
@@ -80,10 +88,11 @@ def scene(live_server):
 
 
 @pytest.mark.parametrize("name", FIELDS)
-def test_a_setting_reaches_rest(live_server, scene, name):
+def test_a_setting_reaches_rest(live_server, name):
     without, given = _settings(name)
+    scene = live_server.app.state.service.scenes[_scene_name(name)]
     assert given[name] != getattr(scene.paint, name)
-    body = {"scene": SCENE, "width": W, "height": H, "paint": given}
+    body = {"scene": scene.name, "width": W, "height": H, "paint": given}
     response = httpx.post(f"{live_server.url}/api/render", json=body, timeout=60)
     assert response.status_code == 200, response.text
     expected = _painting(scene, **given)
@@ -92,9 +101,10 @@ def test_a_setting_reaches_rest(live_server, scene, name):
 
 
 @pytest.mark.parametrize("name", FIELDS)
-def test_a_setting_reaches_the_walk_through(walk, scene, name):
+def test_a_setting_reaches_the_walk_through(walk, live_server, name):
     without, given = _settings(name)
-    walk.send(type="hello", scene=SCENE, width=W, height=H, quality=QUALITY)
+    scene = live_server.app.state.service.scenes[_scene_name(name)]
+    walk.send(type="hello", scene=scene.name, width=W, height=H, quality=QUALITY)
     assert walk.next()["type"] == "ready"
     before, _ = walk.until_final()[-1]
     walk.send(type="paint", **given)
@@ -114,8 +124,9 @@ def test_a_setting_reaches_the_walk_through(walk, scene, name):
 
 
 @pytest.mark.parametrize("name", FIELDS)
-def test_a_setting_reaches_the_command_line(tmp_path, scene, name):
+def test_a_setting_reaches_the_command_line(tmp_path, live_server, name):
     without, given = _settings(name)
+    scene = live_server.app.state.service.scenes[_scene_name(name)]
     out = tmp_path / "still.png"
 
     def flag(key: str, value) -> list[str]:
@@ -125,7 +136,7 @@ def test_a_setting_reaches_the_command_line(tmp_path, scene, name):
         return [f"--{name}", str(value)]
 
     flags = [part for key, value in given.items() for part in flag(key, value)]
-    assert main(["-q", "render", SCENE, "--out", str(out), "--width", str(W), "--height", str(H), *flags]) == 0
+    assert main(["-q", "render", scene.name, "--out", str(out), "--width", str(W), "--height", str(H), *flags]) == 0
     np.testing.assert_array_equal(np.asarray(Image.open(out)), _painting(scene, **given))
 
 

@@ -33,7 +33,7 @@ def test_rcp_serve_takes_its_port_from_the_environment_and_stops_cleanly():
     finally:
         server.send_signal(signal.SIGINT)
         assert server.wait(30) == 0
-    assert b"serving 3 scenes" in server.stderr.read()
+    assert b"serving 4 scenes" in server.stderr.read()
 
 
 @pytest.mark.parametrize("argv", [["serve", "--port", "70000"], ["serve", "--port", "http"]])

@@ -63,11 +63,11 @@ def test_a_style_reaches_rest(live_server, scene, name):
 
 
 def test_explicit_settings_beat_the_style_over_rest(live_server, scene):
-    body = {"scene": SCENE, "width": W, "height": H, "paint": {"lambda_p": 3.0, "style": "fractured"}}
+    body = {"scene": SCENE, "width": W, "height": H, "paint": {"lambda_p": 3.0, "style": "smudge"}}
     response = httpx.post(f"{live_server.url}/api/render", json=body, timeout=60)
-    expected = _painting(scene, **{**STYLES["fractured"].settings, "lambda_p": 3.0})
+    expected = _painting(scene, **{**STYLES["smudge"].settings, "lambda_p": 3.0})
     np.testing.assert_array_equal(decode(response.content), expected)
-    assert not np.array_equal(expected, _painting(scene, **STYLES["fractured"].settings))
+    assert not np.array_equal(expected, _painting(scene, **STYLES["smudge"].settings))
 
 
 def test_an_unknown_style_gets_a_422_naming_the_styles(live_server):
