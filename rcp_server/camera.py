@@ -14,6 +14,22 @@ Conventions (``shared/MISSION.md``; the one place they are written down in code)
   pitch is ``p = 2 tan(fov/2) / H``.
 * Depth is view-space depth along the frame camera's ``f``: ``z = (X - eye) . f``.
 
+Other projections (``shared/MISSION.md``, "Other projections"): a projection maps a sample to a target at
+unit distance from its pixel's eye and a local frame ``(r_ij, u_ij, f_ij)`` (the pixel centre's); ``V_p`` and
+``V_e`` are built in that frame and depth is ``z = (X - eye_ij) . f_ij``.
+
+* ``perspective``: the image plane above, ``(r_ij, u_ij, f_ij) = (r, u, f)``.
+* ``equirect``: longitude ``phi = (2s - 1) pi``, latitude ``theta = (1 - 2t) pi / 2``,
+  ``f_ij = d = cos(theta) sin(phi) r + sin(theta) u + cos(theta) cos(phi) f``, ``r_ij = cos(phi) r - sin(phi) f``,
+  ``u_ij = r_ij x f_ij``; ``W = 2H``; pitch ``p = pi / H``; ``fov`` does not apply. Its inverse map takes a
+  direction back to ``phi = atan2(d . r, d . f)``, ``theta = asin(d . u)``.
+* ``stereo``: ``width x height`` is one eye's image; the painting holds both, ``top-bottom`` (``W x 2H``, left
+  eye on top) or ``side-by-side`` (``2W x H``, left eye on the left). Pixel ``(i, j)`` of the painting is pixel
+  ``(i mod W, j mod H)`` of its eye's image, and ``(s, t)`` are that eye's. The left eye of a pixel sits at
+  ``eye - (ipd/2) r_ij``, the right one at ``eye + (ipd/2) r_ij``: for ``perspective`` two parallel cameras
+  ``ipd`` apart, for ``equirect`` omnidirectional stereo (each column's eye on its own right vector).
+  Added here: a stereo painting's focus depth ``z0`` and the depth of a miss are the centre eye's.
+
 A :class:`Region` is a rectangle of the full image; everything per pixel is computed from absolute pixel
 coordinates, so a region renders exactly the pixels the full image has there.
 """
@@ -21,9 +37,11 @@ coordinates, so a region renders exactly the pixels the full image has there.
 from __future__ import annotations
 
 import math
+import numbers
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import MISSING, dataclass, field, fields, replace
 from functools import partial
+from typing import Any
 
 import numpy as np
 
@@ -89,20 +107,48 @@ def _reason(what: str, values: np.ndarray, k: int) -> str:
     return f"{what} {shown}"
 
 
+PROJECTIONS = ("perspective", "equirect")
+"""What the image is a picture of: the image plane, or the whole sphere around the eye (module docstring)."""
+STEREO = ("mono", "top-bottom", "side-by-side")
+"""One eye, or both in one image: left over right, or left beside right."""
+SIDES = {"mono": (0,), "top-bottom": (-1, 1), "side-by-side": (-1, 1)}
+"""The eyes of a painting, left (-1) to right (1), in the order its image holds them."""
+
+
+def camera_field(help: str, default=MISSING, **bounds) -> Any:
+    """A field of :class:`Camera`: its default (none: required), one line of help and its bounds (``ge``, ``gt``,
+    ``lt``, ``le`` for numbers, ``choices`` for names). The wire model, a path's keyframes, the options of
+    ``rcp render`` and the client's copy are derived from these (:data:`CAMERA_FIELDS`)."""
+    return field(default=default, metadata={"help": help, **bounds})
+
+
 @dataclass(frozen=True)
 class Camera:
-    """A pinhole camera; validated on construction so every later step can trust its basis."""
+    """A camera, declared once: validated on construction so every later step can trust its basis."""
 
-    eye: tuple[float, float, float]
-    look_at: tuple[float, float, float]
-    up: tuple[float, float, float] = (0.0, 1.0, 0.0)
-    fov: float = 60.0
+    eye: tuple[float, float, float] = camera_field("where the camera stands, scene units")
+    look_at: tuple[float, float, float] = camera_field("the point it looks at: the centre of the view")
+    up: tuple[float, float, float] = camera_field("which way is up", default=(0.0, 1.0, 0.0))
+    fov: float = camera_field("vertical field of view, degrees (perspective)", default=60.0, gt=0.0, lt=180.0)
+    projection: str = camera_field(
+        "perspective (an image plane) or equirect (all around: 360 x 180, width = 2 x height)",
+        default="perspective",
+        choices=PROJECTIONS,
+    )
+    stereo: str = camera_field(
+        "mono, or both eyes in one image: top-bottom (left on top) or side-by-side (left on the left)",
+        default="mono",
+        choices=STEREO,
+    )
+    ipd: float = camera_field("distance between the eyes of a stereo camera, scene units", default=0.064, ge=0.0)
 
     def __post_init__(self):
         for name in ("eye", "look_at", "up"):
             object.__setattr__(self, name, _vec3(name, getattr(self, name)))
         object.__setattr__(self, "fov", float(self.fov))
         _, reason = camera_faults(*(np.array([v]) for v in (self.eye, self.look_at, self.up, self.fov)))
+        if reason is None:
+            reason = _choice_fault(self)
         if reason is not None:
             raise CameraError(reason)
 
@@ -119,11 +165,99 @@ class Camera:
         return math.tan(math.radians(self.fov) / 2.0)
 
     def pixel_pitch(self, height: int) -> float:
-        """``p = 2 tan(fov/2) / H``: one pixel's size on the unit-distance image plane, in scene units."""
+        """``p``, one pixel's size at unit distance for an eye's image ``height`` pixels high, in scene units:
+        ``2 tan(fov/2) / H`` on the image plane, ``pi / H`` on the sphere (at the equator)."""
+        if self.projection == "equirect":
+            return math.pi / height
         return 2.0 * self.half_height() / height
+
+    @property
+    def sides(self) -> tuple[int, ...]:
+        """The eyes this camera paints (:data:`SIDES`)."""
+        return SIDES[self.stereo]
+
+    def image_size(self, width: int, height: int) -> tuple[int, int]:
+        """The painting's size for an eye's image of ``width x height``; raises :class:`CameraError` for a size
+        this projection cannot take (the one place such combinations are refused)."""
+        if self.projection == "equirect" and width != 2 * height:
+            raise CameraError(f"an equirect image is 360 x 180 degrees: width must be 2 x height, got {width}x{height}")
+        if self.stereo == "top-bottom":
+            return width, 2 * height
+        if self.stereo == "side-by-side":
+            return 2 * width, height
+        return width, height
+
+    def eye_size(self, width: int, height: int) -> tuple[int, int]:
+        """One eye's image in a painting of ``width x height`` (the inverse of :meth:`image_size`)."""
+        if self.stereo == "top-bottom":
+            return width, height // 2
+        if self.stereo == "side-by-side":
+            return width // 2, height
+        return width, height
+
+    def check_painting(self, width: int, height: int) -> None:
+        """Raises :class:`CameraError` unless a painting of ``width x height`` holds whole eye images of a size
+        this projection takes."""
+        eye = self.eye_size(width, height)
+        if min(eye) < 1 or self.image_size(*eye) != (width, height):
+            raise CameraError(
+                f"a {self.stereo} painting cannot be {width}x{height}: it holds two eye images of one size"
+            )
+
+    @property
+    def one_eye_point(self) -> bool:
+        """Whether every ray of the painting starts at one eye's point (not so in omnidirectional stereo, whose
+        eyes go round a circle)."""
+        return not (self.projection == "equirect" and self.stereo != "mono" and self.ipd > 0.0)
 
     def moved(self, **changes) -> Camera:
         return replace(self, **changes)  # validated again, in __post_init__
+
+
+def _choice_fault(camera: Camera) -> str | None:
+    """What is wrong with a camera's projection, stereo or ipd (one line), None when nothing is."""
+    for name in ("projection", "stereo"):
+        value, choices = getattr(camera, name), CAMERA_FIELDS[name].choices
+        if value not in choices:
+            return f"unknown {name} {value!r}; choose one of {', '.join(choices)}"
+    ipd = camera.ipd
+    if isinstance(ipd, bool) or not isinstance(ipd, numbers.Real) or not 0.0 <= ipd <= COORDINATE_LIMIT:
+        return f"ipd must be a distance from 0 to {COORDINATE_LIMIT:g} scene units, got {ipd!r}"
+    return None
+
+
+@dataclass(frozen=True)
+class CameraField:
+    """One field of :class:`Camera` as declared: ``kind`` is ``"vec3"``, ``float`` or ``str``; ``required``: no
+    default."""
+
+    name: str
+    kind: object
+    default: Any
+    help: str
+    required: bool
+    gt: float | None = None
+    ge: float | None = None
+    lt: float | None = None
+    choices: tuple[str, ...] = ()
+
+
+def _camera_fields() -> dict[str, CameraField]:
+    kinds = {"eye": "vec3", "look_at": "vec3", "up": "vec3", "fov": float, "projection": str, "stereo": str}
+    return {
+        f.name: CameraField(
+            f.name,
+            kinds.get(f.name, float),
+            None if f.default is MISSING else f.default,
+            required=f.default is MISSING,
+            **f.metadata,
+        )
+        for f in fields(Camera)
+    }
+
+
+CAMERA_FIELDS: dict[str, CameraField] = _camera_fields()
+"""Every field of :class:`Camera`, in order: name -> its declaration."""
 
 
 @dataclass(frozen=True)
@@ -175,11 +309,82 @@ class Region:
         ]
 
 
-def plane_points(camera: Camera, region: Region, s: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """Image-plane points ``P_p(s, t)`` for texture coordinates ``s, t`` ((n,) float64): (n, 3) float64."""
+def eye_pixels(
+    camera: Camera, region: Region, i: np.ndarray, j: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where pixels ``(i, j)`` of the painting (absolute, (n,) int64) lie in their eye's image: ``side`` (n,)
+    int64 (-1 left, 1 right, 0 mono) and the eye image's ``(i, j)``."""
+    width, height = camera.eye_size(region.full_width, region.full_height)
+    side = np.zeros(len(i), np.int64)
+    if camera.stereo == "top-bottom":
+        side = np.where(j < height, -1, 1)
+    elif camera.stereo == "side-by-side":
+        side = np.where(i < width, -1, 1)
+    return side, i % width, j % height
+
+
+def directions_at(camera: Camera, region: Region, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The forward map at continuous points ``(x, y)`` of an eye's image (pixel ``(i, j)`` spans ``[i, i + 1) x
+    [j, j + 1)``; (n,) float64): ``d`` (n, 3), the target's offset from the eye (``P_p = eye_ij + d``), and the
+    local frame ``r, u, f`` there (each (n, 3)); all float64."""
+    width, height = camera.eye_size(region.full_width, region.full_height)
     r, u, f = camera.basis()
+    s, t = (x / width)[:, None], (y / height)[:, None]
+    if camera.projection == "equirect":
+        phi = (2.0 * s - 1.0) * math.pi
+        theta = (1.0 - 2.0 * t) * math.pi / 2.0
+        d = np.cos(theta) * np.sin(phi) * r + np.sin(theta) * u + np.cos(theta) * np.cos(phi) * f
+        r_ij = np.cos(phi) * r - np.sin(phi) * f
+        return d, r_ij, np.cross(r_ij, d), d
     tan_half = camera.half_height()
-    aspect = region.full_width / region.full_height
-    sx = ((2.0 * s - 1.0) * aspect * tan_half)[:, None]
-    ty = ((1.0 - 2.0 * t) * tan_half)[:, None]
-    return np.asarray(camera.eye) + f + sx * r + ty * u
+    d = f + (2.0 * s - 1.0) * (width / height) * tan_half * r + (1.0 - 2.0 * t) * tan_half * u
+    n = len(x)
+    return d, *(np.broadcast_to(v, (n, 3)) for v in (r, u, f))
+
+
+def pixel_frames(camera: Camera, region: Region, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Each pixel's own camera before displacement: its eye ``eye_ij`` and local frame ``r_ij, u_ij, f_ij`` (at
+    its centre), for pixels ``(i, j)`` of the painting ((n,) int64): four (n, 3) float64."""
+    side, ei, ej = eye_pixels(camera, region, i, j)
+    _, r_ij, u_ij, f_ij = directions_at(camera, region, ei + 0.5, ej + 0.5)
+    eyes = np.asarray(camera.eye) + (0.5 * camera.ipd * side)[:, None] * r_ij
+    return eyes, r_ij, u_ij, f_ij
+
+
+def sample_targets(
+    camera: Camera, region: Region, i: np.ndarray, j: np.ndarray, xi: np.ndarray, eta: np.ndarray
+) -> np.ndarray:
+    """``P_p`` of every sample: pixels ``(i, j)`` of the painting ((n,) int64) at sub-pixel offsets ``xi, eta``
+    ((n, spp) float64), (n*spp, 3) float64, sample k of pixel m in row m * spp + k."""
+    side, ei, ej = eye_pixels(camera, region, i, j)
+    eyes, *_ = pixel_frames(camera, region, i, j)
+    d, *_ = directions_at(camera, region, (ei[:, None] + xi).ravel(), (ej[:, None] + eta).ravel())
+    return np.repeat(eyes, xi.shape[1], axis=0) + d
+
+
+def project(
+    camera: Camera, region: Region, side: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The inverse map: where directions ``d`` ((n, 3) float64) from the eye on ``side`` ((n,) int64) cross
+    that eye's image, as continuous pixel coordinates of the painting with centres on the integers, and
+    ``ok`` (n,) bool: False where a direction has no place there (behind a perspective camera, zero or not
+    finite). Where not ok, ``x, y`` are 0."""
+    width, height = camera.eye_size(region.full_width, region.full_height)
+    r, u, f = camera.basis()
+    with np.errstate(all="ignore"):  # non-finite input: refused below
+        dr, du, df = d @ r, d @ u, d @ f
+        if camera.projection == "equirect":
+            length = np.sqrt(dr * dr + du * du + df * df)
+            x = (np.arctan2(dr, df) / (2.0 * math.pi) + 0.5) * width - 0.5
+            y = (0.5 - np.arcsin(np.clip(du / length, -1.0, 1.0)) / math.pi) * height - 0.5
+            ok = length > 0.0
+        else:
+            tan_half = camera.half_height()
+            x = (dr / df / (tan_half * width / height) + 1.0) * 0.5 * width - 0.5
+            y = (1.0 - du / df / tan_half) * 0.5 * height - 0.5
+            ok = df > 0.0
+    ok &= np.isfinite(x) & np.isfinite(y)
+    right = side > 0
+    x = np.where(right & (camera.stereo == "side-by-side"), x + width, x)
+    y = np.where(right & (camera.stereo == "top-bottom"), y + height, y)
+    return np.where(ok, x, 0.0), np.where(ok, y, 0.0), ok

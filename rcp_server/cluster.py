@@ -211,7 +211,7 @@ class Painter:
         None when the painting traces every ray."""
         camera, time = shot
         scene = self._scene(held)
-        grid = seen_grid(scene, time, band.full_width, band.full_height, params)
+        grid = seen_grid(scene, time, camera, band.full_width, band.full_height, params)
         if grid is None:
             return None
         fine = grid.height // band.full_height
@@ -635,7 +635,7 @@ def _paint_bands(
     see (``fast``), and each band reads all the parts (Ray waits for them, the driver does not): the whole
     image is seen once a frame, not once a band, and each band paints exactly its crop of the painting."""
     seen = []
-    if len(workers) > 1 and uses_seen(params):
+    if len(workers) > 1 and uses_seen(params, shot[0]):
         seen = [actor.see.remote(held, shot, band, params) for actor, band in workers]
     return [actor.band.remote(held, job, band, index, shot, params, *seen) for actor, band in workers]
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import kernels
-from .camera import Camera, Region
+from .camera import Camera, Region, directions_at, eye_pixels, project
 from .paintstate import PaintState, TileIteration
 from .params import EDGES, PaintParams
 from .raytrace import TileSetup, field_plan
@@ -32,33 +32,28 @@ from .stopwatch import Stopwatch
 
 
 def lookup_coords(v_p: np.ndarray, camera: Camera, region: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Where each pixel's displaced target ``P_p' = P_p + V_p`` projects on the frame camera's image plane.
+    """Where each pixel's displaced target ``P_p' = P_p + V_p`` is seen from its eye (``camera.project``).
 
     v_p : (n, 3) float64 target displacement of each pixel of ``region`` (at its centre), scene units.
-    Returns ``x, y`` (n,) float64 continuous pixel coordinates of the full image, and ``ok`` (n,) bool:
-    False where ``P_p'`` is not in front of the eye (it cannot be projected) or a coordinate is not finite;
-    there ``x, y`` are the pixel's own centre, so that pixel keeps its own plain value.
+    Returns ``x, y`` (n,) float64 continuous pixel coordinates of the eye's image, and ``ok`` (n,) bool:
+    False where ``P_p'`` cannot be projected (behind a perspective eye) or a coordinate is not finite; there
+    ``x, y`` are the pixel's own centre, so that pixel keeps its own plain value. On the sphere ``x`` goes
+    the shorter way round, and may leave ``[0, W)`` by up to half a turn.
 
     ``V_p = 0`` gives exactly the pixel's own integer coordinates: the offset is computed, not the position.
     """
-    r, u, f = camera.basis()
-    pitch = camera.pixel_pitch(region.full_height)
     i, j = region.pixel_coords()
-    tan_half = camera.half_height()
-    aspect = region.full_width / region.full_height
-    # the pixel centre on the plane: eye + f + sx r + ty u
-    sx = (2.0 * (i + 0.5) / region.full_width - 1.0) * aspect * tan_half
-    ty = (1.0 - 2.0 * (j + 0.5) / region.full_height) * tan_half
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # non-finite input: refused below
-        vr, vu, vf = v_p @ r, v_p @ u, v_p @ f
-        ahead = 1.0 + vf  # P_p' - eye along f: the plane is at 1
-        # the projection of P_p' minus that of P_p, in pixels (t, and so y, runs down)
-        dx = (vr - sx * vf) / ahead / pitch
-        dy = -(vu - ty * vf) / ahead / pitch
-    ok = (ahead > 0.0) & np.isfinite(dx) & np.isfinite(dy)
-    x = i + np.where(ok, dx, 0.0)
-    y = j + np.where(ok, dy, 0.0)
-    return x, y, ok
+    side, ei, ej = eye_pixels(camera, region, i, j)
+    centre, *_ = directions_at(camera, region, ei + 0.5, ej + 0.5)
+    mono = np.zeros_like(side)
+    ax, ay, ok_a = project(camera, region, mono, centre + v_p)
+    bx, by, ok_b = project(camera, region, mono, centre)
+    ok = ok_a & ok_b
+    dx, dy = np.where(ok, ax - bx, 0.0), np.where(ok, ay - by, 0.0)
+    if camera.projection == "equirect":
+        width = camera.eye_size(region.full_width, region.full_height)[0]
+        dx = (dx + 0.5 * width) % width - 0.5 * width
+    return ei + dx, ej + dy, ok
 
 
 def _reduce(coord: np.ndarray, n: int, edge: str) -> np.ndarray:
@@ -83,24 +78,43 @@ def edge_index(k: np.ndarray, n: int, edge: str) -> np.ndarray:
     raise ValueError(f"unknown edge mode {edge!r}; choose one of {', '.join(EDGES)}")
 
 
+def sphere_index(c: np.ndarray, r: np.ndarray, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """Pixel indices of a panorama, a row past a pole at most: longitude wraps, and a row past a pole is the row
+    on its other side, half a turn around (``kernels.lookup`` does the same)."""
+    over = (r < 0) | (r >= height)
+    r = np.where(r < 0, -1 - r, np.where(r >= height, 2 * height - 1 - r, r))
+    return np.mod(np.where(over, c + width // 2, c), width), r
+
+
 def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray, edge: str) -> np.ndarray:
     """Bilinear lookup of ``image`` (h, w) or (h, w, c) at continuous pixel coordinates ``x, y`` ((n,)
-    float64, centres on the integers), off-screen indices mapped by ``edge``. Returns (n,) or (n, c) in
-    float64; an integer ``(x, y)`` returns that pixel's value exactly."""
+    float64, centres on the integers), off-screen indices mapped by ``edge`` (or ``"sphere"``: a panorama, where
+    longitude wraps and the poles mirror). Returns (n,) or (n, c) in float64; an integer ``(x, y)`` returns
+    that pixel's value exactly."""
     h, w = image.shape[:2]
-    x = _reduce(x, w, edge)
-    y = _reduce(y, h, edge)
+    if edge == "sphere":
+        x = np.mod(x, float(w))
+        y = np.clip(y, -0.5, h - 0.5)
+    else:
+        x = _reduce(x, w, edge)
+        y = _reduce(y, h, edge)
     x0 = np.floor(x)
     y0 = np.floor(y)
     fx = x - x0
     fy = y - y0
     x0 = x0.astype(np.int64)
     y0 = y0.astype(np.int64)
-    c0, c1 = edge_index(x0, w, edge), edge_index(x0 + 1, w, edge)
-    r0, r1 = edge_index(y0, h, edge), edge_index(y0 + 1, h, edge)
     if image.ndim == 3:
         fx = fx[:, None]
         fy = fy[:, None]
+    if edge == "sphere":
+        corners = [sphere_index(x0 + dc, y0 + dr, w, h) for dr in (0, 1) for dc in (0, 1)]
+        (c00, r00), (c01, r01), (c10, r10), (c11, r11) = corners
+        top = image[r00, c00] * (1.0 - fx) + image[r01, c01] * fx
+        bottom = image[r10, c10] * (1.0 - fx) + image[r11, c11] * fx
+        return top * (1.0 - fy) + bottom * fy
+    c0, c1 = edge_index(x0, w, edge), edge_index(x0 + 1, w, edge)
+    r0, r1 = edge_index(y0, h, edge), edge_index(y0 + 1, h, edge)
     top = image[r0, c0] * (1.0 - fx) + image[r0, c1] * fx
     bottom = image[r1, c0] * (1.0 - fx) + image[r1, c1] * fx
     return top * (1.0 - fy) + bottom * fy
@@ -117,7 +131,7 @@ def tile_iteration(plain: PaintState, setup: TileSetup, params: PaintParams) -> 
     region = setup.region
     z0 = params.focus(setup.camera)
     reads = params.reads()
-    pitch = setup.camera.pixel_pitch(region.full_height)
+    pitch = setup.pitch()
     edge = EDGES.index(params.edge)
     source = kernels.channels(plain)
     noise = kernels.or_dummy(setup.noise, 2)
@@ -131,7 +145,7 @@ def tile_iteration(plain: PaintState, setup: TileSetup, params: PaintParams) -> 
             if field.kind != kernels.FIELD_ZERO:
                 kernels.fill_field(
                     field=field,
-                    basis=setup.basis,
+                    plane=setup.image_plane,
                     previous=kernels.channels(state),
                     z0=float(z0),
                     noise=noise,

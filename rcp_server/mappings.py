@@ -25,11 +25,12 @@ from .paintstate import CHANNELS
 
 @dataclass(frozen=True)
 class MappingInput:
-    """Per-pixel data of ``I_{n-1}`` for n pixels, plus the frame camera's basis.
+    """Per-pixel data of ``I_{n-1}`` for n pixels, plus each pixel's local frame.
 
     color : (n, 3) float32 displayed color in [0, 1];  depth : (n,) float32 view depth (z_max on a miss)
     normal : (n, 3) float32 world normal (0 on a miss);  direction : (n, 3) float32 previous ray direction
-    right, up, forward : (3,) float64;  z0 : focus depth;  i, j : (n,) pixel column and row
+    right, up, forward : (n, 3) float64, each pixel's ``r_ij, u_ij, f_ij`` (camera.py: the camera's own basis
+    in every row on an image plane);  z0 : focus depth;  i, j : (n,) pixel column and row
     A channel the mapping did not declare is None.
     """
 
@@ -46,8 +47,8 @@ class MappingInput:
 
     def color_field(self) -> np.ndarray:
         """``(2R-1) r + (2G-1) u + (2B-1) f`` per pixel: (n, 3) float32."""
-        basis = np.stack([self.right, self.up, self.forward]).astype(np.float32)
-        return (2.0 * self.color - 1.0) @ basis
+        c = 2.0 * self.color.astype(np.float64) - 1.0
+        return (c[:, :1] * self.right + c[:, 1:2] * self.up + c[:, 2:] * self.forward).astype(np.float32)
 
 
 @dataclass(frozen=True)

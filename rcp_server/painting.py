@@ -105,7 +105,8 @@ def paint(
     should_stop: Callable[[], bool] | None = None,
     seen: kernels.Seen | None = None,
 ) -> PaintResult:
-    """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera``.
+    """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera`` (a stereo
+    camera's painting holds both eyes' images: ``camera.image_size`` of one eye's).
 
     Per-frame mode: ``previous=None`` starts from ``I_0`` and runs ``params.iterations`` iterations.
     Temporal mode: pass the previous frame's :attr:`PaintResult.state` to continue the recursion from it
@@ -119,6 +120,7 @@ def paint(
     region painted apart from the rest of its image (on Ray, a band an actor): else the painting finds it
     itself, over the whole image, whatever its region.
     """
+    camera.check_painting(width, height)
     region = region or Region(width, height)
     if (region.full_width, region.full_height) != (width, height):
         raise ValueError("region belongs to an image of another size")
@@ -162,7 +164,7 @@ def paint(
         return [(state, total([first[n][1], seconds])) for n, (state, seconds) in enumerate(rest)]
 
     full = Region(width, height)
-    grid = seen_grid(scene, time, width, height, params)
+    grid = seen_grid(scene, time, camera, width, height, params)
     given = seen is not None
     if given and (grid is None or (seen.width, seen.height) != (grid.width, grid.height)):
         raise ValueError("seen does not cover this painting's grid of pixel centres (seen_grid)")
@@ -216,11 +218,11 @@ def paint(
     return PaintResult(state, total([p[1] for p in parts] + extra), keep or [])
 
 
-def seen_grid(scene: Scene, time: float, width: int, height: int, params: PaintParams) -> Region | None:
+def seen_grid(scene: Scene, time: float, camera: Camera, width: int, height: int, params: PaintParams) -> Region | None:
     """The image whose pixel centres decide most rays of a ``width x height`` painting (:func:`uses_seen`),
     None when every ray is traced. At several samples it is twice as fine: it sees the
     thin geometry that the samples antialias."""
-    if not uses_seen(params) or scene.geometry(time)[1] is None:
+    if not uses_seen(params, camera) or scene.geometry(time)[1] is None:
         return None
     fine = 1 if params.spp == 1 else 2
     return Region(fine * width, fine * height)
@@ -235,13 +237,14 @@ def see(scene: Scene, time: float, camera: Camera, rows: Region) -> kernels.Seen
     return part
 
 
-def uses_seen(params: PaintParams) -> bool:
+def uses_seen(params: PaintParams, camera: Camera) -> bool:
     """Whether paintings with these settings decide rays by what the pixel centres see
     (``kernels.resolve_seen``), in a scene with triangles: with ``fast``, traced, eyes at rest (every ray
-    starts at the eye) and targets that move (else every iteration casts the first one's rays, and the exact
-    painting costs nothing more), and more than one ray a pixel. Not the region's size: a tile must be a crop."""
+    of an eye starts at its point: not omnidirectional stereo, ``Camera.one_eye_point``) and targets that
+    move (else every iteration casts the first one's rays, and the exact painting costs nothing more), and
+    more than one ray a pixel. Not the region's size: a tile must be a crop."""
     fast = params.fast and params.method == "raytrace" and params.lambda_e == 0.0 and params.lambda_p != 0.0
-    return fast and params.iterations * params.spp > 1
+    return fast and camera.one_eye_point and params.iterations * params.spp > 1
 
 
 def _visible(scene: Scene, time: float, camera: Camera, tile: Region | None, seen: kernels.Seen) -> dict[str, float]:

@@ -15,7 +15,7 @@ import numpy as np
 
 from . import kernels
 from .alphamask import pass_masked, step_floor
-from .camera import RAY_DTYPE, Camera, Region, plane_points
+from .camera import RAY_DTYPE, Camera, Region, pixel_frames, sample_targets
 from .mappings import MappingInput, get_mapping
 from .paintstate import PaintState
 from .params import PaintParams
@@ -34,21 +34,24 @@ class TileSetup:
     xi: np.ndarray  # (n, spp) float64 sub-pixel offsets
     eta: np.ndarray
     noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
-    basis: np.ndarray = field(init=False)  # (3, 3) rows r, u, f
-    image_plane: kernels.ImagePlane = field(init=False)  # the image plane and the tile, as the kernels take them
+    image_plane: kernels.ImagePlane = field(init=False)  # the projection and the tile, as the kernels take them
     pixels: np.ndarray = field(init=False)  # (n,) int64 every pixel of the tile: what an iteration paints
 
     def __post_init__(self):
         self.image_plane = kernels.ImagePlane.of(self.camera, self.region)
-        self.basis = self.image_plane.basis
         self.pixels = np.arange(self.region.pixel_count)
 
-    def plane(self) -> np.ndarray:
-        """Image-plane points of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
-        i, j = self.region.pixel_coords()
-        s = ((i[:, None] + self.xi) / self.region.full_width).ravel()
-        t = ((j[:, None] + self.eta) / self.region.full_height).ravel()
-        return plane_points(self.camera, self.region, s, t)
+    def frames(self) -> tuple[np.ndarray, ...]:
+        """Each pixel's eye and local frame ``r_ij, u_ij, f_ij``: four (n, 3) float64 (``camera.pixel_frames``)."""
+        return pixel_frames(self.camera, self.region, *self.region.pixel_coords())
+
+    def targets(self) -> np.ndarray:
+        """``P_p`` of every sample, (n*spp, 3) float64: the numpy form of what cast_rays builds."""
+        return sample_targets(self.camera, self.region, *self.region.pixel_coords(), self.xi, self.eta)
+
+    def pitch(self) -> float:
+        """``p``: a pixel's size at unit distance (camera.py), what ``lambda_p`` counts in."""
+        return self.camera.pixel_pitch(self.image_plane.eye_height)
 
 
 def setup_tile(camera: Camera, region: Region, params: PaintParams) -> TileSetup:
@@ -59,12 +62,16 @@ def setup_tile(camera: Camera, region: Region, params: PaintParams) -> TileSetup
         return TileSetup(camera, region, half, half, None)
     i, j = region.pixel_coords()
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
-    noise = (noise_vectors(params.seed, i, j) @ np.stack(camera.basis())).astype(np.float32) if params.noise else None
+    noise = None
+    if params.noise:  # in each pixel's own frame, so that it means the same all around a panorama
+        _, r, u, f = pixel_frames(camera, region, i, j)
+        v = noise_vectors(params.seed, i, j)
+        noise = (v[:, :1] * r + v[:, 1:2] * u + v[:, 2:] * f).astype(np.float32)
     return TileSetup(camera, region, xi, eta, noise)
 
 
 def _mapping_input(state: PaintState, setup: TileSetup, z0: float) -> MappingInput:
-    r, u, f = setup.basis
+    _, r, u, f = setup.frames()
     i, j = setup.region.pixel_coords()
     return MappingInput(state.color, state.depth, state.normal, state.direction, r, u, f, z0, i, j)
 
@@ -83,8 +90,7 @@ def displacements(state: PaintState, setup: TileSetup, params: PaintParams, z0: 
         d = scale * (np.asarray(get_mapping(mapping).field(data), dtype=np.float64) + noise)
         return np.where(np.isfinite(d), d, 0.0)
 
-    pitch = setup.camera.pixel_pitch(setup.region.full_height)
-    return scaled(params.mapping, params.lambda_p * pitch), scaled(params.eye_mapping, params.lambda_e)
+    return scaled(params.mapping, params.lambda_p * setup.pitch()), scaled(params.eye_mapping, params.lambda_e)
 
 
 @dataclass
@@ -126,7 +132,7 @@ def cameras(
 ) -> kernels.Cast:
     """The tile's cameras from ``I_{n-1}`` as ``kernels.cast_rays`` takes them (``write_origins``: False when the
     eyes rest and the ray buffers already hold the eye)."""
-    pitch = setup.camera.pixel_pitch(setup.region.full_height)
+    pitch = setup.pitch()
     moves = not state.blank and state.has(params.reads())
     return kernels.Cast(
         eye=np.asarray(setup.camera.eye, np.float64),
@@ -282,7 +288,8 @@ class TracedTile:
         cast = cameras(state, self.setup, params, self.z0)
         eyes_rest = cast.eye_field.kind == kernels.FIELD_ZERO
         cast = cast._replace(write_origins=not (eyes_rest and self.at_eye))
-        self.at_eye = eyes_rest
+        # with two eyes, ray m is another pixel's, and so another eye's, when the pixels painted change
+        self.at_eye = eyes_rest and self.setup.image_plane.half_ipd == 0.0
         out = self.buffers[1] if state.color is self.buffers[0].color else self.buffers[0]
         use_seen = self.seen is not None and not state.blank
         self.clock[:] = 0

@@ -12,7 +12,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..camera import Camera, Region
+from ..camera import PROJECTIONS, STEREO, Camera, Region
 from ..paintstate import CHANNELS, channel_shape
 from ..tracer import Hits
 
@@ -25,29 +25,52 @@ reads or writes nothing."""
 
 
 class ImagePlane(NamedTuple):
-    """The frame camera's image plane and where a tile of it lies (``camera.py`` has the formulas)."""
+    """The frame camera's projection and where a tile of the painting lies (``camera.py`` has the formulas,
+    ``projection.py`` the kernels' functions over this)."""
 
     basis: np.ndarray  # (3, 3) float64, rows r, u, f
     tan_half: float  # tan(fov / 2)
-    aspect: float  # W / H of the full image
-    full_width: int  # W
-    full_height: int  # H
+    aspect: float  # W / H of an eye's image
+    full_width: int  # the painting's size (both eyes of a stereo painting)
+    full_height: int
     x0: int  # the tile's top-left pixel
     y0: int
     width: int  # the tile's width: its pixels are row-major
+    projection: int  # projection.PERSPECTIVE, EQUIRECT
+    layout: int  # projection.MONO, TOP_BOTTOM, SIDE_BY_SIDE
+    eye_width: int  # W x H: an eye's image
+    eye_height: int
+    half_ipd: float  # a pixel's eye sits at eye + side * half_ipd * r_ij
+    columns: np.ndarray  # (W, 2) float64 cos, sin of the longitude of each column's centre (equirect; else a dummy)
+    rows: np.ndarray  # (H, 2) float64 cos, sin of the latitude of each row's centre
 
     @classmethod
     def of(cls, camera: Camera, region: Region) -> ImagePlane:
-        """The image plane of ``camera`` and where ``region`` lies on it."""
+        """The projection of ``camera`` and where ``region`` lies in its painting."""
+        width, height = camera.eye_size(region.full_width, region.full_height)
+        equirect = camera.projection == "equirect"
+        columns = rows = np.zeros((1, 2))
+        if equirect:
+            phi = (2.0 * (np.arange(width) + 0.5) / width - 1.0) * np.pi
+            theta = (1.0 - 2.0 * (np.arange(height) + 0.5) / height) * np.pi / 2.0
+            columns = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+            rows = np.stack([np.cos(theta), np.sin(theta)], axis=1)
         return cls(
             basis=np.stack(camera.basis()),
             tan_half=camera.half_height(),
-            aspect=region.full_width / region.full_height,
+            aspect=width / height,
             full_width=region.full_width,
             full_height=region.full_height,
             x0=region.x0,
             y0=region.y0,
             width=region.width,
+            projection=PROJECTIONS.index(camera.projection),
+            layout=STEREO.index(camera.stereo),
+            eye_width=width,
+            eye_height=height,
+            half_ipd=0.5 * camera.ipd if camera.stereo != "mono" else 0.0,
+            columns=columns,
+            rows=rows,
         )
 
 

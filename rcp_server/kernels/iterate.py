@@ -82,6 +82,8 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
             triangles=trace.triangles,
             hits=hits,
             pending=scratch.pending,
+            pixels=pixels,
+            spp=spp,
         )
         traced = scratch.pending[:left]
     if trace.embree.scene == 0:
@@ -119,7 +121,7 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
         ambient=shading.ambient,
         lit=shading.lit,
         eye=cast.eye,
-        forward=cast.plane.basis[2],
+        plane=cast.plane,
         z_max=shading.z_max,
         out=out,
         need_depth=shading.depth,

@@ -9,6 +9,7 @@ import math
 import numba
 
 from .jit import jit
+from .projection import EQUIRECT, centre_frame, locate, target_offset, to_pixel
 
 EDGE_CLAMP, EDGE_WRAP, EDGE_MIRROR = 0, 1, 2  # the kernel's codes for EDGES, in order
 
@@ -21,20 +22,35 @@ def _edge(k, n, edge):
     return 2 * n - 1 - k if k >= n else k
 
 
+@numba.njit(inline="always")
+def _sphere(c, r, width, height):
+    """Pixel ``(c, r)`` of a panorama, one step off it at most: longitude wraps, a row past a pole is the row on
+    its other side, half a turn around."""
+    if r < 0:
+        r = -1 - r
+        c += width // 2
+    elif r >= height:
+        r = 2 * height - 1 - r
+        c += width // 2
+    return c % width, r
+
+
 @jit
 def look_up(v_p, moves, plane, edge, plain, out):
     """``imagespace.lookup_coords`` and ``imagespace.bilinear`` fused, for one region and every recorded channel.
 
     v_p : (n, 3) float64 displacement per pixel of the region (not read unless ``moves``)
-    plane : a bundles.ImagePlane (the frame camera's plane and the region);  edge : EDGE_*
-    plain : bundles.Channels, the plain render of the full image, row-major (W*H, ...) float32; all but
-    color may be dummies. out : bundles.Channels of the region's n pixels, each written only when the
-    matching plain channel is full-size; out.direction is renormalised (a bilinear mix of unit vectors
-    is shorter than one).
+    plane : a bundles.ImagePlane (the projection and the region);  edge : EDGE_*, how an image plane is read
+    off its edges (a panorama has none: longitude wraps and the poles mirror). Each eye of a stereo painting
+    reads its own image. plain : bundles.Channels, the plain render of the full painting, row-major (W*H, ...)
+    float32; all but color may be dummies. out : bundles.Channels of the region's n pixels, each written only
+    when the matching plain channel is full-size; out.direction is renormalised (a bilinear mix of unit
+    vectors is shorter than one).
     """
-    basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
     full_width, full_height = plane.full_width, plane.full_height
+    eye_w, eye_h = plane.eye_width, plane.eye_height
     x0, y0, width = plane.x0, plane.y0, plane.width
+    sphere = plane.projection == EQUIRECT
     color, depth, normal, direction = plain.color, plain.depth, plain.normal, plain.direction
     out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = out_color.shape[0]
@@ -42,45 +58,57 @@ def look_up(v_p, moves, plane, edge, plain, out):
     has_depth = depth.shape[0] == n_full
     has_normal = normal.shape[0] == n_full
     has_direction = direction.shape[0] == n_full
-    inv_pitch = full_height / (2.0 * tan_half)
-    last_x = float(full_width - 1)
-    last_y = float(full_height - 1)
     rows = n_pix // width
-    span_x = float(full_width) if edge == EDGE_WRAP else 2.0 * full_width
-    span_y = float(full_height) if edge == EDGE_WRAP else 2.0 * full_height
+    span_x = float(eye_w) if edge == EDGE_WRAP else 2.0 * eye_w
+    span_y = float(eye_h) if edge == EDGE_WRAP else 2.0 * eye_h
     for row in range(rows):
         j = y0 + row
-        ty = (1.0 - 2.0 * (j + 0.5) / full_height) * tan_half
         for col in range(width):
             pix = row * width + col
-            i = x0 + col
-            x = float(i)
-            y = float(j)
+            side, li, lj = locate(plane, x0 + col, j)
+            x_off = x0 + col - li  # where the eye's image starts in the painting
+            y_off = j - lj
+            # continuous coordinates in the eye's image, centres on the integers
+            x = float(li)
+            y = float(lj)
             if moves:
-                sx = (2.0 * (i + 0.5) / full_width - 1.0) * aspect * tan_half
-                vr = v_p[pix, 0] * basis[0, 0] + v_p[pix, 1] * basis[0, 1] + v_p[pix, 2] * basis[0, 2]
-                vu = v_p[pix, 0] * basis[1, 0] + v_p[pix, 1] * basis[1, 1] + v_p[pix, 2] * basis[1, 2]
-                vf = v_p[pix, 0] * basis[2, 0] + v_p[pix, 1] * basis[2, 1] + v_p[pix, 2] * basis[2, 2]
-                ahead = 1.0 + vf
-                if ahead > 0.0:
-                    scale = inv_pitch / ahead
-                    dx = (vr - sx * vf) * scale
-                    dy = (ty * vf - vu) * scale
-                    if math.isfinite(dx) and math.isfinite(dy):
-                        x += dx
-                        y += dy
-            if 0.0 <= x < last_x and 0.0 <= y < last_y:  # on screen, all four neighbours too: most pixels
+                _, _, _, _, _, _, fx, fy, fz = centre_frame(plane, li, lj)
+                if plane.projection != EQUIRECT:
+                    fx, fy, fz = target_offset(plane, li + 0.5, lj + 0.5)
+                # the projection of P_p' minus that of P_p: V_p = 0 stays exactly on the pixel
+                ax, ay, ok_a = to_pixel(plane, 0, fx + v_p[pix, 0], fy + v_p[pix, 1], fz + v_p[pix, 2])
+                bx, by, ok_b = to_pixel(plane, 0, fx, fy, fz)
+                if ok_a and ok_b:
+                    dx = ax - bx
+                    if sphere:  # the shorter way round
+                        dx = (dx + 0.5 * eye_w) % eye_w - 0.5 * eye_w
+                    x += dx
+                    y += ay - by
+            if 0.0 <= x < eye_w - 1 and 0.0 <= y < eye_h - 1:  # on screen, all four neighbours too: most pixels
                 c0 = int(x)
                 r0 = int(y)
                 fx = x - c0
                 fy = y - r0
                 c1 = c0 + 1
                 r1 = r0 + 1
+                c2 = c0
+                c3 = c1
+            elif sphere:
+                x %= eye_w
+                y = min(max(y, -0.5), eye_h - 0.5)
+                fx0 = math.floor(x)
+                fy0 = math.floor(y)
+                fx = x - fx0
+                fy = y - fy0
+                c0, r0 = _sphere(int(fx0), int(fy0), eye_w, eye_h)
+                c1, _ = _sphere(int(fx0) + 1, int(fy0), eye_w, eye_h)
+                c2, r1 = _sphere(int(fx0), int(fy0) + 1, eye_w, eye_h)
+                c3, _ = _sphere(int(fx0) + 1, int(fy0) + 1, eye_w, eye_h)
             else:
                 # ---- into a range whose integer neighbours fit, then the four pixels by the edge mode ----
                 if edge == EDGE_CLAMP:
-                    x = min(max(x, -1.0), float(full_width))
-                    y = min(max(y, -1.0), float(full_height))
+                    x = min(max(x, -1.0), float(eye_w))
+                    y = min(max(y, -1.0), float(eye_h))
                 else:
                     x %= span_x
                     y %= span_y
@@ -88,14 +116,17 @@ def look_up(v_p, moves, plane, edge, plain, out):
                 fy0 = math.floor(y)
                 fx = x - fx0
                 fy = y - fy0
-                c0 = _edge(int(fx0), full_width, edge)
-                c1 = _edge(int(fx0) + 1, full_width, edge)
-                r0 = _edge(int(fy0), full_height, edge)
-                r1 = _edge(int(fy0) + 1, full_height, edge)
-            a0 = r0 * full_width + c0
-            a1 = r0 * full_width + c1
-            b0 = r1 * full_width + c0
-            b1 = r1 * full_width + c1
+                c0 = _edge(int(fx0), eye_w, edge)
+                c1 = _edge(int(fx0) + 1, eye_w, edge)
+                r0 = _edge(int(fy0), eye_h, edge)
+                r1 = _edge(int(fy0) + 1, eye_h, edge)
+                c2 = c0
+                c3 = c1
+            # c2, c3: the columns of the lower two neighbours (not those of the upper two across a pole)
+            a0 = (y_off + r0) * full_width + x_off + c0
+            a1 = (y_off + r0) * full_width + x_off + c1
+            b0 = (y_off + r1) * full_width + x_off + c2
+            b1 = (y_off + r1) * full_width + x_off + c3
             w00 = (1.0 - fx) * (1.0 - fy)
             w01 = fx * (1.0 - fy)
             w10 = (1.0 - fx) * fy

@@ -20,6 +20,7 @@ import numba
 import numpy as np
 
 from .jit import jit
+from .projection import EQUIRECT, MONO, SIDE_BY_SIDE, TOP_BOTTOM, locate, target_offset, tile_pixel, to_pixel
 from .triangle import corner_and_edges, ray_triangle
 
 SILHOUETTE = 1.1  # the farthest of four neighbouring centres' hits over the nearest, beyond which they
@@ -30,72 +31,76 @@ IN_FRONT = 1e-3  # how much nearer (relative) than the plane of a ray's face a c
 
 
 @numba.njit(inline="always")
-def _corner_in_front(
-    triangles, f, ox, oy, oz, seen_face, seen_distance, corner, width, height, basis, tan_half, aspect
-):
+def _corner_in_front(triangles, f, ox, oy, oz, seen, corner, plane, fine, x_off, y_off):
     """Whether one of the four centres around ``corner`` saw, by another face, something nearer than the plane
     of face ``f`` along its own ray (seen from the eye ``o``): an object that stands before ``f`` right beside
-    the ray. A corner on the same surface, flat or bulging away, lies on or behind that plane."""
+    the ray. A corner on the same surface, flat or bulging away, lies on or behind that plane. The grid is
+    ``fine`` times the painting; its eye's image starts at ``(x_off, y_off)`` of the painting."""
     ax, ay, az, e1x, e1y, e1z, e2x, e2y, e2z = corner_and_edges(triangles, f)
     nx = e1y * e2z - e1z * e2y
     ny = e1z * e2x - e1x * e2z
     nz = e1x * e2y - e1y * e2x
     reach = (ax - ox) * nx + (ay - oy) * ny + (az - oz) * nz  # the plane's distance along n from the eye
+    width = seen.width
     for q in range(4):
         c = corner + (q & 1) + (q >> 1) * width
-        g = seen_face[c]
+        g = seen.face[c]
         if g < 0 or g == f:
             continue
-        # the centre's ray, as the plain render cast it (camera.py)
-        sx = ((c % width + 0.5) / width * 2.0 - 1.0) * aspect * tan_half
-        ty = (1.0 - (c // width + 0.5) / height * 2.0) * tan_half
-        dx = basis[2, 0] + sx * basis[0, 0] + ty * basis[1, 0]
-        dy = basis[2, 1] + sx * basis[0, 1] + ty * basis[1, 1]
-        dz = basis[2, 2] + sx * basis[0, 2] + ty * basis[1, 2]
+        # the centre's ray, as the plain render cast it (projection.target_offset)
+        dx, dy, dz = target_offset(plane, (c % width + 0.5) / fine - x_off, (c // width + 0.5) / fine - y_off)
         length = math.sqrt(dx * dx + dy * dy + dz * dz)
         across = (dx * nx + dy * ny + dz * nz) / length
         if across == 0.0:
             continue
         t_plane = reach / across
-        if t_plane > 0.0 and seen_distance[c] < t_plane * (1.0 - IN_FRONT):
+        if t_plane > 0.0 and seen.distance[c] < t_plane * (1.0 - IN_FRONT):
             return True
     return False
 
 
 @jit
-def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pending):
+def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pending, pixels, spp):
     """Closest hits of the first ``count`` rays where ``seen`` decides them; returns how many it could not
     decide, whose ray indices it writes to the start of ``pending``.
 
-    origins, directions : (>= count, 3) float32, every origin the camera's eye, directions unit length
-    plane : a bundles.ImagePlane of the camera;  seen : a bundles.Seen of the camera
+    origins, directions : (>= count, 3) float32, every origin its pixel's eye (one point per eye: not
+    omnidirectional stereo), directions unit length;  plane : a bundles.ImagePlane of the tile
+    seen : a bundles.Seen of the camera (its grid: the painting's pixels, or ``fine`` times as many each way)
     triangles : (F, 3, 3) float32
     hits : tracer.Hits of >= count rays, written for the rays decided (t, b1, b2 as
     ``triangle.place_hits`` gives them);  pending : (>= count,) int64 out
+    pixels, spp : the tile's pixel of ray ``s`` is ``pixels[s // spp]`` (which eye casts it)
     """
-    basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
     seen_face, seen_distance, near = seen.face, seen.distance, seen.near
-    width, height = seen.width, seen.height  # its grid of centres: the image's, or a finer one
+    width = seen.width
+    fine = width / plane.full_width
+    eye_w = plane.eye_width * fine  # an eye's image, on the grid
+    eye_h = plane.eye_height * fine
+    forward = plane.basis[2]
+    sphere = plane.projection == EQUIRECT
     face, t_hit, b1_hit, b2_hit = hits.face, hits.t, hits.b1, hits.b2
-    # image-plane coordinates (at unit distance along f) -> continuous pixel coordinates, centres at integers
-    x_scale = width / (2.0 * aspect * tan_half)
-    y_scale = height / (2.0 * tan_half)
     n_pending = 0
     for s in range(count):
         dx = directions[s, 0]
         dy = directions[s, 1]
         dz = directions[s, 2]
-        along = dx * basis[2, 0] + dy * basis[2, 1] + dz * basis[2, 2]
-        if not along > 0.0:  # behind the eye, or a NaN ray: Embree's (the tracer masks NaN rays)
+        side = 0
+        if plane.layout != MONO:
+            i, j = tile_pixel(plane, pixels[s // spp])
+            side, _, _ = locate(plane, i, j)
+        x, y, ok = to_pixel(plane, side, dx, dy, dz)
+        # on the grid (its centres on the integers), within the eye's own image
+        x = (x + 0.5) * fine - 0.5
+        y = (y + 0.5) * fine - 0.5
+        x_off = eye_w if side > 0 and plane.layout == SIDE_BY_SIDE else 0.0
+        y_off = eye_h if side > 0 and plane.layout == TOP_BOTTOM else 0.0
+        if not (ok and x_off <= x < x_off + eye_w - 1 and y_off <= y < y_off + eye_h - 1):
+            # behind the eye, a NaN ray, off the eye's grid of centres (or across the sphere's seam): Embree's
             pending[n_pending] = s
             n_pending += 1
             continue
-        x = ((dx * basis[0, 0] + dy * basis[0, 1] + dz * basis[0, 2]) / along + aspect * tan_half) * x_scale - 0.5
-        y = (tan_half - (dx * basis[1, 0] + dy * basis[1, 1] + dz * basis[1, 2]) / along) * y_scale - 0.5
-        if not (0.0 <= x < width - 1 and 0.0 <= y < height - 1):  # off the grid of pixel centres
-            pending[n_pending] = s
-            n_pending += 1
-            continue
+        along = 1.0 if sphere else dx * forward[0] + dy * forward[1] + dz * forward[2]
         corner = int(y) * width + int(x)
         f00 = seen_face[corner]
         f01 = seen_face[corner + 1]
@@ -138,9 +143,7 @@ def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pendi
         if (
             best < 0
             or not (f00 == f01 and f00 == f10 and f00 == f11)
-            and _corner_in_front(
-                triangles, best, ox, oy, oz, seen_face, seen_distance, corner, width, height, basis, tan_half, aspect
-            )
+            and _corner_in_front(triangles, best, ox, oy, oz, seen, corner, plane, fine, x_off / fine, y_off / fine)
         ):
             # none of the candidates: something the centres did not see; or a corner saw something in front
             # of the face the ray hits, whose next face (one no centre saw) may cover the ray: Embree decides
@@ -159,85 +162,181 @@ THIN = 0.75  # a projected triangle whose inscribed circle is at least this wide
 NEARER = 0.01  # how much nearer than what the corners saw (relative) a thin part must be to count
 
 
+SPLIT = 4.0  # on the sphere, a thin triangle is cut (in space) until it spans at most this many cells each way:
+# its edges are curves in the image, nearly straight over a few cells
+MARGIN = 0.5  # cells added around each piece on the sphere, for what remains of the curve
+
+
+@numba.njit(inline="always")
+def _cells(near, xs, ys, z, row0, rows, x_lo, x_hi, y_lo, y_hi, width, margin, wrap):
+    """Lower ``near`` to ``z`` in every cell of rows ``row0 .. row0 + rows`` that the triangle ``(xs, ys)`` (grid
+    coordinates, centres on the integers) overlaps, grown by ``margin`` cells; the cell columns allowed are
+    ``x_lo .. x_hi`` (an eye's image), rows ``y_lo .. y_hi``; ``wrap``: columns wrap around that range."""
+    top_y = min(ys[0], ys[1], ys[2]) - margin
+    bottom_y = max(ys[0], ys[1], ys[2]) + margin
+    first = max(int(math.floor(top_y)), row0, y_lo)
+    last = min(int(math.floor(bottom_y)), row0 + rows - 1, y_hi)
+    span = x_hi - x_lo + 2  # the eye image's width, for the wrap
+    for cy in range(first, last + 1):
+        top = cy - margin
+        bottom = cy + 1.0 + margin
+        lo = math.inf
+        hi = -math.inf
+        # the triangle's extent within the row's slab: its corners inside, its edges where they cross it
+        for k in range(3):
+            if top <= ys[k] <= bottom:
+                lo = min(lo, xs[k])
+                hi = max(hi, xs[k])
+            a = xs[k]
+            b = ys[k]
+            c = xs[(k + 1) % 3]
+            d = ys[(k + 1) % 3]
+            if b != d:
+                for edge_y in (top, bottom):
+                    if (b - edge_y) * (d - edge_y) <= 0.0:
+                        x = a + (edge_y - b) * (c - a) / (d - b)
+                        lo = min(lo, x)
+                        hi = max(hi, x)
+        if lo > hi:
+            continue
+        start = int(math.floor(lo - margin))
+        stop = int(math.floor(hi + margin))
+        if not wrap:
+            start = max(start, x_lo)
+            stop = min(stop, x_hi)
+        for cx in range(start, stop + 1):
+            col = x_lo + (cx - x_lo) % span if wrap else cx
+            if col > x_hi:
+                continue  # the seam's cell, which resolve_seen never reads
+            cell = (cy - row0) * width + col
+            if z < near[cell]:
+                near[cell] = z
+
+
 @jit
 def cover_thin(triangles, eye, plane, rows, near):
     """Where geometry that no centre of the grid may see lies: for each cell of the grid of pixel centres of
     ``plane`` (a bundles.ImagePlane of the grid, whose ``y0`` is the first row of these cells; the cell
-    whose top-left centre is pixel (x, y) at ``near[(y - y0) * width + x]``), the least view depth of the
-    *thin* triangles (``THIN``) that overlap it, for the cells of ``rows`` rows; ``near`` (rows * width,)
-    float32 must hold +inf where nothing is written.
+    whose top-left centre is pixel (x, y) at ``near[(y - y0) * width + x]``), the least depth of the *thin*
+    triangles (``THIN``) that overlap it, for the cells of ``rows`` rows; ``near`` (rows * width,)
+    float32 must hold +inf where nothing is written. Depth is view depth on an image plane, the distance
+    from the eye on the sphere: what ``resolve_seen`` compares it with.
 
     A ray that ``resolve_seen`` would decide by the corners' triangles goes to Embree where something thin
     lies nearer than the corners saw: a baluster, a chair leg, a rail between centres that all saw the wall.
-    triangles : (F, 3, 3) float32;  eye : (3,) float64. Triangles reaching behind the eye's plane are left out
-    (they cross the whole screen; rare, and then only their own pixels can be wrong).
+    Each eye of a stereo grid projects from its own eye into its own image. triangles : (F, 3, 3) float32;
+    eye : (3,) float64. Left out, as rare, and then only their own pixels can be wrong: on an image plane
+    triangles reaching behind the eye's plane (they cross the whole screen), on the sphere thin triangles
+    around a pole.
     """
-    basis, tan_half, aspect = plane.basis, plane.tan_half, plane.aspect
-    width, height, row0 = plane.full_width, plane.full_height, plane.y0
-    x_scale = width / (2.0 * aspect * tan_half)
-    y_scale = height / (2.0 * tan_half)
-    x_shift = aspect * tan_half * x_scale - 0.5
-    y_shift = tan_half * y_scale - 0.5
+    width, row0 = plane.full_width, plane.y0
+    sphere = plane.projection == EQUIRECT
+    forward = plane.basis[2]
+    eye_w = plane.eye_width
+    eye_h = plane.eye_height
     xs = np.empty(3)
     ys = np.empty(3)
-    for f in range(triangles.shape[0]):
-        z_min = math.inf
-        behind = False
-        for k in range(3):
-            rx = triangles[f, k, 0] - eye[0]
-            ry = triangles[f, k, 1] - eye[1]
-            rz = triangles[f, k, 2] - eye[2]
-            z = rx * basis[2, 0] + ry * basis[2, 1] + rz * basis[2, 2]
-            if not z > 1e-6:
-                behind = True
-                break
-            inv = 1.0 / z
-            xs[k] = (rx * basis[0, 0] + ry * basis[0, 1] + rz * basis[0, 2]) * inv * x_scale + x_shift
-            ys[k] = y_shift - (rx * basis[1, 0] + ry * basis[1, 1] + rz * basis[1, 2]) * inv * y_scale
-            z_min = min(z_min, z)
-        if behind:
-            continue
-        x_lo = min(xs[0], xs[1], xs[2])
-        x_hi = max(xs[0], xs[1], xs[2])
-        y_lo = min(ys[0], ys[1], ys[2])
-        y_hi = max(ys[0], ys[1], ys[2])
-        if x_hi < 0.0 or x_lo > width - 1 or y_hi < row0 or y_lo > row0 + rows:
-            continue  # off these rows of the grid
-        # ---- thin: the inscribed circle's radius, twice the area over the perimeter (at most three times the
-        # longest edge, which needs one root where the perimeter needs three) ----
-        area2 = abs((xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]))
-        e0 = (xs[1] - xs[0]) ** 2 + (ys[1] - ys[0]) ** 2
-        e1 = (xs[2] - xs[1]) ** 2 + (ys[2] - ys[1]) ** 2
-        e2 = (xs[0] - xs[2]) ** 2 + (ys[0] - ys[2]) ** 2
-        if area2 * area2 >= 9.0 * THIN * THIN * max(e0, e1, e2):
-            continue
-        if area2 >= THIN * (math.sqrt(e0) + math.sqrt(e1) + math.sqrt(e2)):
-            continue
-        # ---- the cells it overlaps: row by row, the triangle's extent within the row's slab ----
-        first = max(int(math.floor(y_lo)), row0, 0)
-        last = min(int(math.floor(y_hi)), row0 + rows - 1, height - 2)
-        for cy in range(first, last + 1):
-            top = float(cy)
-            bottom = top + 1.0
-            lo = math.inf
-            hi = -math.inf
+    px = np.empty(3)
+    py = np.empty(3)
+    stack = np.empty((64, 3, 3))  # pieces of a triangle on the sphere, cut in space
+    sides = (-1, 1) if plane.layout != MONO else (0, 0)
+    for n_side in range(1 if plane.layout == MONO else 2):
+        side = sides[n_side]
+        x_off = eye_w if side > 0 and plane.layout == SIDE_BY_SIDE else 0
+        y_off = eye_h if side > 0 and plane.layout == TOP_BOTTOM else 0
+        ox = eye[0] + side * plane.half_ipd * plane.basis[0, 0]
+        oy = eye[1] + side * plane.half_ipd * plane.basis[0, 1]
+        oz = eye[2] + side * plane.half_ipd * plane.basis[0, 2]
+        for f in range(triangles.shape[0]):
+            z_min = math.inf
+            usable = True
             for k in range(3):
-                if top <= ys[k] <= bottom:
-                    lo = min(lo, xs[k])
-                    hi = max(hi, xs[k])
-                a = xs[k]
-                b = ys[k]
-                c = xs[(k + 1) % 3]
-                d = ys[(k + 1) % 3]
-                if b != d:
-                    for edge_y in (top, bottom):
-                        if (b - edge_y) * (d - edge_y) <= 0.0:
-                            x = a + (edge_y - b) * (c - a) / (d - b)
-                            lo = min(lo, x)
-                            hi = max(hi, x)
-            if lo > hi:
+                rx = triangles[f, k, 0] - ox
+                ry = triangles[f, k, 1] - oy
+                rz = triangles[f, k, 2] - oz
+                if sphere:
+                    z = math.sqrt(rx * rx + ry * ry + rz * rz)
+                elif not rx * forward[0] + ry * forward[1] + rz * forward[2] > 1e-6:
+                    usable = False
+                    break
+                else:
+                    z = rx * forward[0] + ry * forward[1] + rz * forward[2]
+                x, y, ok = to_pixel(plane, side, rx, ry, rz)
+                usable = usable and ok
+                xs[k] = x
+                ys[k] = y
+                z_min = min(z_min, z)
+            if not usable:
                 continue
-            for cx in range(max(int(math.floor(lo)), 0), min(int(math.floor(hi)), width - 2) + 1):
-                cell = (cy - row0) * width + cx
-                if z_min < near[cell]:
-                    near[cell] = z_min
+            if sphere:  # across the seam: each corner's longitude the nearest to the first's
+                for k in (1, 2):
+                    if xs[k] - xs[0] > 0.5 * eye_w:
+                        xs[k] -= eye_w
+                    elif xs[0] - xs[k] > 0.5 * eye_w:
+                        xs[k] += eye_w
+                if max(xs[0], xs[1], xs[2]) - min(xs[0], xs[1], xs[2]) > 0.5 * eye_w:
+                    continue  # around a pole
+            y_lo = min(ys[0], ys[1], ys[2])
+            y_hi = max(ys[0], ys[1], ys[2])
+            if y_hi < row0 - 1 or y_lo > row0 + rows + 1:
+                continue  # off these rows of the grid
+            if not sphere and (max(xs[0], xs[1], xs[2]) < x_off or min(xs[0], xs[1], xs[2]) > x_off + eye_w - 1):
+                continue
+            # ---- thin: the inscribed circle's radius, twice the area over the perimeter (at most three times the
+            # longest edge, which needs one root where the perimeter needs three) ----
+            area2 = abs((xs[1] - xs[0]) * (ys[2] - ys[0]) - (xs[2] - xs[0]) * (ys[1] - ys[0]))
+            e0 = (xs[1] - xs[0]) ** 2 + (ys[1] - ys[0]) ** 2
+            e1 = (xs[2] - xs[1]) ** 2 + (ys[2] - ys[1]) ** 2
+            e2 = (xs[0] - xs[2]) ** 2 + (ys[0] - ys[2]) ** 2
+            if area2 * area2 >= 9.0 * THIN * THIN * max(e0, e1, e2):
+                continue
+            if area2 >= THIN * (math.sqrt(e0) + math.sqrt(e1) + math.sqrt(e2)):
+                continue
+            x_lo, x_hi = x_off, x_off + eye_w - 2
+            y_first, y_last = y_off, y_off + eye_h - 2
+            if not sphere:
+                _cells(near, xs, ys, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, 0.0, False)
+                continue
+            # ---- on the sphere: pieces small enough that their curved edges are nearly straight ----
+            for k in range(3):
+                for q in range(3):
+                    stack[0, k, q] = triangles[f, k, q]
+            top = 1
+            while top > 0:
+                top -= 1
+                for k in range(3):
+                    x, y, _ = to_pixel(plane, side, stack[top, k, 0] - ox, stack[top, k, 1] - oy, stack[top, k, 2] - oz)
+                    px[k] = x
+                    py[k] = y
+                for k in (1, 2):
+                    if px[k] - px[0] > 0.5 * eye_w:
+                        px[k] -= eye_w
+                    elif px[0] - px[k] > 0.5 * eye_w:
+                        px[k] += eye_w
+                big = max(
+                    max(px[0], px[1], px[2]) - min(px[0], px[1], px[2]),
+                    max(py[0], py[1], py[2]) - min(py[0], py[1], py[2]),
+                )
+                if big <= SPLIT or top + 2 > stack.shape[0]:
+                    _cells(near, px, py, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, MARGIN, True)
+                    continue
+                # cut the longest edge (in space) at its middle: two pieces
+                longest = 0
+                best = -1.0
+                for k in range(3):
+                    length = 0.0
+                    for q in range(3):
+                        length += (stack[top, (k + 1) % 3, q] - stack[top, k, q]) ** 2
+                    if length > best:
+                        best = length
+                        longest = k
+                a = longest
+                b = (longest + 1) % 3
+                for q in range(3):
+                    middle = 0.5 * (stack[top, a, q] + stack[top, b, q])
+                    stack[top + 1, 0, q] = stack[top, 0, q]
+                    stack[top + 1, 1, q] = stack[top, 1, q]
+                    stack[top + 1, 2, q] = stack[top, 2, q]
+                    stack[top, b, q] = middle
+                    stack[top + 1, a, q] = middle
+                top += 2

@@ -11,6 +11,7 @@ import numba
 import numpy as np
 
 from .jit import jit
+from .projection import EQUIRECT, centre_frame, locate, tile_pixel
 
 
 @numba.njit(inline="always")
@@ -152,7 +153,7 @@ def shade(
     ambient,
     lit,
     eye,
-    forward,
+    plane,
     z_max,
     out,
     need_depth,
@@ -165,8 +166,9 @@ def shade(
     b1, b2; face -1 on a miss);  pixels : (m,) int64 the pixel of each group of spp rays, where its mean is
     written (the others are left as they are);  surfaces : a bundles.Surfaces
     environment : (h, w, 3) float32 equirectangular; light_dir : (3,) float64 travel direction
+    eye, plane : the camera's eye (3,) float64 and a bundles.ImagePlane of the tile, for depth
     out : bundles.Channels of n pixels: color (n, 3) float32 displayed color in [0, 1]; depth (n,) float32
-    view depth along ``forward`` from ``eye`` (``z_max`` on a miss); normal (n, 3) world normal (0 on a
+    view depth ``(X - eye_ij) . f_ij`` (camera.py; ``z_max`` on a miss); normal (n, 3) world normal (0 on a
     miss); direction (n, 3) ray direction. The channels not needed are not written.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
@@ -182,6 +184,12 @@ def shade(
     env_flat = environment.reshape(env_h * env_w, 3)
     inv_spp = 1.0 / spp
     panorama = env_w * env_h > 1
+    # each pixel's eye and f_ij, for depth: one for the whole image on a mono image plane
+    _, _, _, _, _, _, fx, fy, fz = centre_frame(plane, 0, 0)
+    ex = eye[0]
+    ey = eye[1]
+    ez = eye[2]
+    per_pixel = need_depth and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
     block = 256  # pixels
     sky = np.empty((block * spp, 2))  # panorama texel coordinates of one block's misses
     for first in range(0, n_pix, block):
@@ -202,6 +210,13 @@ def shade(
         # scalars rather than small arrays throughout: they stay in registers
         for m in range(first, last):
             pix = pixels[m]
+            if per_pixel:
+                i, j = tile_pixel(plane, pix)
+                side, i, j = locate(plane, i, j)
+                rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, i, j)
+                ex = eye[0] + side * plane.half_ipd * rx
+                ey = eye[1] + side * plane.half_ipd * ry
+                ez = eye[2] + side * plane.half_ipd * rz
             acc_r = acc_g = acc_b = 0.0
             acc_nx = acc_ny = acc_nz = 0.0
             acc_dx = acc_dy = acc_dz = 0.0
@@ -266,9 +281,9 @@ def shade(
                     if need_depth:
                         ts = t[s]
                         acc_z += (
-                            (origins[s, 0] + ts * dx - eye[0]) * forward[0]
-                            + (origins[s, 1] + ts * dy - eye[1]) * forward[1]
-                            + (origins[s, 2] + ts * dz - eye[2]) * forward[2]
+                            (origins[s, 0] + ts * dx - ex) * fx
+                            + (origins[s, 1] + ts * dy - ey) * fy
+                            + (origins[s, 2] + ts * dz - ez) * fz
                         )
                     if need_normal:
                         acc_nx += nx

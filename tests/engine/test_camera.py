@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from rcp_server.camera import Camera, CameraError, Region, plane_points
+from rcp_server.camera import Camera, CameraError, Region, directions_at
 
 
 def test_basis_follows_mission_formulas():
@@ -29,6 +29,11 @@ def test_default_camera_looking_down_minus_z_has_x_right_y_up():
     np.testing.assert_array_equal(r, [1.0, 0.0, 0.0])
     np.testing.assert_array_equal(u, [0.0, 1.0, 0.0])
     np.testing.assert_array_equal(f, [0.0, 0.0, -1.0])
+
+
+def plane_points(camera, region, s, t):
+    """``P_p(s, t)`` of a mono camera: its eye plus the forward map's offset at ``(s W, t H)``."""
+    return np.asarray(camera.eye) + directions_at(camera, region, s * region.full_width, t * region.full_height)[0]
 
 
 def test_plane_points_formula_and_corners():

@@ -124,7 +124,7 @@ def test_bands_given_what_the_image_sees_in_parts_are_its_crops(hard_scene):
     """How Ray paints one painting in bands: the parts of ``seen`` found apart, joined, handed to each band."""
     for params in (PaintParams(lambda_p=12.0), PaintParams(lambda_p=12.0, spp=4, noise=0.3)):
         full = paint(hard_scene, CAMERA, W, H, params).image
-        grid = seen_grid(hard_scene, 0.0, W, H, params)
+        grid = seen_grid(hard_scene, 0.0, CAMERA, W, H, params)
         fine = grid.height // H
         bands = Region(W, H).tiles(17)
         parts = [
@@ -137,7 +137,7 @@ def test_bands_given_what_the_image_sees_in_parts_are_its_crops(hard_scene):
             np.testing.assert_array_equal(got, full[band.y0 : band.y0 + band.height])
         with pytest.raises(ValueError, match="seen does not cover"):
             paint(hard_scene, CAMERA, W, H, params, region=bands[0], seen=kernels.Seen.joined(parts[:1]))
-    assert seen_grid(hard_scene, 0.0, W, H, PaintParams(fast=False)) is None
+    assert seen_grid(hard_scene, 0.0, CAMERA, W, H, PaintParams(fast=False)) is None
 
 
 def test_the_visibility_pass_sees_what_the_plain_render_hits(hard_scene):
@@ -178,6 +178,8 @@ def test_resolve_seen_agrees_with_embree_wherever_it_decides(hard_scene):
         triangles=geometry.triangles,
         hits=decided,
         pending=pending,
+        pixels=np.arange(n),
+        spp=1,
     )
     truth = tracer.intersect(rays.origins, rays.directions)
     done = np.ones(n, bool)

@@ -75,6 +75,8 @@ def _decided(scene, rays: Rays, seen: kernels.Seen) -> tuple[np.ndarray, Hits]:
         triangles=scene.geometry(0.0)[0].triangles,
         hits=hits,
         pending=pending,
+        pixels=np.arange(n),
+        spp=1,
     )
     done = np.ones(n, bool)
     done[pending[:left]] = False

@@ -86,7 +86,7 @@ def test_a_cut_out_shows_what_is_behind_it_in_the_exact_and_the_fast_path(tmp_pa
     assert scene.geometry()[0].masked
     exact = paint(scene, CAMERA, W, H, PaintParams(iterations=3, spp=spp, lambda_p=2.0, fast=False), threads=1).image
     fast_params = PaintParams(iterations=3, spp=spp, lambda_p=2.0, fast=True)
-    assert uses_seen(fast_params)  # the fast path decides rays by what the pixel centres see
+    assert uses_seen(fast_params, CAMERA)  # the fast path decides rays by what the pixel centres see
     fast = paint(scene, CAMERA, W, H, fast_params, threads=1).image
     for image in (exact, fast):
         np.testing.assert_allclose(image[ROW, LEFT], [1, 0, 0], atol=1e-6)  # the red wall, through the cut

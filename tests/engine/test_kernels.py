@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from rcp_server import kernels
-from rcp_server.camera import Camera, Region, plane_points
+from rcp_server.camera import Camera, Region, pixel_frames, sample_targets
 from rcp_server.painting import PaintState
 from rcp_server.params import PaintParams
 from rcp_server.raytrace import displacements, setup_tile
@@ -28,16 +28,18 @@ KINDS = {
 # ---- cast_rays ----
 
 
-def ref_field(kind, scale, basis, color, depth, normal, direction, z0, given, noise, noise_scale):
-    """scale * (D + noise_scale * noise), non-finite -> 0; (n, 3) float64."""
+def ref_field(kind, scale, frames, color, depth, normal, direction, z0, given, noise, noise_scale):
+    """scale * (D + noise_scale * noise), non-finite -> 0; (n, 3) float64. frames: each pixel's r, u, f (n, 3)."""
     n = len(color)
     c = color.astype(np.float64)
+    r, u, f = frames
     if kind == kernels.FIELD_ZERO:
         return np.zeros((n, 3))
     if kind == kernels.FIELD_COLOR:
-        d = (2.0 * c - 1.0) @ basis
+        d = (2.0 * c[:, :1] - 1.0) * r + (2.0 * c[:, 1:2] - 1.0) * u + (2.0 * c[:, 2:] - 1.0) * f
     elif kind == kernels.FIELD_DEPTH:
-        d = ((2.0 * c - 1.0) @ basis) * np.abs(depth.astype(np.float64) - z0)[:, None]
+        d = (2.0 * c[:, :1] - 1.0) * r + (2.0 * c[:, 1:2] - 1.0) * u + (2.0 * c[:, 2:] - 1.0) * f
+        d = d * np.abs(depth.astype(np.float64) - z0)[:, None]
     elif kind == kernels.FIELD_NORMAL:
         d = np.cross(direction, normal).astype(np.float64)  # float32 data, float32 products (as mappings.py)
     else:
@@ -48,13 +50,12 @@ def ref_field(kind, scale, basis, color, depth, normal, direction, z0, given, no
 
 
 def ref_cast_rays(camera, region, xi, eta, v_p, v_e):
-    """origins (n*spp, 3) = eye + V_e; unit directions towards P_p(s, t) + V_p; NaN where there is no ray."""
+    """origins (n*spp, 3) = eye_ij + V_e; unit directions towards P_p(s, t) + V_p; NaN where there is no ray."""
     i, j = region.pixel_coords()
     spp = xi.shape[1]
-    s = ((i[:, None] + xi) / region.full_width).ravel()
-    t = ((j[:, None] + eta) / region.full_height).ravel()
-    target = plane_points(camera, region, s, t) + np.repeat(v_p, spp, axis=0)
-    origins = np.asarray(camera.eye) + np.repeat(v_e, spp, axis=0)
+    target = sample_targets(camera, region, i, j, xi, eta) + np.repeat(v_p, spp, axis=0)
+    eyes, *_ = pixel_frames(camera, region, i, j)
+    origins = np.repeat(eyes + v_e, spp, axis=0)
     d = target - origins
     with np.errstate(invalid="ignore", over="ignore", divide="ignore"):
         norm = np.sqrt((d * d).sum(axis=1))
@@ -114,23 +115,50 @@ def _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale):
     return bad, args["v_p"], args["v_e"], args["origins"], args["directions"]
 
 
+CAST_CAMERA = Camera((0.5, 1.0, 2.0), (-1.0, 0.0, -3.0), (0.1, 1.0, 0.0), fov=55.0)
+PROJECTED = {  # a camera of every projection, and a region of its painting across both eyes where there are two
+    "perspective": (CAST_CAMERA, Region(13, 9, 3, 2, 6, 4)),
+    "equirect": (CAST_CAMERA.moved(projection="equirect"), Region(18, 9, 3, 2, 12, 6)),
+    "perspective top-bottom": (CAST_CAMERA.moved(stereo="top-bottom", ipd=0.3), Region(13, 18, 3, 6, 6, 7)),
+    "equirect side-by-side": (
+        CAST_CAMERA.moved(projection="equirect", stereo="side-by-side", ipd=0.3),
+        Region(36, 9, 12, 2, 12, 6),
+    ),
+}
+
+
+@pytest.mark.parametrize("projected", sorted(PROJECTED))
+@pytest.mark.parametrize("spp", [1, 3])
+def test_cast_rays_matches_numpy_reference_on_every_projection(projected, spp):
+    camera, region = PROJECTED[projected]
+    for target_kind, eye_kind, noise_scale in (
+        ("color", "depth", 0.35),
+        ("given", "normal", 0.0),
+        ("zero", "zero", 0.0),
+    ):
+        _check_cast(camera, region, spp, target_kind, eye_kind, noise_scale)
+
+
 @pytest.mark.parametrize("noise_scale", [0.0, 0.35])
 @pytest.mark.parametrize("eye_kind", sorted(KINDS))
 @pytest.mark.parametrize("target_kind", sorted(KINDS))
 def test_cast_rays_matches_numpy_reference(target_kind, eye_kind, noise_scale):
-    camera = Camera((0.5, 1.0, 2.0), (-1.0, 0.0, -3.0), (0.1, 1.0, 0.0), fov=55.0)
-    region = Region(13, 9, 3, 2, 6, 4)
-    spp = 3
+    _check_cast(CAST_CAMERA, Region(13, 9, 3, 2, 6, 4), 3, target_kind, eye_kind, noise_scale)
+
+
+def _check_cast(camera, region, spp, target_kind, eye_kind, noise_scale):
     data, xi, eta = _cast_inputs(1, region, spp)
     z0 = 4.5
     target = (KINDS[target_kind], 0.07)
     eye = (KINDS[eye_kind], 0.3)
+    if spp == 1:
+        xi = eta = np.full((region.pixel_count, 1), 0.5)
     bad, v_p, v_e, origins, directions = _run_cast(camera, region, xi, eta, data, z0, target, eye, noise_scale)
-    basis = np.stack(camera.basis())
+    frames = pixel_frames(camera, region, *region.pixel_coords())[1:]
     ref_vp = ref_field(
         target[0],
         target[1],
-        basis,
+        frames,
         data["color"],
         data["depth"],
         data["normal"],
@@ -143,7 +171,7 @@ def test_cast_rays_matches_numpy_reference(target_kind, eye_kind, noise_scale):
     ref_ve = ref_field(
         eye[0],
         eye[1],
-        basis,
+        frames,
         data["color"],
         data["depth"],
         data["normal"],
@@ -158,7 +186,7 @@ def test_cast_rays_matches_numpy_reference(target_kind, eye_kind, noise_scale):
     np.testing.assert_allclose(v_e, ref_ve if eye_kind != "zero" else 7.0, rtol=1e-12, atol=1e-14)
     ref_o, ref_d, ref_bad = ref_cast_rays(camera, region, xi, eta, ref_vp, ref_ve)
     assert bad == ref_bad == 0
-    np.testing.assert_allclose(origins, ref_o.astype(np.float32), rtol=0, atol=0)
+    np.testing.assert_allclose(origins, ref_o.astype(np.float32), rtol=0, atol=1e-6)
     np.testing.assert_allclose(directions, ref_d, rtol=0, atol=2e-7)
     if target_kind != "zero" or eye_kind != "zero":
         plain = ref_cast_rays(camera, region, xi, eta, np.zeros_like(ref_vp), np.zeros_like(ref_ve))[1]
@@ -193,7 +221,7 @@ def test_cast_rays_agrees_with_the_painting_reference():
         data, _, _ = _cast_inputs(3, region, 2)
         state = PaintState(region, data["color"], data["depth"], data["normal"].copy(), data["direction"])
         v_p, v_e = displacements(state, setup, params, 3.0)
-        pitch = camera.pixel_pitch(region.full_height)
+        pitch = setup.pitch()
         data["noise"] = setup.noise
         _, kv_p, kv_e, origins, directions = _run_cast(
             camera,
@@ -209,7 +237,7 @@ def test_cast_rays_agrees_with_the_painting_reference():
         # the mappings' numpy fields are float32 (the state's dtype); the kernel sums in float64
         np.testing.assert_allclose(kv_p, v_p, rtol=1e-6, atol=1e-7)
         np.testing.assert_allclose(kv_e, v_e, rtol=1e-6, atol=1e-7)
-        target = setup.plane() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
+        target = setup.targets() + np.repeat(v_p, 2, axis=0) - (np.asarray(camera.eye) + np.repeat(v_e, 2, axis=0))
         np.testing.assert_allclose(directions, target / np.linalg.norm(target, axis=1, keepdims=True), atol=2e-7)
 
 
@@ -286,7 +314,7 @@ def ref_shade(
     ambient,
     lit,
     eye,
-    forward,
+    camera,
     z_max,
 ):
     o = origins.astype(np.float64)
@@ -327,7 +355,10 @@ def ref_shade(
         emission[glows] *= ref_texel_color(texels, texture_offset[k], tw, th, uvs[glows, 0], uvs[glows, 1])
     rgb[hit] = albedo + emission
     nrm[hit] = nr
-    z[hit] = (o[hit] + t[hit].astype(np.float64)[:, None] * dh - eye) @ forward
+    # depth along each pixel's f_ij from its eye_ij (camera.py), the image one row of len(face) / spp pixels
+    pixels = np.arange(n) // spp
+    eyes, _, _, f_ij = pixel_frames(camera, Region(n // spp, 1), pixels, np.zeros_like(pixels))
+    z[hit] = ((o[hit] + t[hit].astype(np.float64)[:, None] * dh - eyes[hit]) * f_ij[hit]).sum(axis=1)
     # ---- misses ----
     sky = ~hit & finite
     env_h, env_w = environment.shape[:2]
@@ -420,7 +451,7 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
         ambient=0.25,
         lit=True,
         eye=np.array([0.2, -0.1, 0.3]),
-        forward=np.array([0.0, 0.6, -0.8]),
+        camera=Camera((0.2, -0.1, 0.3), (0.2, 0.5, -0.5)),
         z_max=50.0,
     )
 
@@ -445,7 +476,7 @@ def _run_shade(inputs, need=(True, True, True)):
         ambient=inputs["ambient"],
         lit=inputs["lit"],
         eye=inputs["eye"],
-        forward=inputs["forward"],
+        plane=kernels.ImagePlane.of(inputs["camera"], Region(n_pix, 1)),
         z_max=inputs["z_max"],
         out=kernels.Channels(*out),
         need_depth=need[0],
@@ -459,10 +490,26 @@ def _run_shade(inputs, need=(True, True, True)):
 @pytest.mark.parametrize("spp", [1, 3])
 @pytest.mark.parametrize("seed", [0, 1])
 def test_shade_matches_numpy_reference(seed, spp, lit):
+    _check_shade(seed, spp, lit, None)
+
+
+@pytest.mark.parametrize("projection", ["equirect", "perspective"])
+@pytest.mark.parametrize("stereo", ["mono", "side-by-side"])
+def test_shade_measures_depth_along_each_pixels_own_frame_from_its_own_eye(projection, stereo):
+    inputs = _shade_inputs(0, spp=3)
+    _check_shade(0, 3, True, inputs["camera"].moved(projection=projection, stereo=stereo, ipd=0.4))
+
+
+def _check_shade(seed, spp, lit, camera):
     inputs = _shade_inputs(seed, spp=spp)
     inputs["lit"] = lit
+    if camera is not None:
+        inputs["camera"] = camera
     color, depth, normal, direction = _run_shade(inputs)
     ref = ref_shade(**inputs)
+    if camera is not None:  # depth is what this one checks
+        np.testing.assert_allclose(depth, ref[1], rtol=1e-6, atol=1e-5)
+        return
     # the panorama's longitude and latitude come from an atan2 good to 1e-5 rad: 1e-5 texels here; a
     # texture's display value is encoded through a 4096-step table, interpolated: within 2e-4
     np.testing.assert_allclose(color, ref[0], rtol=0, atol=2e-4)

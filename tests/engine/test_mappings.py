@@ -26,9 +26,9 @@ def _input(n=64, seed=0, z0=3.0):
         depth=rng.uniform(0.5, 10, n).astype(np.float32),
         normal=normal,
         direction=direction,
-        right=np.array(r),
-        up=np.array(u),
-        forward=np.array(f),
+        right=np.tile(r, (n, 1)).astype(np.float64),
+        up=np.tile(u, (n, 1)).astype(np.float64),
+        forward=np.tile(f, (n, 1)).astype(np.float64),
         z0=z0,
         i=np.arange(n),
         j=np.zeros(n, int),
@@ -44,7 +44,7 @@ def test_builtin_mappings_declare_what_they_read():
 
 def test_color_field_formula():
     data = _input()
-    basis = np.stack([data.right, data.up, data.forward])
+    basis = np.stack([data.right[0], data.up[0], data.forward[0]])
     expected = (2.0 * data.color.astype(np.float64) - 1.0) @ basis
     np.testing.assert_allclose(get_mapping("color").field(data), expected, rtol=0, atol=1e-6)
     mid = MappingInput(
@@ -52,9 +52,9 @@ def test_color_field_formula():
         None,
         None,
         None,
-        data.right,
-        data.up,
-        data.forward,
+        data.right[:5],
+        data.up[:5],
+        data.forward[:5],
         1.0,
         np.arange(5),
         np.arange(5),
@@ -66,7 +66,7 @@ def test_depth_field_is_color_field_times_distance_from_focus():
     data = _input(z0=4.0)
     expected = (
         (2.0 * data.color.astype(np.float64) - 1.0)
-        @ np.stack([data.right, data.up, data.forward])
+        @ np.stack([data.right[0], data.up[0], data.forward[0]])
         * np.abs(data.depth.astype(np.float64) - 4.0)[:, None]
     )
     np.testing.assert_allclose(get_mapping("depth").field(data), expected, rtol=1e-5, atol=1e-5)

@@ -70,7 +70,7 @@ def test_uniform_grey_world_never_moves_a_ray():
     probe = PaintParams(mapping="color", eye_mapping="test-probe", lambda_p=30.0, lambda_e=1.0, iterations=4)
     state = paint(grey, CAMERA, W, H, probe).state
     i, j = region.pixel_coords()
-    plane = setup_tile(CAMERA, region, probe).plane()
+    plane = setup_tile(CAMERA, region, probe).targets()
     primary = plane - np.asarray(CAMERA.eye)
     primary /= np.linalg.norm(primary, axis=1, keepdims=True)
     np.testing.assert_allclose(state.direction, primary, rtol=0, atol=1e-7)
