@@ -129,6 +129,7 @@ function ready(msg) {
 
 function startScene(scene) {
   walk.place(scene.camera);
+  if (view360.active) view360.enter(walk.walk); // the new scene's panorama faces its own camera's way
   showViewpoints(scene);
   state.lastCamera = walkCamera.toCamera(walk.walk); // what the server shows after hello
   state.paint = {};
@@ -201,7 +202,7 @@ function advance(now) {
   lastTick = Math.max(lastTick, now);
   if (walk.walk && state.scene && connection.state === "open") sendCamera();
   flushPaint();
-  view360.draw(walk.walk);
+  view360.draw(walk.walk, state.size[1]);
   if (now - lastOverlay > 200) {
     lastOverlay = now;
     overlay.update(now);
@@ -363,7 +364,7 @@ async function save() {
     scene: state.scene.name,
     width,
     height,
-    camera: walkCamera.toCamera(walk.walk),
+    camera: currentCamera(), // in the 360° view, the panorama
     paint,
     time: overlay.frame?.time ?? 0, // the moment shown, for animated scenes
     format: "png",

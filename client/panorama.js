@@ -151,9 +151,9 @@ export class PanoramaView {
     this.uploaded += 1;
   }
 
-  /** Size the drawing buffer to the canvas's size on screen (device pixels); true when it changed. */
-  fit() {
-    const scale = Math.min(devicePixelRatio || 1, 2);
+  /** Size the drawing buffer to `detail` x the canvas's size on screen in device pixels; true when it changed. */
+  fit(detail = 1) {
+    const scale = Math.min(devicePixelRatio || 1, 2) * detail;
     const width = Math.max(1, Math.round(this.canvas.clientWidth * scale));
     const height = Math.max(1, Math.round(this.canvas.clientHeight * scale));
     if (width === this.canvas.width && height === this.canvas.height) return false;

@@ -12,6 +12,7 @@ import { PanoramaView, dot } from "./panorama.js";
 
 export const PANORAMA_FOV = 60; // the fov sent with a panorama: equirect ignores it; fixed, so zooming sends nothing
 const LAYOUTS_KEPT = 64; // camera ids remembered: far more than the frames in flight
+const DETAIL_MARGIN = 1.5; // screen pixels drawn per panorama pixel in view, at most: more shows nothing new
 
 /** The painting size (one eye's) of a panorama costing about as much as a `width` x `height` view: 2H x H. */
 export function panoramaSize(width, height) {
@@ -119,10 +120,21 @@ export class View360 {
     this.decoding = false;
   }
 
-  /** Draw the walk's view of the panorama when it changed (called once an animation frame). */
-  draw(walk) {
+  /**
+   * The share of the screen's resolution worth drawing: a panorama `rows` high has rows / pi pixels a radian,
+   * the screen H / (2 tan(fov / 2)) at its centre; past DETAIL_MARGIN screen pixels a panorama pixel the
+   * view only grows costlier (a software renderer's frame rate falls with every pixel), not sharper.
+   */
+  detail(walk, rows) {
+    const screen = (this.canvas.clientHeight * Math.min(devicePixelRatio || 1, 2)) / (2 * Math.tan((walk.fov * Math.PI) / 360));
+    const share = (DETAIL_MARGIN * rows) / Math.PI / screen;
+    return Math.min(1, Math.max(0.25, Math.ceil(share * 8) / 8)); // in eighths: zooming reallocates rarely
+  }
+
+  /** Draw the walk's view of a panorama `rows` high when it changed (called once an animation frame). */
+  draw(walk, rows) {
     if (!this.active || this.presenting || !walk) return;
-    const resized = this.pano.fit();
+    const resized = this.pano.fit(this.detail(walk, rows));
     const key = `${walk.yaw} ${walk.pitch} ${walk.fov} ${this.pano.uploaded} ${this.yaw0}`;
     if (key === this.shownKey && !resized) return;
     this.shownKey = key;
@@ -133,9 +145,9 @@ export class View360 {
   }
 
   /** The canvas as drawn now, as a PNG data URL (drawn again first: a WebGL canvas keeps no old frame). */
-  snapshot(walk) {
+  snapshot(walk, rows) {
     this.shownKey = "";
-    this.draw(walk);
+    this.draw(walk, rows);
     return this.canvas.toDataURL("image/png");
   }
 }

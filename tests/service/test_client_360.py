@@ -99,7 +99,7 @@ def decode(url: str) -> np.ndarray:
 
 def drawn(page) -> np.ndarray:
     """What the 360° view draws now."""
-    return decode(page.evaluate("rcp.view360.snapshot(rcp.walk.walk)"))
+    return decode(page.evaluate("rcp.view360.snapshot(rcp.walk.walk, rcp.state.size[1])"))
 
 
 def view_of(page) -> dict:
