@@ -91,7 +91,7 @@ export class VrSession {
     const session = frame.session;
     session.requestAnimationFrame((t, f) => this.onFrame(t, f));
     const pose = frame.getViewerPose(this.space);
-    if (pose) this.walk(pose, time);
+    if (pose) this.thumbstick(pose, time);
     this.actions.advance(time);
     if (!pose) return;
     const layer = session.renderState.baseLayer;
@@ -110,7 +110,7 @@ export class VrSession {
   }
 
   /** The thumbstick walks: forward and sideways along the head's level heading, at the walk's speed. */
-  walk(pose, time) {
+  thumbstick(pose, time) {
     const dt = this.lastTime === null ? 0 : Math.min(0.1, (time - this.lastTime) / 1000);
     this.lastTime = time;
     let [side, ahead] = [0, 0];
