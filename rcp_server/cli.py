@@ -231,8 +231,7 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
         writer = video.ImageFrames(lambda index: args.out, args.quality)
     elif video.is_video(args.out) or video.is_folder(args.out):
         first = path.cameras[0] if args.path is not None else base  # a sequence keeps one projection
-        size = first.image_size(args.width, args.height)  # both eyes of a stereo painting
-        writer = video.open_writer(args.out, *size, fps, count, first.projection, first.stereo)
+        writer = video.open_writer(args.out, args.width, args.height, fps, count, first.projection, first.stereo)
     else:
         writer = video.ImageFrames(lambda index: _frame_path(args.out, index), args.quality)
 

@@ -112,14 +112,9 @@ class VideoJob:
         return self.path.frame_count
 
     @property
-    def image_size(self) -> tuple[int, int]:
-        """The size of its frames: ``width x height`` is one eye's, a stereo frame holds both."""
-        return self.path.cameras[0].image_size(self.width, self.height)  # a path keeps one projection
-
-    @property
     def estimate(self) -> int:
         """Bytes its video is estimated to take (:func:`video_bytes`)."""
-        return video_bytes(*self.image_size, self.frames)
+        return video_bytes(self.width, self.height, self.frames)
 
     def finish(self, state: State, message: str = "") -> None:
         self.state, self.message, self.finished = state, message, time.time()
@@ -214,14 +209,13 @@ class Videos:
         """Queue a job, or refuse it: :class:`VideoRefused` (over a limit, the disk budget used up) or
         :class:`~.workshop.Busy` (every place in the queue taken)."""
         settings = self.settings
-        frame_width, frame_height = path.cameras[0].image_size(width, height)  # CameraError: a size it cannot take
-        settings.check_painting(frame_width, frame_height, params)
-        work = job_work(frame_width, frame_height, params, temporal, path.frame_count)
+        settings.check_painting(width, height, params)
+        work = job_work(width, height, params, temporal, path.frame_count)
         if work > settings.max_video_work:
             raise VideoRefused(
-                f"{path.frame_count} frames of {frame_width}x{frame_height} pixels x {params.spp} spp x their "
-                f"iterations is {work:,} rays, more than the {settings.max_video_work:,} one video may take: ask "
-                "for fewer frames, pixels, samples or iterations"
+                f"{path.frame_count} frames of {width}x{height} pixels x {params.spp} spp x their iterations is "
+                f"{work:,} rays, more than the {settings.max_video_work:,} one video may take: ask for fewer "
+                "frames, pixels, samples or iterations"
             )
         self.sweep()
         job_id = secrets.token_hex(8)
@@ -392,8 +386,8 @@ class Videos:
 
     def _assemble(self, job: VideoJob) -> None:
         """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""
-        camera = job.path.cameras[0]
-        writer = Mp4Writer(job.file, *job.image_size, job.path.fps, camera.projection, camera.stereo)
+        camera = job.path.cameras[0]  # a path keeps one projection: its frames are all laid out alike
+        writer = Mp4Writer(job.file, job.width, job.height, job.path.fps, camera.projection, camera.stereo)
         try:
             for k in range(job.frames):
                 if job.cancelled.is_set():
