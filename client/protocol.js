@@ -7,6 +7,7 @@ export const PROTOCOL = {
    "description": "The newest camera; ``id`` comes back on the frame that shows it (for measuring latency).",
    "properties": {
     "eye": {
+     "description": "where the camera stands, scene units",
      "maxItems": 3,
      "minItems": 3,
      "prefixItems": [
@@ -25,8 +26,10 @@ export const PROTOCOL = {
     },
     "fov": {
      "default": 60.0,
-     "exclusiveMaximum": 180,
-     "exclusiveMinimum": 0,
+     "description": "vertical field of view, degrees (perspective)",
+     "exclusiveMaximum": 180.0,
+     "exclusiveMinimum": 0.0,
+     "maximum": 1000000000.0,
      "title": "Fov",
      "type": "number"
     },
@@ -43,7 +46,16 @@ export const PROTOCOL = {
      "default": null,
      "title": "Id"
     },
+    "ipd": {
+     "default": 0.064,
+     "description": "distance between the eyes of a stereo camera, scene units",
+     "maximum": 1000000000.0,
+     "minimum": 0.0,
+     "title": "Ipd",
+     "type": "number"
+    },
     "look_at": {
+     "description": "the point it looks at: the centre of the view",
      "maxItems": 3,
      "minItems": 3,
      "prefixItems": [
@@ -60,6 +72,27 @@ export const PROTOCOL = {
      "title": "Look At",
      "type": "array"
     },
+    "projection": {
+     "default": "perspective",
+     "description": "perspective (an image plane) or equirect (all around: 360 x 180, width = 2 x height)",
+     "enum": [
+      "perspective",
+      "equirect"
+     ],
+     "title": "Projection",
+     "type": "string"
+    },
+    "stereo": {
+     "default": "mono",
+     "description": "mono, or both eyes in one image: top-bottom (left on top) or side-by-side (left on the left)",
+     "enum": [
+      "mono",
+      "top-bottom",
+      "side-by-side"
+     ],
+     "title": "Stereo",
+     "type": "string"
+    },
     "type": {
      "const": "camera",
      "title": "Type",
@@ -71,6 +104,7 @@ export const PROTOCOL = {
       1.0,
       0.0
      ],
+     "description": "which way is up",
      "maxItems": 3,
      "minItems": 3,
      "prefixItems": [
@@ -857,9 +891,10 @@ export const PROTOCOL = {
    "$defs": {
     "CameraSpec": {
      "additionalProperties": false,
-     "description": "A pinhole camera (MISSION.md conventions): ``fov`` is the vertical field of view in degrees.",
+     "description": "A camera (MISSION.md conventions): ``fov`` is the vertical field of view in degrees.",
      "properties": {
       "eye": {
+       "description": "where the camera stands, scene units",
        "maxItems": 3,
        "minItems": 3,
        "prefixItems": [
@@ -878,12 +913,23 @@ export const PROTOCOL = {
       },
       "fov": {
        "default": 60.0,
-       "exclusiveMaximum": 180,
-       "exclusiveMinimum": 0,
+       "description": "vertical field of view, degrees (perspective)",
+       "exclusiveMaximum": 180.0,
+       "exclusiveMinimum": 0.0,
+       "maximum": 1000000000.0,
        "title": "Fov",
        "type": "number"
       },
+      "ipd": {
+       "default": 0.064,
+       "description": "distance between the eyes of a stereo camera, scene units",
+       "maximum": 1000000000.0,
+       "minimum": 0.0,
+       "title": "Ipd",
+       "type": "number"
+      },
       "look_at": {
+       "description": "the point it looks at: the centre of the view",
        "maxItems": 3,
        "minItems": 3,
        "prefixItems": [
@@ -900,12 +946,34 @@ export const PROTOCOL = {
        "title": "Look At",
        "type": "array"
       },
+      "projection": {
+       "default": "perspective",
+       "description": "perspective (an image plane) or equirect (all around: 360 x 180, width = 2 x height)",
+       "enum": [
+        "perspective",
+        "equirect"
+       ],
+       "title": "Projection",
+       "type": "string"
+      },
+      "stereo": {
+       "default": "mono",
+       "description": "mono, or both eyes in one image: top-bottom (left on top) or side-by-side (left on the left)",
+       "enum": [
+        "mono",
+        "top-bottom",
+        "side-by-side"
+       ],
+       "title": "Stereo",
+       "type": "string"
+      },
       "up": {
        "default": [
         0.0,
         1.0,
         0.0
        ],
+       "description": "which way is up",
        "maxItems": 3,
        "minItems": 3,
        "prefixItems": [

@@ -33,15 +33,16 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterator
-from dataclasses import dataclass
-from typing import Annotated, NamedTuple
+from dataclasses import asdict, dataclass
+from typing import Annotated, Any, NamedTuple
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
 from scipy.interpolate import PchipInterpolator
 from scipy.spatial.transform import Rotation, RotationSpline
 
-from .camera import COORDINATE_LIMIT, Camera, CameraError, camera_faults
+from .camera import Camera, CameraError, camera_faults
+from .camerawire import camera_fields
 from .scenefile import one_line
 
 MAX_FRAMES = 100_000
@@ -60,30 +61,31 @@ class PathError(ValueError):
 
 # ---- the file format ----
 
-Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-COORDINATE_LIMIT, le=COORDINATE_LIMIT)]
-Vec3 = tuple[Coordinate, Coordinate, Coordinate]
-
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-class KeyframeSpec(_Model):
-    """One keyframe: the camera's view at ``t`` seconds along the path (``fov`` vertical, in degrees)."""
+HELD = ("projection", "stereo", "ipd")
+"""Camera fields a path holds from start to end (a video is one projection): given once, or given alike."""
+CARRIED = frozenset({"up", "fov", *HELD})
+"""Camera fields a keyframe may leave out: then as the keyframe before (at first, the scene camera's)."""
 
-    t: Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)]
-    eye: Vec3
-    look_at: Vec3
-    up: Vec3 | None = None
-    fov: Annotated[float, Field(allow_inf_nan=False, gt=0, lt=180)] | None = None
-    scene_time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] | None = None
+KeyframeSpec = create_model(  # type: ignore[call-overload]  # its camera is declared once, in camera.py
+    "KeyframeSpec",
+    __base__=_Model,
+    __doc__="One keyframe: the camera's view at ``t`` seconds along the path (``fov`` vertical, in degrees).",
+    t=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)], ...),
+    **camera_fields(optional=CARRIED),
+    scene_time=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] | None, None),
+)
 
 
 class PathSpec(_Model):
     """A camera path as written: frames per second, two or more keyframes in increasing ``t``, ``loop``."""
 
     fps: Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_FPS)] = 24.0
-    keyframes: Annotated[list[KeyframeSpec], Field(min_length=2, max_length=MAX_KEYFRAMES)]
+    keyframes: Annotated[list[KeyframeSpec], Field(min_length=2, max_length=MAX_KEYFRAMES)]  # type: ignore[valid-type]
     loop: bool = False
 
     def resolve(self, scene_camera: Camera) -> CameraPath:
@@ -91,21 +93,31 @@ class PathSpec(_Model):
         keyframe gives them), checked as a whole, for everything a video of it will ask: increasing ``t`` at
         least :data:`MIN_GAP` apart, valid cameras, a bounded frame count, curves that fit, and a valid camera
         at every frame (:meth:`CameraPath.check`). Raises :class:`PathError`."""
-        for k in range(1, len(self.keyframes)):
-            if not self.keyframes[k].t >= self.keyframes[k - 1].t + MIN_GAP:
+        keyframes: list[Any] = list(self.keyframes)  # models built from the camera declaration
+        for k in range(1, len(keyframes)):
+            if not keyframes[k].t >= keyframes[k - 1].t + MIN_GAP:
                 raise PathError(
                     f"keyframes.{k}.t: must be greater than the previous keyframe's t, by {MIN_GAP:g} s at least "
-                    f"({self.keyframes[k].t:g} after {self.keyframes[k - 1].t:g})"
+                    f"({keyframes[k].t:g} after {keyframes[k - 1].t:g})"
                 )
-        up, fov = scene_camera.up, scene_camera.fov
+        carried = {name: getattr(scene_camera, name) for name in CARRIED}
+        for name in HELD:  # the one value every keyframe then has
+            given = [(k, value) for k, key in enumerate(keyframes) if (value := getattr(key, name)) is not None]
+            for k, value in given[1:]:
+                if value != given[0][1]:
+                    raise PathError(
+                        f"keyframes.{k}.{name}: a path keeps one {name} from start to end, "
+                        f"and keyframe {given[0][0]} gave {given[0][1]!r}"
+                    )
+            if given:
+                carried[name] = given[0][1]
         times: list[float] = []
         cameras: list[Camera] = []
         scene_times: list[float] = []
-        for k, key in enumerate(self.keyframes):
-            up = key.up if key.up is not None else up
-            fov = key.fov if key.fov is not None else fov
+        for k, key in enumerate(keyframes):
+            carried.update({name: value for name in ("up", "fov") if (value := getattr(key, name)) is not None})
             try:
-                cameras.append(Camera(key.eye, key.look_at, up, fov))
+                cameras.append(Camera(key.eye, key.look_at, **carried))
             except CameraError as exc:
                 raise PathError(f"keyframes.{k}: {exc}") from None
             if key.scene_time is not None:
@@ -268,8 +280,10 @@ class CameraPath:
         curves = self._curves()
         eye, look_at, up = curves.view(t)
         fov, scene_time = curves.fov(t), curves.scene_time(t)
+        held = {name: getattr(self.cameras[0], name) for name in HELD}  # the same in every keyframe
         cameras = [
-            Camera(tuple(e), tuple(a), tuple(u), float(f)) for e, a, u, f in zip(eye, look_at, up, fov, strict=True)
+            Camera(tuple(e), tuple(a), tuple(u), float(f), **held)
+            for e, a, u, f in zip(eye, look_at, up, fov, strict=True)
         ]
         return cameras, [float(s) for s in scene_time]
 
@@ -283,7 +297,7 @@ class CameraPath:
     def to_json(self) -> str:
         """The resolved path in the file format (every default written out)."""
         keyframes = [
-            {"t": t, "eye": c.eye, "look_at": c.look_at, "up": c.up, "fov": c.fov, "scene_time": s}
+            {"t": t, **asdict(c), "scene_time": s}
             for t, c, s in zip(self.times, self.cameras, self.scene_times, strict=True)
         ]
         return json.dumps({"fps": self.fps, "keyframes": keyframes, "loop": self.loop})

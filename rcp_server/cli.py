@@ -14,7 +14,7 @@ import numpy as np
 from . import images, video
 from .argtypes import finite, positive_int
 from .bench.cli import MissingExtra, add_bench_commands
-from .camera import Camera, CameraError
+from .camera import CAMERA_FIELDS, Camera, CameraError
 from .camerapath import PathError, PathFrame, load_path
 from .cluster import ClusterError
 from .painting import PaintState, paint
@@ -59,11 +59,16 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
 
 
 def _add_camera_options(p: argparse.ArgumentParser) -> None:
+    """One option per camera field (``camera.CAMERA_FIELDS``); left out, the scene camera's."""
     g = p.add_argument_group("camera (default: the scene's)")
-    g.add_argument("--eye", nargs=3, type=finite, metavar=("X", "Y", "Z"))
-    g.add_argument("--look-at", nargs=3, type=finite, metavar=("X", "Y", "Z"))
-    g.add_argument("--up", nargs=3, type=finite, metavar=("X", "Y", "Z"))
-    g.add_argument("--fov", type=finite, help="vertical field of view in degrees")
+    for name, declared in CAMERA_FIELDS.items():
+        flag = "--" + name.replace("_", "-")
+        if declared.kind == "vec3":
+            g.add_argument(flag, nargs=3, type=finite, metavar=("X", "Y", "Z"), help=declared.help)
+        elif declared.kind is str:
+            g.add_argument(flag, choices=declared.choices, help=declared.help)
+        else:
+            g.add_argument(flag, type=finite, help=declared.help)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -150,9 +155,9 @@ def paint_params(scene_defaults: PaintParams, args: argparse.Namespace) -> Paint
 
 def _camera(default: Camera, args: argparse.Namespace) -> Camera:
     changes = {
-        k: tuple(v) if isinstance(v, list) else v
-        for k, v in (("eye", args.eye), ("look_at", args.look_at), ("up", args.up), ("fov", args.fov))
-        if v is not None
+        name: tuple(v) if isinstance(v, list) else v
+        for name in CAMERA_FIELDS
+        if (v := getattr(args, name, None)) is not None
     }
     return default.moved(**changes)
 
@@ -184,13 +189,15 @@ def _render(args: argparse.Namespace) -> None:
         raise UsageError(f"--fps must be positive, got {args.fps:g}")
     if not sequence or not (video.is_video(args.out) or video.is_folder(args.out)):
         images.image_format(args.out)  # refuse an unknown image type before painting anything
-    elif video.is_video(args.out):
-        video.check_video_size(args.width, args.height)
     scene = load_scene(args.scene)
     if args.environment is not None:
         scene.environment = load_environment(args.environment, args.exposure)
     params = paint_params(scene.paint, args)
     base = _camera(scene.camera, args)
+    # --width and --height are one eye's image; from here on they are the painting's (both eyes)
+    args.width, args.height = base.image_size(args.width, args.height)
+    if sequence and video.is_video(args.out):
+        video.check_video_size(args.width, args.height)
     if sequence or args.ray is not None:
         _render_sequence(args, scene, params, base)
         return

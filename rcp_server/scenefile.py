@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from . import framing
 from .camera import COORDINATE_LIMIT, Camera, CameraError
+from .camerawire import CameraSpec, camera_of
 from .meshes import (
     DEFAULT_ALBEDO,
     MeshError,
@@ -60,15 +61,6 @@ Color = tuple[
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-class CameraSpec(_Model):
-    """A pinhole camera (MISSION.md conventions): ``fov`` is the vertical field of view in degrees."""
-
-    eye: Vec3
-    look_at: Vec3
-    up: Vec3 = (0.0, 1.0, 0.0)
-    fov: Annotated[float, Field(gt=0, lt=180)] = 60.0
 
 
 class EnvironmentSpec(_Model):
@@ -165,7 +157,7 @@ class ObjectSpec(Placement):
 
 class SceneSpec(_Model):
     title: str = ""
-    camera: CameraSpec | str  # or the name of a camera in one of the objects' glTF files
+    camera: CameraSpec | str  # type: ignore[valid-type]  # or the name of a camera in one of the objects' glTF files
     environment: EnvironmentSpec = EnvironmentSpec(color=(0.55, 0.62, 0.72))
     light: LightSpec | str | None = None  # or the name of a light (KHR_lights_punctual) in one of them
     paint: dict[str, str | int | float] = {}
@@ -324,7 +316,7 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
     folder = path.parent
     try:
         named = _Named()
-        camera = Camera(**spec.camera.model_dump()) if isinstance(spec.camera, CameraSpec) else None
+        camera = camera_of(spec.camera) if isinstance(spec.camera, CameraSpec) else None
         env = spec.environment
         if (env.image is None) == (env.color is None):
             raise SceneError("environment: give exactly one of 'image' or 'color'")

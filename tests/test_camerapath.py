@@ -177,3 +177,13 @@ def test_a_resolved_path_writes_itself_with_every_default_filled_in():
     path = resolve(ORBIT, fps=30)
     again = parse_path(path.to_json()).resolve(Camera((9.0, 9.0, 9.0), (0.0, 0.0, 0.0), fov=10.0))
     assert again == path
+
+
+def test_a_path_holds_one_projection_stereo_and_ipd_from_start_to_end():
+    keys = [key(0, (0, 1, 5)), {**key(1, (5, 1, 0)), "projection": "equirect", "stereo": "top-bottom", "ipd": 0.2}]
+    path = resolve(keys)
+    cameras, _ = path.at(np.linspace(0, 1, 7))
+    assert {(c.projection, c.stereo, c.ipd) for c in [*path.cameras, *cameras]} == {("equirect", "top-bottom", 0.2)}
+    assert json.loads(path.to_json())["keyframes"][0]["projection"] == "equirect"
+    with pytest.raises(PathError, match=r"keyframes.1.projection: a path keeps one projection"):
+        resolve([{**key(0, (0, 1, 5)), "projection": "perspective"}, {**key(1, (5, 1, 0)), "projection": "equirect"}])

@@ -36,6 +36,20 @@ def test_render_writes_the_painting(tmp_path):
     assert image.std() > 5  # a box against the sky, not a flat fill
 
 
+@pytest.mark.parametrize(
+    ("options", "shape"),
+    [
+        (["--projection", "equirect", "--width", "64", "--height", "32"], (32, 64, 3)),
+        (["--projection", "equirect", "--stereo", "top-bottom", "--width", "64", "--height", "32"], (64, 64, 3)),
+        (["--stereo", "side-by-side", "--ipd", "0.2", *SMALL], (32, 96, 3)),
+    ],
+)
+def test_render_paints_panoramas_and_stereo_pairs_of_one_eyes_size(tmp_path, options, shape):
+    out = tmp_path / "pano.png"
+    assert main(["render", str(_scene_file(tmp_path)), "--out", str(out), "--iterations", "2", *options]) == 0
+    assert np.asarray(Image.open(out)).shape == shape
+
+
 def test_save_iterations_writes_every_iteration_and_the_last_is_the_output(tmp_path):
     out = tmp_path / "still.png"
     argv = [
@@ -119,6 +133,9 @@ def test_camera_path_orbits_around_the_target_and_walks_forward():
             "up is parallel",
         ),
         (["render", "{scene}", "--out", "x.png", "--fov", "180"], "fov"),
+        (["render", "{scene}", "--out", "x.png", "--projection", "equirect", *SMALL], "width must be 2 x height"),
+        (["render", "{scene}", "--out", "x.png", "--projection", "fisheye"], "invalid choice"),
+        (["render", "{scene}", "--out", "x.png", "--stereo", "top-bottom", "--ipd", "-1"], "ipd"),
         (["render", "{scene}"], "--out"),
         (["render", "{scene}", "--out", "x.png", "--width", "200000", "--height", "200000"], "not enough memory"),
         (["paint"], "invalid choice"),

@@ -115,6 +115,22 @@ def test_one_large_painting_in_bands_is_the_threads_painting(painter, busy_scene
         np.testing.assert_array_equal(got, expected)
 
 
+@pytest.mark.parametrize(
+    "view",
+    [
+        {"projection": "equirect"},
+        {"stereo": "top-bottom", "ipd": 0.2},
+        {"projection": "equirect", "stereo": "side-by-side"},
+    ],
+)
+def test_a_panorama_or_a_stereo_pair_in_bands_is_the_threads_painting(painter, busy_scene, view):
+    camera = shots(busy_scene)[2].camera.moved(**view)
+    width, height = camera.image_size(2 * H, H)
+    params = PaintParams(iterations=4, lambda_p=10.0)
+    expected = images.to_uint8(paint(busy_scene, camera, width, height, params, time=0.25, threads=2).image)
+    np.testing.assert_array_equal(painter.render(busy_scene, camera, width, height, params, time=0.25), expected)
+
+
 def test_paintings_of_two_scenes_share_the_workers_at_once(painter, busy_scene, gradient_scene):
     """A sequence of one scene and a painting of another, interleaved on the same actors."""
     params = PaintParams(iterations=2)

@@ -47,6 +47,12 @@ def _speed(args: argparse.Namespace) -> None:
     speed(args.scene, args.width, args.height, args.iterations, args.repeats, args.threads)
 
 
+def _projection(args: argparse.Namespace) -> None:
+    from .projection import bench_projection
+
+    bench_projection(args.scene, args.width, args.repeats, args.ipd)
+
+
 def _agreement(args: argparse.Namespace) -> None:
     from .agreement import run
 
@@ -151,6 +157,15 @@ def add_bench_commands(subparsers) -> None:
     )
     p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
     p.set_defaults(run_bench=_speed)
+
+    p = command("projection", "a panorama and a stereo pair against a perspective painting: cost, and eyes in rivalry")
+    p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")
+    p.add_argument(
+        "--width", type=positive_int, default=640, help="an eye's image width; its height is half (default 640)"
+    )
+    p.add_argument("--repeats", type=positive_int, default=5, help="paintings timed of each kind (default 5)")
+    p.add_argument("--ipd", type=finite, help="distance between the eyes, scene units (default: the scene camera's)")
+    p.set_defaults(run_bench=_projection)
 
     p = command("agreement", "how often fast changes a pixel, against tracing every ray, on scenes and models")
     p.add_argument("models", nargs="*", help="model or scene files to check besides the shipped scenes")

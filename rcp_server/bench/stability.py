@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import binary_dilation
 
-from ..camera import Camera, CameraError, Region
+from ..camera import Camera, CameraError, Region, directions_at
+from ..camera import project as camera_project
 from ..imagespace import bilinear, lookup_coords
 from ..mappings import register_mapping, unregister_mapping
 from ..meshes import Part, primitive
@@ -53,22 +54,15 @@ def pan(camera: Camera, degrees: float) -> Camera:
 
 def project(camera: Camera, width: int, height: int, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Continuous pixel coordinates (centres on the integers) where world ``directions`` (n, 3) from the eye
-    cross ``camera``'s image plane; NaN for directions not in front of it."""
-    r, u, f = camera.basis()
-    along = directions @ f
-    ahead = along > 1e-9
-    safe = np.where(ahead, along, 1.0)
-    tan_half = camera.half_height()
-    x = ((directions @ r) / safe / (tan_half * width / height) + 1.0) / 2.0 * width - 0.5
-    y = (1.0 - (directions @ u) / safe / tan_half) / 2.0 * height - 0.5
-    return np.where(ahead, x, np.nan), np.where(ahead, y, np.nan)
+    land in ``camera``'s mono image (``camera.project``); NaN where they have no place (behind an image plane)."""
+    x, y, ok = camera_project(camera, Region(width, height), np.zeros(len(directions), np.int64), directions)
+    return np.where(ok, x, np.nan), np.where(ok, y, np.nan)
 
 
 def primary_directions(camera: Camera, width: int, height: int) -> np.ndarray:
     """Unit directions of the rays through every pixel centre, (W*H, 3) float64, row-major."""
     region = Region(width, height)
-    plane = setup_tile(camera, region, PaintParams()).plane()
-    d = plane - np.asarray(camera.eye)
+    d, *_ = directions_at(camera, region, *(c + 0.5 for c in region.pixel_coords()))
     return d / np.linalg.norm(d, axis=1, keepdims=True)
 
 

@@ -16,6 +16,26 @@ MONO, TOP_BOTTOM, SIDE_BY_SIDE = 0, 1, 2  # camera.STEREO, in order
 
 
 @numba.njit(inline="always")
+def fast_atan2(y, x):
+    """atan2 within 1e-5 rad (a 1024-texel panorama's texel is 6e-3 rad) at a fraction of libm's cost."""
+    ax = abs(x)
+    ay = abs(y)
+    big = max(ax, ay)
+    if big == 0.0:
+        return 0.0
+    z = min(ax, ay) / big
+    z2 = z * z
+    a = z * (
+        0.99997726 + z2 * (-0.33262347 + z2 * (0.19354346 + z2 * (-0.11643287 + z2 * (0.05265332 + z2 * -0.01172120))))
+    )
+    if ay > ax:
+        a = 0.5 * math.pi - a
+    if x < 0.0:
+        a = math.pi - a
+    return -a if y < 0.0 else a
+
+
+@numba.njit(inline="always")
 def locate(plane, i, j):
     """Pixel ``(i, j)`` of the painting (absolute) -> ``(side, i, j)``: its eye (-1 left, 1 right, 0 mono) and
     where it lies in that eye's image."""
@@ -81,10 +101,12 @@ def target_offset(plane, x, y):
 
 
 @numba.njit(inline="always")
-def to_pixel(plane, side, dx, dy, dz):
+def to_pixel(plane, side, dx, dy, dz, exact=True):
     """The inverse map: where direction ``d`` from the eye on ``side`` crosses that eye's image, as continuous
     coordinates of the painting with pixel centres on the integers, and whether it does (not behind a
-    perspective camera, not zero or NaN): ``(x, y, ok)``."""
+    perspective camera, not zero or NaN): ``(x, y, ok)``. ``exact=False``: on the sphere within 1e-5 rad
+    (``fast_atan2``), for finding which pixels lie around a direction (a 4096-wide panorama's pixel is 1.5e-3
+    rad), at a third of the cost."""
     b = plane.basis
     dr = dx * b[0, 0] + dy * b[0, 1] + dz * b[0, 2]
     du = dx * b[1, 0] + dy * b[1, 1] + dz * b[1, 2]
@@ -93,8 +115,14 @@ def to_pixel(plane, side, dx, dy, dz):
         length = math.sqrt(dr * dr + du * du + df * df)
         if not length > 0.0:
             return 0.0, 0.0, False
-        x = (math.atan2(dr, df) / (2.0 * math.pi) + 0.5) * plane.eye_width - 0.5
-        y = (0.5 - math.asin(min(max(du / length, -1.0), 1.0)) / math.pi) * plane.eye_height - 0.5
+        if exact:
+            longitude = math.atan2(dr, df)
+            latitude = math.asin(min(max(du / length, -1.0), 1.0))
+        else:
+            longitude = fast_atan2(dr, df)
+            latitude = fast_atan2(du, math.sqrt(dr * dr + df * df))
+        x = (longitude / (2.0 * math.pi) + 0.5) * plane.eye_width - 0.5
+        y = (0.5 - latitude / math.pi) * plane.eye_height - 0.5
     else:
         if not df > 0.0:
             return 0.0, 0.0, False

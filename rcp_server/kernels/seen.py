@@ -89,7 +89,7 @@ def resolve_seen(origins, directions, count, plane, seen, triangles, hits, pendi
         if plane.layout != MONO:
             i, j = tile_pixel(plane, pixels[s // spp])
             side, _, _ = locate(plane, i, j)
-        x, y, ok = to_pixel(plane, side, dx, dy, dz)
+        x, y, ok = to_pixel(plane, side, dx, dy, dz, False)
         # on the grid (its centres on the integers), within the eye's own image
         x = (x + 0.5) * fine - 0.5
         y = (y + 0.5) * fine - 0.5
@@ -261,7 +261,7 @@ def cover_thin(triangles, eye, plane, rows, near):
                     break
                 else:
                     z = rx * forward[0] + ry * forward[1] + rz * forward[2]
-                x, y, ok = to_pixel(plane, side, rx, ry, rz)
+                x, y, ok = to_pixel(plane, side, rx, ry, rz, False)
                 usable = usable and ok
                 xs[k] = x
                 ys[k] = y
@@ -305,7 +305,9 @@ def cover_thin(triangles, eye, plane, rows, near):
             while top > 0:
                 top -= 1
                 for k in range(3):
-                    x, y, _ = to_pixel(plane, side, stack[top, k, 0] - ox, stack[top, k, 1] - oy, stack[top, k, 2] - oz)
+                    x, y, _ = to_pixel(
+                        plane, side, stack[top, k, 0] - ox, stack[top, k, 1] - oy, stack[top, k, 2] - oz, False
+                    )
                     px[k] = x
                     py[k] = y
                 for k in (1, 2):

@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 from .jit import jit
-from .projection import EQUIRECT, centre_frame, locate, tile_pixel
+from .projection import EQUIRECT, centre_frame, fast_atan2, locate, tile_pixel
 
 
 @numba.njit(inline="always")
@@ -24,26 +24,6 @@ def _inverse_length(length2):
         y *= 1.5 - 0.5 * length2 * y * y
         return y * (1.5 - 0.5 * length2 * y * y)
     return 1.0 / math.sqrt(length2) if length2 > 0.0 else 0.0
-
-
-@numba.njit(inline="always")
-def fast_atan2(y, x):
-    """atan2 within 1e-5 rad (a 1024-texel panorama's texel is 6e-3 rad) at a fraction of libm's cost."""
-    ax = abs(x)
-    ay = abs(y)
-    big = max(ax, ay)
-    if big == 0.0:
-        return 0.0
-    z = min(ax, ay) / big
-    z2 = z * z
-    a = z * (
-        0.99997726 + z2 * (-0.33262347 + z2 * (0.19354346 + z2 * (-0.11643287 + z2 * (0.05265332 + z2 * -0.01172120))))
-    )
-    if ay > ax:
-        a = 0.5 * math.pi - a
-    if x < 0.0:
-        a = math.pi - a
-    return -a if y < 0.0 else a
 
 
 @numba.njit(inline="always")  # two call sites in shade; an out-of-line call passes the array by value

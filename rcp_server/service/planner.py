@@ -159,6 +159,8 @@ class Planner:
     def _walk(self, view: View, scene_time: float) -> Plan:
         scale = self.walk_scale(view)
         width, height = max(1, round(view.width * scale)), max(1, round(view.height * scale))
+        if view.width % view.height == 0:  # a whole aspect stays whole: a panorama stays twice as wide as high
+            width = height * (view.width // view.height)
         continues = self._continues(view)
         params = replace(view.params, iterations=1, spp=1) if continues else replace(view.params, spp=1)
         return self._plan("walk", width, height, params, continues, scene_time, False)

@@ -15,9 +15,9 @@ from typing import Annotated, Any, Literal, get_args
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
 from ..camerapath import PathSpec
+from ..camerawire import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
 from ..params import PAINT_SETTINGS, PaintParams, PaintSetting
 from ..scenefile import SCENE_NAME
-from ..scenefile import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
 from ..styles import STYLE, STYLES
 
 Size = Annotated[int, Field(ge=1, le=4096)]

@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from .. import images
 from ..camera import Camera, CameraError
+from ..camerawire import camera_of
 from ..painting import Abandoned, PaintResult, PaintState
 from ..params import PaintParams
 from ..scene import Scene
@@ -141,21 +142,26 @@ class Session:
         elif self.scene is None:
             raise ValueError(f"say hello first: a '{msg.type}' message needs a scene")
         elif isinstance(msg, protocol.CameraMessage):
-            self.camera = Camera(msg.eye, msg.look_at, msg.up, msg.fov)
+            camera = camera_of(msg)
+            camera.image_size(self.width, self.height)  # a size this projection takes, or refused here
+            kind = (camera.projection, camera.stereo)
+            if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
+                self.state = None  # another kind of picture: the recursion starts again
+            self.camera = camera
             self.camera_id = msg.id
             self.planner.camera_moved(_time.monotonic())
         elif isinstance(msg, protocol.PaintMessage):
             overrides = {**self.overrides, **msg.changes()}
             overrides = {k: v for k, v in overrides.items() if v is not None}
             # refuse now, keep the old settings
-            self.params = self._check(self.scene, self.width, self.height, overrides)
+            self.params = self._check(self.scene, self.camera, self.width, self.height, overrides)
             self.overrides = overrides
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
-            self._check(self.scene, width, height, self.overrides)
+            self._check(self.scene, self.camera, width, height, self.overrides)
             self.width, self.height, self.quality = width, height, msg.quality or self.quality
         self._changed()
 
@@ -165,7 +171,7 @@ class Session:
         scene = self.service.scene(msg.scene)
         if scene is None:
             raise ValueError(self.service.unknown_scene(msg.scene))
-        self.params = self._check(scene, msg.width, msg.height, {})
+        self.params = self._check(scene, scene.camera, msg.width, msg.height, {})
         self.scene = scene
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
@@ -184,11 +190,12 @@ class Session:
             )
         )
 
-    def _check(self, scene: Scene, width: int, height: int, overrides: dict) -> PaintParams:
+    def _check(self, scene: Scene, camera: Camera | None, width: int, height: int, overrides: dict) -> PaintParams:
         """The view's painting settings, validated once here; refuses a view whose paintings could not be made:
-        a bad setting, or more work than one may take."""
+        a bad setting, a size the camera's projection does not take (``width x height`` is one eye's image),
+        or more work than one may take."""
         params = with_style(scene.paint, overrides)
-        self.settings.check_painting(width, height, params)
+        self.settings.check_painting(*(camera or scene.camera).image_size(width, height), params)
         return params
 
     def _changed(self) -> None:
@@ -241,8 +248,9 @@ class Session:
         plan = self.planner.next_frame(_time.monotonic(), self._view())
         if plan is None:
             return None
-        previous = self.state.resized(plan.width, plan.height) if plan.continues and self.state is not None else None
         assert self.camera is not None, "hello sets the camera with the scene"
+        size = self.camera.image_size(plan.width, plan.height)
+        previous = self.state.resized(*size) if plan.continues and self.state is not None else None
         return _Job(plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality)
 
     def _paint_and_encode(self, job: _Job) -> tuple[tuple[PaintResult, bytes], float]:
@@ -259,8 +267,7 @@ class Session:
         result = self.workshop.paint(
             job.scene,
             job.camera,
-            plan.width,
-            plan.height,
+            *job.camera.image_size(plan.width, plan.height),
             plan.params,
             time=plan.time,
             previous=job.previous,
@@ -276,8 +283,8 @@ class Session:
         self.state = result.state
         meta = protocol.Frame(
             seq=0,
-            width=plan.width,
-            height=plan.height,
+            width=result.state.region.full_width,
+            height=result.state.region.full_height,
             render_ms=round(seconds * 1000, 2),
             iteration=plan.iteration,
             spp=plan.params.spp,

@@ -13,6 +13,7 @@ from fastapi import Depends
 from starlette.applications import Starlette
 from starlette.requests import HTTPConnection
 
+from ..camerawire import spec_of
 from ..painting import paint
 from ..params import PaintParams
 from ..scene import Scene
@@ -145,14 +146,11 @@ class Service:
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:
-    def wire(camera) -> protocol.CameraModel:
-        return protocol.CameraModel(eye=camera.eye, look_at=camera.look_at, up=camera.up, fov=camera.fov)
-
     return protocol.SceneInfo(
         name=scene.name,
         title=scene.title,
-        camera=wire(scene.camera),
-        viewpoints=[protocol.Viewpoint(name=name, camera=wire(c)) for name, c in scene.viewpoints.items()],
+        camera=spec_of(scene.camera),
+        viewpoints=[protocol.Viewpoint(name=name, camera=spec_of(c)) for name, c in scene.viewpoints.items()],
         paint=scene.paint.non_defaults(),
         animated=scene.animated,
         triangles=scene.geometry(0.0)[0].face_count,

@@ -10,7 +10,8 @@ import time
 from fastapi import APIRouter, HTTPException, Request, Response
 
 from ... import images
-from ...camera import Camera, CameraError
+from ...camera import CameraError
+from ...camerawire import camera_of
 from ...cluster import ClusterError
 from ...painting import Abandoned
 from ...styles import with_style
@@ -60,9 +61,10 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
     if scene is None:
         raise HTTPException(404, service.unknown_scene(body.scene))
     try:
-        camera = scene.camera if body.camera is None else Camera(**body.camera.model_dump())
+        camera = scene.camera if body.camera is None else camera_of(body.camera)
         params = with_style(scene.paint, body.paint.given())
-        settings.check_painting(body.width, body.height, params)
+        size = camera.image_size(body.width, body.height)  # width x height is one eye's image
+        settings.check_painting(*size, params)
     except (CameraError, ValueError) as exc:
         raise HTTPException(422, str(exc)) from None
     fmt, media_type = MEDIA_TYPES[body.format]
@@ -74,7 +76,6 @@ async def render(body: protocol.RenderRequest, request: Request, service: Servic
         return gone.is_set() or time.monotonic() > deadline or workshop.stopping
 
     def job() -> bytes:
-        size = (body.width, body.height)
         cluster = service.cluster if service.on_cluster(*size, params) else None
         if cluster is not None:  # a large render: Ray paints it, the cores here stay with the walks
             image = cluster.render(scene, camera, *size, params, body.time, stop)

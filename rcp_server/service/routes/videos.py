@@ -8,6 +8,7 @@ from starlette.concurrency import run_in_threadpool
 
 from ...camera import CameraError
 from ...camerapath import PathError
+from ...camerawire import spec_of
 from ...styles import with_style
 from .. import protocol
 from ..state import ServiceDep
@@ -58,7 +59,7 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
         fps=path.fps / step,
         step=step,
         frames=path.frame_count,
-        cameras=[protocol.CameraModel(eye=c.eye, look_at=c.look_at, up=c.up, fov=c.fov) for c in cameras],
+        cameras=[spec_of(c) for c in cameras],
         scene_times=scene_times,
     )
 
@@ -83,9 +84,10 @@ async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.V
     try:
         path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
         params = with_style(scene.paint, body.paint.given())
-        if body.width % 2 or body.height % 2:
-            raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {body.width}x{body.height}")
-        job = service.videos.submit(scene, path, body.width, body.height, params, body.temporal)
+        width, height = path.cameras[0].image_size(body.width, body.height)  # one eye's size -> the video's
+        if width % 2 or height % 2:
+            raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {width}x{height}")
+        job = service.videos.submit(scene, path, width, height, params, body.temporal)
     except VideoRefused as exc:
         raise HTTPException(exc.status, str(exc)) from None
     except (PathError, CameraError, ValueError) as exc:
