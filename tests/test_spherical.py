@@ -4,14 +4,17 @@ MP4 reader turns them into the frames' side data; the video's frames untouched b
 
 from __future__ import annotations
 
+import json
 import struct
 from pathlib import Path
 
 import av
 import numpy as np
 import pytest
+from conftest import SPINNING_BOX
 
 from rcp_server import spherical
+from rcp_server.cli import main
 from rcp_server.video import Mp4Writer
 
 WIDTH, HEIGHT = 64, 32
@@ -162,3 +165,17 @@ def test_what_cannot_take_the_metadata_is_refused(tmp_path):
         spherical.add_spherical(out, tmp_path / "x.mp4", "anaglyph")
     with pytest.raises(ValueError, match="no video of projection 'fisheye'"):
         Mp4Writer(tmp_path / "f.mp4", WIDTH, HEIGHT, 12, "fisheye")
+
+
+def test_rcp_render_paints_a_360_video_of_a_path(tmp_path):
+    scene, path = tmp_path / "tiny.toml", tmp_path / "walk.json"
+    scene.write_text(SPINNING_BOX)
+    keys = [{"t": 0, "eye": [0, 1, 4], "look_at": [0, 1, 0]}, {"t": 0.5, "eye": [1, 1, 3], "look_at": [0, 1, 0]}]
+    path.write_text(json.dumps({"fps": 4, "keyframes": keys}))
+    out = tmp_path / "pano.mp4"
+    argv = ["-q", "render", str(scene), "--path", str(path), "--out", str(out), "--width", "32", "--height", "16"]
+    assert main([*argv, "--projection", "equirect", "--stereo", "side-by-side"]) == 0
+    _, _, _, boxes = read_metadata(out)
+    assert dict(boxes)[b"st3d"][-1] == 2  # left-right
+    frames = decoded(out)
+    assert len(frames) == 3 and frames[0].shape == (16, 64, 3)  # two eyes of 32x16, side by side

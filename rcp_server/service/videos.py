@@ -133,8 +133,8 @@ class VideoJob:
 def path_spec(path: CameraPath) -> dict:
     """A resolved path written out in full (every camera and scene time explicit), so that resolving it again
     gives the same path whatever the scene's camera: JSON keeps every float exactly."""
-    keyframes = [
-        {"t": t, "eye": list(c.eye), "look_at": list(c.look_at), "up": list(c.up), "fov": c.fov, "scene_time": st}
+    keyframes = [  # every camera field (a panorama's projection, stereo and ipd too): none is dropped
+        {"t": t, **asdict(c), "scene_time": st}
         for t, c, st in zip(path.times, path.cameras, path.scene_times, strict=True)
     ]
     return {"fps": path.fps, "keyframes": keyframes, "loop": path.loop}
