@@ -242,6 +242,8 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     page.keyboard.down("w")
     page.wait_for_timeout(300)  # the key is held this long: that is the input
     page.keyboard.up("w")
+    page.wait_for_function("rcp.walk.velocity.every((v) => v === 0)")  # eased to a stop: the last camera sent
+    page.wait_for_timeout(100)
     cameras = [m for m in page.evaluate("rcp.sent") if m["type"] == "camera"]
     last = cameras[-1]
     assert last["eye"] != eye and last["projection"] == "equirect"
@@ -252,5 +254,6 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     # and back to the flat view: its camera first, then its size
     page.click("#view360")
     camera, view = [m for m in page.evaluate("rcp.sent") if m["type"] in ("view", "camera")][-2:]
-    assert camera["projection"] == "perspective" and (view["width"], view["height"]) == SIZE
+    assert camera.get("projection", "perspective") == "perspective"  # the field's default
+    assert (camera["type"], view["type"], view["width"], view["height"]) == ("camera", "view", *SIZE)
     assert page.evaluate("rcp.view360.canvas.hidden")
