@@ -31,6 +31,18 @@ xrDevice.installRuntime({ forceInstall: true }); // over Chromium's own navigato
 xrDevice.stereoEnabled = true; // two eyes, each its half of the layer
 """
 
+# the headset's frames drawn a second, over a second of the head turning a little in every one
+XR_RATE = """() => new Promise((done) => {
+  const frames = rcp.vr.frames, start = performance.now();
+  let yaw = 1.2;
+  const timer = setInterval(() => {
+    yaw += 0.01;
+    xrDevice.quaternion.set(0, Math.sin(yaw / 2), 0, Math.cos(yaw / 2));
+    const seconds = (performance.now() - start) / 1000;
+    if (seconds >= 1) { clearInterval(timer); done((rcp.vr.frames - frames) / seconds); }
+  }, 8);
+})"""
+
 pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
 
 
@@ -106,6 +118,11 @@ def test_vr_shows_each_eye_its_half_turns_with_the_head_and_walks_with_the_thumb
         assert np.abs(turned - ahead).mean() > 10
         assert page.evaluate("rcp.vr.frames") > frames
         assert len(page.ws_sent) == sent and page.evaluate("rcp.state.messages") == counted
+        rate = page.evaluate(XR_RATE)
+        print(f"\nVR: {rate:.1f} headset frames a second, both eyes drawn in each, {len(page.ws_sent) - sent} messages")
+        assert len(page.ws_sent) == sent
+        head_turned(page, 1.2)  # as it was before the second of turning
+        shot(page)  # a frame drawn with it
         # the thumbstick pushed forward walks along the head's heading: cameras sent, each a new eye
         eye = camera["eye"]
         page.evaluate("xrDevice.controllers.right.updateAxes('thumbstick', 0, -1)")
