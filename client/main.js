@@ -459,7 +459,7 @@ const uploads = new Uploader($("scene"), authorization, { chosen: switchScene, n
 // ---- the camera path: keyframes from the walk, played back, rendered into a video ----
 
 const path = pathPanel($("path"), {
-  camera: () => walkCamera.toCamera(walk.walk),
+  camera: currentCamera,
   place: (camera) => walk.place(camera),
   scene: () => state.scene,
   request: () => {

@@ -14,9 +14,10 @@ export const PANORAMA_FOV = 60; // the fov sent with a panorama: equirect ignore
 const LAYOUTS_KEPT = 64; // camera ids remembered: far more than the frames in flight
 const DETAIL_MARGIN = 1.5; // screen pixels drawn per panorama pixel in view, at most: more shows nothing new
 
-/** The painting size (one eye's) of a panorama costing about as much as a `width` x `height` view: 2H x H. */
+/** The painting size (one eye's) of a panorama costing about as much as a `width` x `height` view: 2H x H,
+ * H even (a video of it needs even sizes). */
 export function panoramaSize(width, height) {
-  const rows = Math.max(8, Math.min(2048, Math.round(Math.sqrt((width * height) / 2))));
+  const rows = 2 * Math.max(4, Math.min(1024, Math.round(Math.sqrt((width * height) / 2) / 2)));
   return [2 * rows, rows];
 }
 

@@ -13,6 +13,7 @@ import contextlib
 import io
 from pathlib import Path
 
+import av
 import httpx
 import numpy as np
 import pytest
@@ -77,7 +78,7 @@ def browser():
 def client(browser, url: str, scene: str = "default", init_script: str | None = None):
     """The client on ``scene``, its first refined frame shown; ``page.ws_sent`` lists every WebSocket message
     the page sent, as the browser saw it go. Fails on console errors."""
-    context = browser.new_context(viewport={"width": WINDOW[0], "height": WINDOW[1]})
+    context = browser.new_context(viewport={"width": WINDOW[0], "height": WINDOW[1]}, accept_downloads=True)
     if init_script:
         context.add_init_script(init_script)
     page = context.new_page()
@@ -282,3 +283,26 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     assert camera.get("projection", "perspective") == "perspective"  # the field's default
     assert (camera["type"], view["type"], view["width"], view["height"]) == ("camera", "view", *SIZE)
     assert page.evaluate("rcp.view360.canvas.hidden")
+
+
+def test_a_path_taken_in_the_360_view_renders_a_360_video(browser, live_server, tmp_path):
+    with client(browser, live_server.url, scene="sky") as page:
+        enter_360(page)
+        add = page.locator("#path [data-path=add]")
+        add.click()
+        page.evaluate("rcp.walk.walk = { ...rcp.walk.walk, eye: rcp.walk.walk.eye.map((x) => x + 1) }")
+        add.click()
+        keyframes = page.evaluate("rcp.path.path.keyframes")
+        assert [(k["projection"], k["stereo"]) for k in keyframes] == [("equirect", "mono")] * 2
+        page.locator("#path-fps").fill("2")
+        page.locator("#path [data-path=render]").click()
+        link = page.wait_for_selector("#path [data-path=download]:not([hidden])", timeout=WAIT_MS)
+        with page.expect_download() as video:
+            link.click()
+        out = tmp_path / "360.mp4"
+        video.value.save_as(out)
+    with av.open(str(out)) as container:
+        frames = list(container.decode(video=0))
+        found = {sd.type.name for sd in frames[0].side_data}
+    assert len(frames) == 3 and frames[0].width == 2 * frames[0].height  # the panorama's size, as the view asked
+    assert {"SPHERICAL", "STEREO3D"} <= found  # FFmpeg's reader sees a 360° video
