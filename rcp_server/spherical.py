@@ -25,7 +25,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 STEREO_MODES = {"mono": 0, "top-bottom": 1, "side-by-side": 2}
-"""The painting's stereo layouts and their ``st3d`` stereo_mode."""
+"""The painting's stereo layouts (``camera.STEREO``) and their ``st3d`` stereo_mode."""
 V1_STEREO = {"mono": "mono", "top-bottom": "top-bottom", "side-by-side": "left-right"}
 V1_UUID = bytes.fromhex("ffcc8263f8554a938814587a02521fdd")
 METADATA_SOURCE = "rcp (recursive camera painting)"

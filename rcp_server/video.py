@@ -17,6 +17,7 @@ from typing import Protocol
 import numpy as np
 
 from . import images, spherical
+from .camera import PROJECTIONS, STEREO
 
 VIDEO_FORMATS = {".mp4": "mp4"}
 CRF = 18
@@ -55,7 +56,7 @@ class Mp4Writer:
         import av  # the video writer's own dependency: importing it costs a quarter of a second
 
         check_video_size(width, height)
-        if projection not in ("perspective", "equirect") or stereo not in spherical.STEREO_MODES:
+        if projection not in PROJECTIONS or stereo not in STEREO:
             raise ValueError(f"no video of projection {projection!r} in stereo {stereo!r}")
         self.spherical = stereo if projection == "equirect" else None  # a perspective video is a flat one
         self.out = Path(out)

@@ -14,6 +14,7 @@ import pytest
 from conftest import SPINNING_BOX
 
 from rcp_server import spherical
+from rcp_server.camera import STEREO
 from rcp_server.cli import main
 from rcp_server.video import Mp4Writer
 
@@ -151,6 +152,10 @@ def test_an_mp4_with_its_index_at_the_end_keeps_its_offsets(tmp_path):
     assert dict(boxes)[b"st3d"][-1] == 2
     for a, b in zip(decoded(dst), decoded(src), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_every_stereo_layout_of_the_camera_has_its_boxes():
+    assert set(spherical.STEREO_MODES) == set(STEREO) == set(spherical.V1_STEREO)
 
 
 def test_what_cannot_take_the_metadata_is_refused(tmp_path):
