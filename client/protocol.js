@@ -24,6 +24,16 @@ export const PROTOCOL = {
      "title": "Eye",
      "type": "array"
     },
+    "eyes": {
+     "default": "own",
+     "description": "stereo: each eye smudges from its own previous image (own), or as the left eye does where both see the same point (shared: no rivalry in a headset)",
+     "enum": [
+      "own",
+      "shared"
+     ],
+     "title": "Eyes",
+     "type": "string"
+    },
     "fov": {
      "default": 60.0,
      "description": "vertical field of view, degrees (perspective)",
@@ -910,6 +920,16 @@ export const PROTOCOL = {
        ],
        "title": "Eye",
        "type": "array"
+      },
+      "eyes": {
+       "default": "own",
+       "description": "stereo: each eye smudges from its own previous image (own), or as the left eye does where both see the same point (shared: no rivalry in a headset)",
+       "enum": [
+        "own",
+        "shared"
+       ],
+       "title": "Eyes",
+       "type": "string"
       },
       "fov": {
        "default": 60.0,

@@ -28,3 +28,7 @@ rm -rf "$its"
 for style in smudge focus fractured cross-hatching layered; do
   rcp -q render default --out "$out/style-$style.jpg" --style "$style" --quality 85
 done
+# all around: 360 x 180 panoramas (an eye's image twice as wide as high), and a stereo pair
+rcp -q render default --out "$out/360-village.jpg" --projection equirect --width 1024 --height 512
+rcp -q render sky --out "$out/360-sky.jpg" --projection equirect --width 1024 --height 512 --lambda-p 24
+rcp -q render default --out "$out/stereo.jpg" --stereo side-by-side --width 480 --height 270

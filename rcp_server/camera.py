@@ -28,7 +28,9 @@ unit distance from its pixel's eye and a local frame ``(r_ij, u_ij, f_ij)`` (the
   ``(i mod W, j mod H)`` of its eye's image, and ``(s, t)`` are that eye's. The left eye of a pixel sits at
   ``eye - (ipd/2) r_ij``, the right one at ``eye + (ipd/2) r_ij``: for ``perspective`` two parallel cameras
   ``ipd`` apart, for ``equirect`` omnidirectional stereo (each column's eye on its own right vector).
-  Added here: a stereo painting's focus depth ``z0`` and the depth of a miss are the centre eye's.
+  Added here: a stereo painting's focus depth ``z0`` and the depth of a miss are the centre eye's; with
+  ``eyes = "shared"`` the right eye reads its displacement fields from the left eye's previous image where the
+  left eye sees the same surface point in the plain render (``stereo.py``).
 
 A :class:`Region` is a rectangle of the full image; everything per pixel is computed from absolute pixel
 coordinates, so a region renders exactly the pixels the full image has there.
@@ -111,6 +113,8 @@ PROJECTIONS = ("perspective", "equirect")
 """What the image is a picture of: the image plane, or the whole sphere around the eye (module docstring)."""
 STEREO = ("mono", "top-bottom", "side-by-side")
 """One eye, or both in one image: left over right, or left beside right."""
+EYES = ("own", "shared")
+"""Where each eye of a stereo painting reads its displacement fields (``stereo.py``)."""
 SIDES = {"mono": (0,), "top-bottom": (-1, 1), "side-by-side": (-1, 1)}
 """The eyes of a painting, left (-1) to right (1), in the order its image holds them."""
 
@@ -141,6 +145,12 @@ class Camera:
         choices=STEREO,
     )
     ipd: float = camera_field("distance between the eyes of a stereo camera, scene units", default=0.064, ge=0.0)
+    eyes: str = camera_field(
+        "stereo: each eye smudges from its own previous image (own), or as the left eye does where both see the "
+        "same point (shared: no rivalry in a headset)",
+        default="own",
+        choices=EYES,
+    )
 
     def __post_init__(self):
         for name in ("eye", "look_at", "up"):
@@ -216,7 +226,7 @@ class Camera:
 
 def _choice_fault(camera: Camera) -> str | None:
     """What is wrong with a camera's projection, stereo or ipd (one line), None when nothing is."""
-    for name in ("projection", "stereo"):
+    for name in ("projection", "stereo", "eyes"):
         value, choices = getattr(camera, name), CAMERA_FIELDS[name].choices
         if value not in choices:
             return f"unknown {name} {value!r}; choose one of {', '.join(choices)}"
@@ -243,7 +253,7 @@ class CameraField:
 
 
 def _camera_fields() -> dict[str, CameraField]:
-    kinds = {"eye": "vec3", "look_at": "vec3", "up": "vec3", "fov": float, "projection": str, "stereo": str}
+    kinds = {"eye": "vec3", "look_at": "vec3", "up": "vec3", "projection": str, "stereo": str, "eyes": str}
     return {
         f.name: CameraField(
             f.name,

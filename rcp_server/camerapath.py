@@ -66,7 +66,7 @@ class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
-HELD = ("projection", "stereo", "ipd")
+HELD = ("projection", "stereo", "ipd", "eyes")
 """Camera fields a path holds from start to end (a video is one projection): given once, or given alike."""
 CARRIED = frozenset({"up", "fov", *HELD})
 """Camera fields a keyframe may leave out: then as the keyframe before (at first, the scene camera's)."""

@@ -417,7 +417,7 @@ class RayPainter:
         ``should_stop`` says so."""
         self._check()
         try:
-            workers = _split(self.actors(), width, height, params)
+            workers = _split(self.actors(), width, height, params, camera)
             refs = _paint_bands(workers, self.hold(scene), None, 0, (camera, time), params)
             try:
                 return np.concatenate(self._get(refs, should_stop), axis=0)
@@ -456,7 +456,12 @@ class RayPainter:
         actors = self.actors()
         held = self.hold(scene)
         job = f"job-{next(self._serial)}"
-        workers = _split(actors, width, height, params) if temporal else []
+        shots = iter(shots)
+        first = next(shots, None)
+        if first is None:
+            return
+        shots = itertools.chain([first], shots)
+        workers = _split(actors, width, height, params, first.camera) if temporal else []
         limit = IN_FLIGHT_PER_ACTOR * (1 if temporal else len(actors))
         pending: deque[_Frame] = deque()  # the frames in flight, in order
         history: list[tuple[tuple[Camera, float], PaintParams]] = []  # temporal: what a band painted again needs
@@ -613,11 +618,12 @@ def _broken(refs: list) -> bool:
     return False
 
 
-def _split(actors: list, width: int, height: int, params: PaintParams) -> list[tuple[Any, Region]]:
+def _split(actors: list, width: int, height: int, params: PaintParams, camera: Camera) -> list[tuple[Any, Region]]:
     """Who paints which rows of a ``width x height`` painting: a band each (fewer bands when there are fewer
     rows than actors) for the ray-traced method, where a pixel reads only its own previous value; the whole
-    image on the first actor for the image method, whose lookups reach the whole screen."""
-    if params.method != "raytrace":
+    image on the first actor for the image method, whose lookups reach the whole screen, and for eyes that share
+    their smudges (the right eye reads the left's)."""
+    if params.method != "raytrace" or (camera.eyes == "shared" and camera.stereo != "mono"):
         return [(actors[0], Region(width, height))]
     bands = Region(width, height).tiles(-(-height // len(actors)))
     return list(zip(actors, bands, strict=False))

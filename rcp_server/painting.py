@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import imagespace, kernels, raytrace
+from . import imagespace, kernels, raytrace, stereo
 from .camera import Camera, Region
 from .paintstate import Abandoned, PaintState, TileIteration
 from .params import PaintParams
@@ -126,6 +126,9 @@ def paint(
         raise ValueError("region belongs to an image of another size")
     if params.method == "image" and region != Region(width, height):
         raise ValueError("the image-space method needs the full image: its lookups reach anywhere on screen")
+    shared = camera.eyes == "shared" and camera.stereo != "mono"
+    if shared and (region != Region(width, height) or params.method != "raytrace"):
+        raise ValueError("eyes that share their smudges are traced, over the whole painting (the right reads the left)")
     if previous is None or previous.region != region:
         previous = PaintState.canvas(region)
     threads = threads or default_threads()
@@ -184,6 +187,29 @@ def paint(
             painters[tile] = raytrace.TracedTile(frame, setup_tile(camera, tile, params), params, seen, record)
         return painters[tile]
 
+    sources: list[np.ndarray] = []  # with shared eyes: the pixel each pixel's fields read (stereo.shared_sources)
+
+    def iterate(start, iterations: int, keep) -> list:
+        """``iterations`` traced iterations of every tile from ``start`` (as :func:`run`); with shared eyes one
+        iteration at a time over the whole painting, each reading what the eyes share of the one before."""
+        if not shared:
+            return run(traced, start, iterations, keep)
+        parts: list = []
+        for n in range(iterations):
+            states = start if not parts else [p[0] for p in parts]
+            whole = PaintState.joined(states, region) if isinstance(states, list) else states
+            source = None
+            if not whole.blank:
+                if not sources:
+                    known = seen if seen is not None and (seen.width, seen.height) == (width, height) else None
+                    sources.append(stereo.shared_sources(scene, time, camera, region, known))
+                source = whole.gathered(sources[0])
+            for tile in tiles:
+                traced(tile).source = source.rows(tile) if source is not None else None
+            step = run(traced, states, 1, keep[n : n + 1] if keep is not None else None)
+            parts = then(parts, step) if parts else step
+        return parts
+
     if seen is not None and free:
         # ---- fast, eyes at rest: the first iteration casts the plain render's rays; what they hit decides
         # most rays of the later iterations (raytrace.TracedTile), once every tile has painted it ----
@@ -191,12 +217,12 @@ def paint(
         parts = first
         if params.iterations > 1:
             kept = keep[1:] if keep is not None else None
-            parts = then(first, run(traced, [p[0] for p in first], params.iterations - 1, kept))
+            parts = then(first, iterate([p[0] for p in first], params.iterations - 1, kept))
     elif params.method == "raytrace":
         if seen is not None and not given:  # what the pixel centres see, in a pass of its own
             visible = grid.tiles(tile_rows(grid, threads))
             extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), [*visible, None])
-        parts = run(traced, previous, params.iterations, keep)
+        parts = iterate(previous, params.iterations, keep)
     else:
         # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
         temporal = not previous.blank

@@ -106,6 +106,10 @@ class PaintState:
         pick = (y[:, None] * src.width + x[None, :]).ravel()
         return PaintState(Region(width, height), blank=self.blank, **self._pick(pick))
 
+    def gathered(self, index: np.ndarray) -> PaintState:
+        """A state of the same region whose pixel ``k`` holds this state's pixel ``index[k]`` ((n,) int64)."""
+        return PaintState(self.region, blank=self.blank, **self._pick(index))
+
     def _pick(self, index) -> dict[str, Any]:  # channel -> its rows, or None: PaintState's keyword arguments
         return {name: None if getattr(self, name) is None else getattr(self, name)[index] for name in CHANNELS}
 

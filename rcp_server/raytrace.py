@@ -279,13 +279,16 @@ class TracedTile:
         self.buffers = (PaintState.empty(setup.region, self.reads), PaintState.empty(setup.region, self.reads))
         self.at_eye = False  # every origin in the ray buffers already is the camera's eye
         self.last: PaintState | None = None  # the state the iteration before started from
+        self.source: PaintState | None = None  # what the next iteration's fields read, when not its own state
         self.clock = np.zeros(3, np.int64)
 
     def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
         params, reads, before = self.params, self.reads, self.last
         self.last = state
+        source = self.source if self.source is not None else state
         compare = params.fast and before is not None and not (before.blank or state.blank) and before.has(reads)
-        cast = cameras(state, self.setup, params, self.z0)
+        compare = compare and self.source is None  # a shared source changes with other pixels than this one
+        cast = cameras(source, self.setup, params, self.z0)
         eyes_rest = cast.eye_field.kind == kernels.FIELD_ZERO
         cast = cast._replace(write_origins=not (eyes_rest and self.at_eye))
         # with two eyes, ray m is another pixel's, and so another eye's, when the pixels painted change
@@ -307,6 +310,7 @@ class TracedTile:
             ),
             before=kernels.channels(before if compare else state),
             previous=kernels.channels(state),
+            source=kernels.channels(source),
             out=kernels.channels(out),
             trace=self.frame.trace,
             seen=self.seen if use_seen else _NO_SEEN,

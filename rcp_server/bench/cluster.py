@@ -120,6 +120,18 @@ def bench_cluster(
             f"Ray in {len(actors)} bands {ray_s:.2f} s, "
             f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {np.array_equal(here, there_one)}"
         )
+        # a panorama (equirect, an eye's image twice as wide as high), threads against Ray's bands
+        pano_camera, pano = scene.camera.moved(projection="equirect"), (4 * height, 2 * height)
+        clock = time.perf_counter()
+        here = _u8(paint(scene, pano_camera, *pano, params, threads=threads).image)
+        pano_here_s = time.perf_counter() - clock
+        clock = time.perf_counter()
+        there_one = painter.render(scene, pano_camera, *pano, params)
+        pano_ray_s = time.perf_counter() - clock
+        print(
+            f"one {pano[0]}x{pano[1]} panorama: threads {pano_here_s:.2f} s, Ray in {len(actors)} bands "
+            f"{pano_ray_s:.2f} s, pixel-identical: {np.array_equal(here, there_one)}"
+        )
     finally:
         painter.close()
         if started:
@@ -153,6 +165,12 @@ def bench_cluster(
         # two frames in flight hide a call's round trip behind painting; the encoder's link moves every byte
         t_frame = max(t_paint, (frame_bytes + request * bands) / link, (t_paint + trip) / 2)
         print(f"{n:>5} {achieved:14.2f} {achieved / ideal:5.2f} {1 / t_frame:13.1f} {t_paint / t_frame:5.2f}")
+
+    # a 4096x2048 panorama at the scene's settings: its core-seconds from the Ray run, a band a core
+    pano_core_s = pano_ray_s * len(actors) / (pano[0] * pano[1]) * 4096 * 2048
+    print(f"\na 4096x2048 panorama ({params.iterations} iterations, {params.spp} spp): {pano_core_s:.1f} core-s; on")
+    for n in (1, 2, 4, 8, 16):
+        print(f"{n:>5} machines: {pano_core_s / (n * cores) + 4096 * 2048 * 3 / link + trip:6.2f} s")
 
 
 def _u8(image):

@@ -2,8 +2,8 @@
 pixels, and how often the two eyes of a pair disagree where they see the same surface.
 
 Costs are medians of paintings timed in turn, one of each kind per round, so that the machine's drift falls on
-both alike. Disagreement: each pixel of the left eye is followed to the point it sees and into the right eye;
-where the right eye sees that very point (within 1% of its distance), the two eyes' paintings are compared, and
+both alike. Disagreement: where the two eyes see the same surface point (``stereo.partners``), their paintings
+are compared, and
 a pixel counts when their colours differ by more than :data:`RIVALRY` beyond what the plain renders differ there
 (the smudges, not the view, disagree: in a headset the eyes then see two paintings).
 """
@@ -16,15 +16,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..camera import Camera, Region, eye_pixels, pixel_frames, project
-from ..mappings import register_mapping, unregister_mapping
+from .. import kernels
+from ..camera import Camera, Region, eye_pixels
 from ..painting import paint
 from ..params import PaintParams
+from ..raytrace import visible_faces
 from ..scene import Scene
 from ..scenefile import load_scene
+from ..stereo import partners
 
 RIVALRY = 16 / 255
-PROBE = "bench-projection-probe"  # a mapping that moves nothing and reads what locates a hit
 
 
 def _timed(scene: Scene, camera: Camera, width: int, height: int, params: PaintParams) -> float:
@@ -58,46 +59,19 @@ def costs(scene: Scene, width: int, repeats: int) -> dict[str, float]:
 
 def rivalry(scene: Scene, camera: Camera, width: int, height: int, params: PaintParams) -> tuple[float, int]:
     """The share of the left eye's pixels whose painting disagrees with the right eye's where both see the same
-    surface point, and how many such pixels there are."""
-    register_mapping(PROBE, {"depth", "direction"}, lambda data: np.zeros((len(data.color), 3)))
-    try:
-        full = camera.image_size(width, height)
-        probe = PaintParams(eye_mapping=PROBE, lambda_e=1e-12, lambda_p=0.0, iterations=1, z_max=1e6)
-        seen = paint(scene, camera, *full, probe).state
-    finally:
-        unregister_mapping(PROBE)
+    surface point (``stereo.partners``), and how many such pixels there are."""
+    full = camera.image_size(width, height)
+    region = Region(*full)
+    seen = kernels.Seen.empty(*full)
+    visible_faces(scene, 0.0, camera, region, seen)
+    pair = partners(camera, region, seen)
+    side, _, _ = eye_pixels(camera, region, *region.pixel_coords())
+    left = np.flatnonzero((side < 0) & (pair >= 0) & (seen.face >= 0))
     plain = paint(scene, camera, *full, replace(params, iterations=1)).image.reshape(-1, 3)
     painted = paint(scene, camera, *full, params).image.reshape(-1, 3)
-    region = Region(*full)
-    i, j = region.pixel_coords()
-    eyes, _, _, f = pixel_frames(camera, region, i, j)
-    assert seen.direction is not None and seen.depth is not None, "the probe reads both"
-    direction = seen.direction.astype(np.float64)
-    along = seen.depth / np.einsum("ij,ij->i", direction, f)
-    points = eyes + along[:, None] * direction
-    hit = seen.depth < 1e5  # not the sky
-    left = np.flatnonzero(hit & (_sides(camera, region, i, j) < 0))
-    # into the right eye: from the camera's centre first, then from the eye of the pixel found (on the sphere
-    # each column has its own), the nearest pixel
-    target = np.empty(len(left), np.int64)
-    right_eye = np.broadcast_to(np.asarray(camera.eye, np.float64), (len(left), 3))
-    ok: np.ndarray = np.ones(len(left), bool)
-    for _ in range(2):
-        x, y, ok = project(camera, region, np.ones(len(left), np.int64), points[left] - right_eye)
-        x = np.clip(np.rint(x), 0, region.full_width - 1).astype(np.int64)
-        y = np.clip(np.rint(y), 0, region.full_height - 1).astype(np.int64)
-        target = y * region.full_width + x
-        right_eye = eyes[target]
-    same = ok & hit[target] & (_sides(camera, region, i[target], j[target]) > 0)
-    distance = np.linalg.norm(points[left] - right_eye, axis=1)
-    same &= np.linalg.norm(points[target] - points[left], axis=1) < 0.01 * distance
-    a, b = left[same], target[same]
+    a, b = left, pair[left]
     beyond = np.abs(painted[a] - painted[b]).max(axis=1) - np.abs(plain[a] - plain[b]).max(axis=1)
     return float((beyond > RIVALRY).mean()) if len(a) else 0.0, len(a)
-
-
-def _sides(camera: Camera, region: Region, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-    return eye_pixels(camera, region, i, j)[0]
 
 
 def bench_projection(scene_name: str, width: int, repeats: int, ipd: float | None) -> None:
@@ -116,5 +90,6 @@ def bench_projection(scene_name: str, width: int, repeats: int, ipd: float | Non
             print(f"  {name:20s} {t * 1e3:7.0f} ms  {against} (targets: equirect 1.15x, stereo 2.1x)")
     for projection in ("perspective", "equirect"):
         camera = scene.camera.moved(projection=projection, stereo="side-by-side")
-        share, pairs = rivalry(scene, camera, width, width // 2, scene.paint)
-        print(f"eyes disagreeing, {projection} pair: {share:.1%} of the {pairs:,} pixels both eyes see")
+        for eyes in ("own", "shared"):
+            share, pairs = rivalry(scene, camera.moved(eyes=eyes), width, width // 2, scene.paint)
+            print(f"eyes disagreeing, {projection} pair, eyes {eyes}: {share:.1%} of the {pairs:,} pixels both see")

@@ -18,7 +18,7 @@ from .triangle import place_hits
 
 
 @jit
-def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen, shading, scratch, clock):
+def paint_iteration(cast, compare, before, previous, source, out, trace, seen, use_seen, shading, scratch, clock):
     """``I_n`` of a tile into ``out`` from ``previous`` (``I_{n-1}``); returns how many pixels it painted.
 
     cast : bundles.Cast, the tile's cameras (its ``pixels`` field is ignored: the pixels are decided here)
@@ -26,6 +26,8 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
     ``before`` (``I_{n-2}``) is not painted but carried over (``reuse.changed_pixels``, ``reuse.carry``);
     else every pixel is painted.  before, previous, out : bundles.Channels of the tile (``out`` may be
     ``before``'s buffer: each pixel of it is read before it is written, never ``previous``'s)
+    source : bundles.Channels the displacement fields read: ``previous``, or what the eyes of a stereo painting
+    share (``stereo.py``; then ``compare.any`` must be off: a pixel's source changes with another pixel)
     trace : bundles.Trace, the scene's Embree handle and triangles (scene 0: no triangles, every ray misses)
     seen, use_seen : the visible-surface grid and whether it decides rays (``seen.resolve_seen``)
     shading : bundles.Shading;  scratch : bundles.Scratch of the tile
@@ -55,7 +57,7 @@ def paint_iteration(cast, compare, before, previous, out, trace, seen, use_seen,
         plane=cast.plane,
         xi=cast.xi,
         eta=cast.eta,
-        previous=previous,
+        previous=source,
         z0=cast.z0,
         target=cast.target,
         eye_field=cast.eye_field,

@@ -12,6 +12,7 @@ import pytest
 from conftest import facing_plane, make_scene, sphere, translate
 
 from rcp_server import kernels
+from rcp_server.bench.projection import rivalry
 from rcp_server.camera import (
     Camera,
     CameraError,
@@ -27,7 +28,9 @@ from rcp_server.meshes import primitive
 from rcp_server.painting import paint, see, seen_grid
 from rcp_server.paintstate import PaintState
 from rcp_server.params import EDGES, PaintParams
+from rcp_server.raytrace import visible_faces
 from rcp_server.scene import Environment, Light, SceneObject
+from rcp_server.stereo import partners
 
 EYE = Camera((0.2, 0.1, 0.3), (0.9, 0.0, -2.0), fov=60.0)
 CAMERAS = {
@@ -326,3 +329,53 @@ def test_an_equirect_lookup_wraps_round_the_seam_and_over_the_poles():
     # half a pixel above row 0's centre is the pole: the mean of row 0 here and half a turn round
     value = bilinear(image, np.array([1.0]), np.array([-0.5]), "sphere")[0]
     assert value == pytest.approx((image[0, 1] + image[0, 1 + w // 2]) / 2)
+
+
+# ---- stereo: where the eyes see the same point, and eyes that share their smudges ----
+
+
+def test_the_eyes_partners_on_a_facing_plane_are_apart_by_its_disparity():
+    """Parallel eyes ipd apart see a plane at depth d shifted by ipd x focal length / d pixels."""
+    width, height, depth, ipd = 64, 40, 4.0, 0.4
+    camera = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), fov=60.0, stereo="side-by-side", ipd=ipd)
+    scene = make_scene([facing_plane(depth, size=(40.0, 40.0))], camera=camera)
+    region = Region(2 * width, height)
+    seen = kernels.Seen.empty(2 * width, height)
+    visible_faces(scene, 0.0, camera, region, seen)
+    pair = partners(camera, region, seen)
+    disparity = ipd * (height / 2) / np.tan(np.radians(30.0)) / depth
+    i, j = region.pixel_coords()
+    left = np.flatnonzero((i < width) & (i >= 8))
+    assert (pair[left] >= 0).all()
+    np.testing.assert_array_equal(pair[left] // (2 * width), j[left])
+    assert np.abs(pair[left] % (2 * width) - (i[left] + width - disparity)).max() <= 0.5 + 1e-9
+    right = np.flatnonzero((i >= width + 8) & (pair >= 0))
+    assert len(right) > 0.8 * (width - 8) * height
+    np.testing.assert_array_equal(pair[pair[right]], right)  # partners both ways
+
+
+@pytest.mark.parametrize("name", ["perspective side-by-side", "equirect top-bottom"])
+def test_shared_eyes_smudge_the_same_point_alike(surround, name):
+    """With shared eyes the left eye paints as it does alone, and the right follows it: fewer pixels where the two
+    eyes' smudges of one point disagree (``rcp bench projection`` measures it on the shipped scenes)."""
+    own = CAMERAS[name]
+    shared = own.moved(eyes="shared")
+    width, height = _size(own)
+    params = PaintParams(lambda_p=12.0, fast=False)
+    alone = paint(surround, own, width, height, params).image
+    both = paint(surround, shared, width, height, params).image
+    left = (slice(None), slice(0, width // 2)) if own.stereo == "side-by-side" else (slice(0, height // 2),)
+    np.testing.assert_array_equal(both[left], alone[left])
+    if own.projection == "perspective":  # the panorama's eyes at this size and so near: no clear gain (the bench's)
+        eye_size = own.eye_size(width, height)
+        rivalry_own, pairs = rivalry(surround, own, *eye_size, params)
+        rivalry_shared, _ = rivalry(surround, shared, *eye_size, params)
+        assert pairs > 0.2 * eye_size[0] * eye_size[1] and rivalry_shared < 0.6 * rivalry_own
+
+
+def test_shared_eyes_paint_the_whole_painting_by_tracing():
+    camera = CAMERAS["perspective top-bottom"].moved(eyes="shared")
+    with pytest.raises(ValueError, match="whole painting"):
+        paint(make_scene([]), camera, 64, 80, PaintParams(), region=Region(64, 80, 0, 0, 64, 40))
+    with pytest.raises(ValueError, match="traced"):
+        paint(make_scene([]), camera, 64, 80, PaintParams(method="image"))

@@ -205,9 +205,9 @@ def test_an_upload_a_stored_film_still_paints_is_in_use_however_long_the_server_
         job = client.post("/api/videos", json={"scene": name, **body}).json()
         seen = wait_for(client, job["id"], lambda s: s["done_frames"] >= 1)
     assert seen["state"] == "running"
-    time.sleep(1.1)
+    time.sleep(3.1)  # down longer than an upload may stay idle (3 s: room for the film to finish on a busy machine)
     with (
-        BackgroundServer(data=data, upload_idle_s=1.0) as live,
+        BackgroundServer(data=data, upload_idle_s=3.0) as live,
         httpx.Client(base_url=live.url, timeout=60) as client,
     ):
         done = wait_for(client, job["id"], lambda s: s["state"] not in ("queued", "running"))
