@@ -12,6 +12,9 @@ import { PanoramaView, dot } from "./panorama.js";
 
 export const PANORAMA_FOV = 60; // the fov sent with a panorama: equirect ignores it; fixed, so zooming sends nothing
 const LAYOUTS_KEPT = 64; // camera ids remembered: far more than the frames in flight
+// A headset's pair: the right eye smudges as the left one where both see the same point, so the two eyes do not
+// fight (`rcp bench projection --width 508` on the village: 1.8% of pixels in rivalry instead of 4.5%).
+const PAIR_EYES = "shared";
 const DETAIL_MARGIN = 1.5; // screen pixels drawn per panorama pixel in view, at most: more shows nothing new
 
 /** The painting size (one eye's) of a panorama costing about as much as a `width` x `height` view: 2H x H,
@@ -84,7 +87,8 @@ export class View360 {
   /** The protocol camera of the panorama at the walk's eye. */
   camera(walk) {
     const level = walkCamera.toCamera({ ...walk, yaw: this.yaw0, pitch: 0, fov: PANORAMA_FOV });
-    return { ...level, projection: "equirect", stereo: this.stereo };
+    const pair = this.stereo === "mono" ? {} : { eyes: PAIR_EYES };
+    return { ...level, projection: "equirect", stereo: this.stereo, ...pair };
   }
 
   /** Camera `id` was sent: its paintings are panoramas in the current layout. */

@@ -92,7 +92,7 @@ def test_vr_shows_each_eye_its_half_turns_with_the_head_and_walks_with_the_thumb
         assert page.text_content("#enter-vr") == "Exit VR"
         # the client asks for stereo top-bottom panoramas and draws them, each eye in its half of the layer
         camera = [m for m in page.evaluate("rcp.sent") if m["type"] == "camera"][-1]
-        assert (camera["projection"], camera["stereo"]) == ("equirect", "top-bottom")
+        assert (camera["projection"], camera["stereo"], camera["eyes"]) == ("equirect", "top-bottom", "shared")
         page.wait_for_function(
             """(id) => { const f = rcp.overlay.frame; return f.final && f.camera_id === id
                 && rcp.view360.pano.layout.stereo === 'top-bottom'; }""",
