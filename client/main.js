@@ -203,6 +203,8 @@ function advance(now) {
   if (walk.walk && state.scene && connection.state === "open") sendCamera();
   flushPaint();
   view360.draw(walk.walk, state.size[1]);
+  const local = vr.session ? "VR" : view360.active ? "360°" : null; // drawn here, at the display's rate
+  overlay.viewDrawn(local, vr.session ? vr.frames : (view360.pano?.drawn ?? 0), now);
   if (now - lastOverlay > 200) {
     lastOverlay = now;
     overlay.update(now);
