@@ -263,6 +263,9 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     drawn_each, shown_each = page.evaluate(TURNING)
     print(f"turning on every animation frame: {drawn_each:.1f} frames drawn a second of {shown_each:.1f}")
     assert len(page.ws_sent) == sent
+    # the overlay says how often the view is drawn here (a person can read the figure too)
+    page.wait_for_function("/^360° · [1-9][0-9]* a second$/.test(document.getElementById('o-view').textContent)")
+    assert page.is_visible("#o-view")
     # walking moves the eye: new panorama cameras, each level, and a refined panorama of the last one
     eye = page.evaluate("rcp.state.lastCamera.eye")
     page.keyboard.down("w")
