@@ -75,6 +75,17 @@ def sphere(center=(0.0, 0.0, -4.0), radius=1.0, subdivisions=3, color=(1.0, 1.0,
     return SceneObject(name, part, [(translate(*center), part)])
 
 
+def noise_texture(seed: int, size: int = 64) -> np.ndarray:
+    """A texture of random texels, ``size x size`` RGB float32: every lookup lands on a different color."""
+    return np.random.default_rng(seed).uniform(0, 1, (size, size, 3)).astype(np.float32)
+
+
+def wavy_sky() -> Environment:
+    """A 64x32 panorama whose color changes with longitude and latitude alike (silhouettes show against it)."""
+    u, v = np.meshgrid(np.linspace(0, 1, 64), np.linspace(0, 1, 32))
+    return Environment(np.stack([u, v, 0.5 + 0.5 * np.sin(12 * u)], axis=2).astype(np.float32))
+
+
 def make_scene(objects=(), camera=CAMERA, sky=SKY, light=None, z_max=None, environment=None) -> Scene:
     env = environment if environment is not None else Environment.constant(sky)
     return Scene("test", "test", camera, env, light, list(objects), z_max=z_max)

@@ -164,7 +164,8 @@ NEARER = 0.01  # how much nearer than what the corners saw (relative) a thin par
 
 SPLIT = 4.0  # on the sphere, a thin triangle is cut (in space) until it spans at most this many cells each way:
 # its edges are curves in the image, nearly straight over a few cells
-MARGIN = 0.5  # cells added around each piece on the sphere, for what remains of the curve
+MARGIN = 0.05  # cells added around each piece on the sphere, besides what its curved edges need
+POLE = math.radians(89.0)  # the latitude up to which a piece's bend is estimated (beyond, as there)
 
 
 @numba.njit(inline="always")
@@ -320,7 +321,13 @@ def cover_thin(triangles, eye, plane, rows, near):
                     max(py[0], py[1], py[2]) - min(py[0], py[1], py[2]),
                 )
                 if big <= SPLIT or top + 2 > stack.shape[0]:
-                    _cells(near, px, py, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, MARGIN, True)
+                    # how far its curved edges may stray from the straight ones: a chord of length L of a curve of
+                    # curvature k strays L^2 k / 8; a great circle's image bends by about tan(latitude) pi / H a cell
+                    pole = max(abs(0.5 - (py[0] - y_off + 0.5) / eye_h), abs(0.5 - (py[1] - y_off + 0.5) / eye_h))
+                    pole = max(pole, abs(0.5 - (py[2] - y_off + 0.5) / eye_h)) * math.pi
+                    bend = math.tan(min(pole, POLE)) * math.pi / eye_h
+                    margin = MARGIN + 0.25 * big * big * bend  # twice the estimate
+                    _cells(near, px, py, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, margin, True)
                     continue
                 # cut the longest edge (in space) at its middle: two pieces
                 longest = 0

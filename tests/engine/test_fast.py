@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, make_scene, sphere, translate
+from conftest import CAMERA, facing_plane, make_scene, noise_texture, sphere, translate, wavy_sky
 
 from rcp_server import kernels
 from rcp_server.camera import Camera, Region
@@ -19,7 +19,7 @@ from rcp_server.painting import paint, see, seen_grid
 from rcp_server.paintstate import PaintState
 from rcp_server.params import PaintParams
 from rcp_server.raytrace import Rays, assign_cameras, setup_tile, visible_faces
-from rcp_server.scene import Environment, Light, SceneObject
+from rcp_server.scene import Light, SceneObject
 from rcp_server.tracer import Hits
 
 W, H = 128, 72
@@ -44,10 +44,7 @@ def _box(x: float, y: float, depth: float, size: float, color) -> SceneObject:
 def hard_scene():
     """Everything the shortcuts could get wrong: a fine texture, poles thinner than a pixel (at this size a
     pixel is 0.08 units wide at depth 5), boxes and spheres with silhouettes against a panorama sky."""
-    rng = np.random.default_rng(7)
-    texture = rng.uniform(0, 1, (64, 64, 3)).astype(np.float32)
-    u, v = np.meshgrid(np.linspace(0, 1, 64), np.linspace(0, 1, 32))
-    sky = np.stack([u, v, 0.5 + 0.5 * np.sin(12 * u)], axis=2).astype(np.float32)
+    texture = noise_texture(7)
     objects = [
         facing_plane(14.0, size=(30.0, 8.0), divisions=(6, 2), texture=texture, center=(0.0, -3.0), uv_repeat=(4, 1)),
         sphere((-1.4, 0.4, -5.0), 1.0, 3, (0.9, 0.2, 0.1), "red"),
@@ -58,7 +55,7 @@ def hard_scene():
         _pole(3.0, 9.0, 0.03),
     ]
     light = Light(tuple(np.array([-0.3, -1.0, -0.4]) / np.linalg.norm([-0.3, -1.0, -0.4])), 0.3)
-    return make_scene(objects, light=light, environment=Environment(sky))
+    return make_scene(objects, light=light, environment=wavy_sky())
 
 
 LAMBDA = {"color": 12.0, "depth": 3.0, "normal": 14.0}  # the smudge of a painting that looks painted

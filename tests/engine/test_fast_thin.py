@@ -11,7 +11,8 @@ import pytest
 from conftest import CAMERA, facing_plane, make_scene, translate
 
 from rcp_server import kernels
-from rcp_server.camera import Region
+from rcp_server.camera import Camera, Region
+from rcp_server.camera import project as camera_project
 from rcp_server.meshes import primitive
 from rcp_server.painting import paint
 from rcp_server.params import PaintParams
@@ -60,9 +61,10 @@ def _displaced_rays(scene) -> tuple[Rays, Hits]:
     return rays, scene.geometry(0.0)[1].intersect(rays.origins, rays.directions)
 
 
-def _decided(scene, rays: Rays, seen: kernels.Seen) -> tuple[np.ndarray, Hits]:
-    """Which rays ``kernels.resolve_seen`` decides with ``seen``, (n,) bool, and the hits it gives them."""
-    n = W * H
+def _decided(scene, rays: Rays, seen: kernels.Seen, camera: Camera = CAMERA) -> tuple[np.ndarray, Hits]:
+    """Which rays ``kernels.resolve_seen`` decides with ``seen`` (of ``camera``'s painting, one ray a pixel), (n,)
+    bool, and the hits it gives them."""
+    n = seen.width * seen.height
     hits = Hits.misses(n)
     hits.face[:] = -7
     pending = np.empty(n, np.int64)
@@ -70,7 +72,7 @@ def _decided(scene, rays: Rays, seen: kernels.Seen) -> tuple[np.ndarray, Hits]:
         origins=rays.origins,
         directions=rays.directions,
         count=n,
-        plane=kernels.ImagePlane.of(CAMERA, Region(W, H)),
+        plane=kernels.ImagePlane.of(camera, Region(seen.width, seen.height)),
         seen=seen,
         triangles=scene.geometry(0.0)[0].triangles,
         hits=hits,
@@ -180,3 +182,62 @@ def test_a_panel_just_before_a_wall_is_never_decided_through():
     wrong = done & (hits.face != truth.face)
     # only ties may differ: a ray through an edge the two faces share, at the same distance
     np.testing.assert_allclose(hits.t[wrong], truth.t[wrong], rtol=1e-6)
+
+
+def test_cover_thin_on_the_sphere_marks_every_cell_a_thin_part_crosses():
+    """The panorama's grid: thin triangles all around the eye, long ones whose edges curve in the image, some
+    across the seam behind and high towards a pole; every point of each (sampled densely, projected by
+    ``camera.project``) lies in a cell marked no farther than the triangle's nearest corner."""
+    rng = np.random.default_rng(8)
+    width, height = 96, 48
+    camera = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0), projection="equirect")
+    n = 80
+    direction = rng.normal(size=(n, 3))
+    direction[:10] = (0.0, 0.1, 1.0)  # behind: across the seam
+    direction[10:16] = (0.3, 2.5, -0.4)  # high: near the pole
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centers = direction * rng.uniform(3, 9, (n, 1))
+    spans = 0.01 * rng.normal(size=(n, 3, 3))
+    spans[:, :, 0] += rng.uniform(-3, 3, (n, 3))  # long along x: rails that curve in the panorama
+    triangles = (centers[:, None, :] + spans).astype(np.float32)
+    region = Region(width, height)
+    near = np.full(width * height, np.inf, np.float32)
+    kernels.cover_thin(
+        triangles=triangles, eye=np.zeros(3), plane=kernels.ImagePlane.of(camera, region), rows=height, near=near
+    )
+    w = rng.dirichlet(np.ones(3), 20000)
+    checked = 0
+    for tri in triangles.astype(np.float64):
+        x, y, _ = camera_project(camera, region, np.zeros(3, np.int64), tri)
+        x = np.where(x - x[0] > width / 2, x - width, np.where(x[0] - x > width / 2, x + width, x))
+        area2 = abs((x[1] - x[0]) * (y[2] - y[0]) - (x[2] - x[0]) * (y[1] - y[0]))
+        perimeter = sum(np.hypot(x[k] - x[k - 1], y[k] - y[k - 1]) for k in range(3))
+        if area2 >= kernels.seen.THIN * perimeter or np.ptp(x) > width / 2:
+            continue
+        points = w @ tri
+        px, py, _ = camera_project(camera, region, np.zeros(len(points), np.int64), points)
+        inside = (px >= 0) & (px < width - 1) & (py >= 0) & (py < height - 1)  # not the seam, not the poles
+        cells = np.floor(py[inside]).astype(int) * width + np.floor(px[inside]).astype(int)
+        assert (near[cells] <= np.linalg.norm(tri, axis=1).min() + 1e-4).all()
+        checked += 1
+    assert checked > 40
+
+
+def test_no_ray_of_a_panorama_is_decided_through_the_bars(room):
+    """The room all around: the bars ahead, the chair's legs, the room's walls behind and beside."""
+    camera = CAMERA.moved(projection="equirect")
+    width, height = 2 * H, H
+    region = Region(width, height)
+    seen = kernels.Seen.empty(width, height)
+    visible_faces(room, 0.0, camera, region, seen)
+    params = PaintParams(lambda_p=9.0, noise=0.5, iterations=2)
+    state = paint(room, camera, width, height, params).state
+    rays = Rays.allocate(width * height, 1)
+    assign_cameras(state, setup_tile(camera, region, params), params, params.focus(camera), rays)
+    truth = room.geometry(0.0)[1].intersect(rays.origins, rays.directions)
+    n = region.pixel_count
+    grid = kernels.Seen(seen.face, seen.distance, np.full(n, np.inf, np.float32), width, height)
+    thin_parts(room, 0.0, camera, region, grid)
+    done, hits = _decided(room, rays, grid, camera)
+    assert done.mean() > 0.5  # the grid decides most rays ...
+    assert int((done & (hits.face != truth.face)).sum()) <= 2  # ... and almost none wrongly

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numba
 import numpy as np
 import pytest
-from conftest import facing_plane, make_scene, sphere, translate
+from conftest import facing_plane, make_scene, noise_texture, sphere, translate, wavy_sky
 
 from rcp_server import kernels
 from rcp_server.bench.projection import rivalry
@@ -170,10 +170,7 @@ def _painting(camera: Camera, stereo: str) -> tuple[int, int]:
 def surround():
     """Things in every direction around EYE (ahead, behind across the panorama's seam, to the sides, above and
     below), some thinner than a pixel, a textured wall, a panorama sky, a light."""
-    rng = np.random.default_rng(7)
-    texture = rng.uniform(0, 1, (64, 64, 3)).astype(np.float32)
-    u, v = np.meshgrid(np.linspace(0, 1, 64), np.linspace(0, 1, 32))
-    sky = np.stack([u, v, 0.5 + 0.5 * np.sin(12 * u)], axis=2).astype(np.float32)
+    texture = noise_texture(7)
     objects = [
         facing_plane(9.0, size=(30.0, 8.0), divisions=(6, 2), texture=texture, center=(0.0, -3.0), uv_repeat=(4, 1)),
         sphere((-1.4, 0.4, -5.0), 1.0, 3, (0.9, 0.2, 0.1), "red"),
@@ -187,7 +184,7 @@ def surround():
         SceneObject("floor", *_floor()),
     ]
     light = Light(tuple(np.array([-0.3, -1.0, -0.4]) / np.linalg.norm([-0.3, -1.0, -0.4])), 0.3)
-    return make_scene(objects, camera=EYE, light=light, environment=Environment(sky))
+    return make_scene(objects, camera=EYE, light=light, environment=wavy_sky())
 
 
 def _pole(x: float, z: float, radius: float) -> SceneObject:
@@ -225,6 +222,33 @@ def test_fast_is_within_two_levels_of_exact_on_every_projection(surround, name, 
     np.testing.assert_array_equal(fast.iterations[0], exact.iterations[0])
     assert _close_share(fast.image, exact.image) >= 0.99
     assert np.abs(exact.image - exact.iterations[0]).max() > 0.2  # the painting did move
+
+
+@pytest.mark.parametrize("name", ["equirect", "perspective top-bottom", "equirect top-bottom"])
+def test_temporal_mode_continues_each_eyes_painting_and_fast_stays_within_the_bound(surround, name):
+    """Frames that go on from the one before (each eye from its own), a step apart: fast against exact, and the
+    shared eyes' mode against its own exact painting."""
+    for camera in (CAMERAS[name], CAMERAS[name].moved(eyes="shared")):
+        params = PaintParams(lambda_p=12.0, iterations=2)
+        exact = fast = None
+        for k in range(3):
+            step = camera.moved(eye=tuple(np.add(camera.eye, (0.05 * k, 0.0, -0.05 * k))))
+            exact = paint(surround, step, *_size(step), replace(params, fast=False), previous=exact and exact.state)
+            fast = paint(surround, step, *_size(step), params, previous=fast and fast.state)
+        assert _close_share(fast.image, exact.image) >= 0.99
+        fresh = paint(surround, step, *_size(step), replace(params, fast=False)).image
+        assert np.abs(exact.image - fresh).max() > 0.1  # it did continue, not start again
+
+
+@pytest.mark.parametrize("name", ["equirect", "perspective side-by-side"])
+def test_the_image_method_continues_a_panorama_and_a_pair(surround, name):
+    camera = CAMERAS[name]
+    params = PaintParams(lambda_p=6.0, iterations=2, method="image")
+    first = paint(surround, camera, *_size(camera), params)
+    again = paint(surround, camera, *_size(camera), params, previous=first.state)
+    plain = paint(surround, camera, *_size(camera), PaintParams(iterations=1)).image
+    assert np.abs(again.image - first.image).max() > 0.05 and np.abs(first.image - plain).max() > 0.1
+    assert np.isfinite(again.image).all() and (again.image >= 0).all() and (again.image <= 1).all()
 
 
 @pytest.mark.parametrize("name", sorted(CAMERAS))
