@@ -197,9 +197,9 @@ _calls = []
 
 @register_mapping("test-painting-right", reads={"depth"})
 def _right(data):
-    """Every pixel moves right, whatever it saw."""
+    """Every pixel moves right (its own r_ij), whatever it saw."""
     _calls.append((data.depth is not None, data.normal is None, data.direction is None, len(data.color)))
-    return np.tile(data.right, (len(data.color), 1))
+    return data.right
 
 
 def test_a_registered_mapping_is_used(gradient_scene):
