@@ -17,6 +17,8 @@ import { stylesPanel } from "./styles.js";
 import { pathPanel } from "./pathpanel.js";
 import { WalkController } from "./walk.js";
 import { Uploader } from "./upload.js";
+import { View360, panoramaSize } from "./view360.js";
+import { VrSession } from "./vr.js";
 
 const $ = (id) => document.getElementById(id);
 const query = new URLSearchParams(location.search);
@@ -39,12 +41,18 @@ const state = {
   cameraId: 0,
   lastCamera: null, // the camera last sent (or the scene's, which the server starts from)
   readies: 0, // `ready` messages received
+  messages: 0, // messages sent since the page opened (`sent` keeps only the last 500)
   errors: [], // the last 50 problems shown to the user
 };
 const sent = []; // the last 500 messages sent, for the tests
 
 const overlay = new Overlay();
 const frames = new FrameView(canvas, {
+  shown: (meta) => overlay.frameShown(meta),
+  failed: (text) => notice(text),
+});
+// the 360° view: equirect paintings of the walk's position, looked around in locally (view360.js)
+const view360 = new View360($("pano"), {
   shown: (meta) => overlay.frameShown(meta),
   failed: (text) => notice(text),
 });
@@ -59,7 +67,7 @@ if (token) wsUrl.searchParams.set("token", token); // a browser's WebSocket cann
 const connection = new Connection(wsUrl.href, {
   onOpen: sendHello,
   onMessage: receive,
-  onFrame: (meta, jpeg) => frames.push(meta, jpeg),
+  onFrame: (meta, jpeg) => (view360.accepts(meta) ? view360 : frames).push(meta, jpeg),
   onState: (connectionState, detail) => overlay.connection(connectionState, detail),
 });
 
@@ -67,17 +75,24 @@ const connection = new Connection(wsUrl.href, {
 
 function send(msg) {
   if (!connection.send(msg)) return false;
+  state.messages += 1;
   sent.push(msg);
   if (sent.length > 500) sent.shift();
   return true;
 }
 
+/** The camera the walk shows: its own view, or in the 360° view the panorama at its eye. */
+function currentCamera() {
+  return view360.active ? view360.camera(walk.walk) : walkCamera.toCamera(walk.walk);
+}
+
 function sendCamera() {
-  const camera = walkCamera.toCamera(walk.walk);
+  const camera = currentCamera();
   if (walkCamera.sameCamera(camera, state.lastCamera)) return;
   state.cameraId += 1;
   if (send(MESSAGES.camera(camera, state.cameraId))) {
     overlay.cameraSent(state.cameraId);
+    if (view360.active) view360.sent(state.cameraId);
     state.lastCamera = camera;
   }
 }
@@ -105,6 +120,7 @@ function ready(msg) {
   } else {
     // a reconnection: the server starts afresh, so restore the camera and settings we had
     state.lastCamera = walkCamera.toCamera(walkCamera.fromCamera(msg.scene.camera));
+    if (view360.active) state.lastCamera = null; // the server starts from a flat view: send the panorama's
     sendCamera();
     // one field a message: a setting the server refuses does not take the others with it
     for (const [name, value] of Object.entries(state.paint)) send(MESSAGES.paint({ [name]: value }));
@@ -115,6 +131,7 @@ function ready(msg) {
 
 function startScene(scene) {
   walk.place(scene.camera);
+  if (view360.active) view360.enter(walk.walk); // the new scene's panorama faces its own camera's way
   showViewpoints(scene);
   state.lastCamera = walkCamera.toCamera(walk.walk); // what the server shows after hello
   state.paint = {};
@@ -154,7 +171,8 @@ function refused(text) {
 function wantedSize() {
   const fixed = [Number(query.get("width")), Number(query.get("height"))];
   const base = fixed[0] > 0 && fixed[1] > 0 ? fixed : [innerWidth, innerHeight];
-  return base.map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
+  const size = base.map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
+  return view360.active ? panoramaSize(...size) : size; // a panorama costs about what the flat view does
 }
 
 /** Size the canvas to the painting and tell the server; false when nothing changed. */
@@ -179,16 +197,24 @@ let lastTick = performance.now();
 let lastOverlay = 0;
 
 function tick(now) {
-  walk.step(Math.min(0.1, (now - lastTick) / 1000));
-  lastTick = now;
+  advance(now);
+  requestAnimationFrame(tick);
+}
+
+/** One animation frame's work (a headset's frames call it too, vr.js). */
+function advance(now) {
+  walk.step(Math.min(0.1, Math.max(0, now - lastTick) / 1000));
+  lastTick = Math.max(lastTick, now);
   if (walk.walk && state.scene && connection.state === "open") sendCamera();
   flushPaint();
+  view360.draw(walk.walk, state.size[1]);
+  const local = vr.session ? "VR" : view360.active ? "360°" : null; // drawn here, at the display's rate
+  overlay.viewDrawn(local, vr.session ? vr.frames : (view360.pano?.drawn ?? 0), now);
   if (now - lastOverlay > 200) {
     lastOverlay = now;
     overlay.update(now);
     $("hint").classList.toggle("away", walk.moved);
   }
-  requestAnimationFrame(tick);
 }
 
 // ---- the panel ----
@@ -326,6 +352,33 @@ $("resolution").addEventListener("change", (event) => {
   applySize();
 });
 $("save").addEventListener("click", save);
+$("view360").addEventListener("click", (event) => {
+  event.target.blur(); // keys walk again
+  toggle360(!view360.active);
+});
+
+// ---- the 360° view: the flat view's size and camera are swapped for the panorama's ----
+
+/** Turn the 360° view on or off; false when this browser cannot show it. */
+function toggle360(on) {
+  if (on === view360.active) return true;
+  if (on && !view360.available()) {
+    notice(`the 360° view needs WebGL2: ${view360.problem}`);
+    return false;
+  }
+  state.lastCamera = null; // the camera changes kind: send it even where it stands still
+  if (on) {
+    view360.enter(walk.walk);
+    applySize(); // the panorama's size first, so the server never pairs an equirect camera with a flat size
+    sendCamera();
+  } else {
+    view360.leave();
+    sendCamera();
+    applySize();
+  }
+  $("view360").setAttribute("aria-pressed", String(on));
+  return true;
+}
 
 // ---- Save: the same view, painted once more at full size with more samples, as a PNG download ----
 
@@ -340,7 +393,7 @@ async function save() {
     scene: state.scene.name,
     width,
     height,
-    camera: walkCamera.toCamera(walk.walk),
+    camera: currentCamera(), // in the 360° view, the panorama
     paint,
     time: overlay.frame?.time ?? 0, // the moment shown, for animated scenes
     format: "png",
@@ -435,7 +488,7 @@ const uploads = new Uploader($("scene"), authorization, { chosen: switchScene, n
 // ---- the camera path: keyframes from the walk, played back, rendered into a video ----
 
 const path = pathPanel($("path"), {
-  camera: () => walkCamera.toCamera(walk.walk),
+  camera: currentCamera,
   place: (camera) => walk.place(camera),
   scene: () => state.scene,
   request: () => {
@@ -447,5 +500,22 @@ const path = pathPanel($("path"), {
   notice,
 });
 
-window.rcp = { state, sent, overlay, walk, connection, panel, objects, path, canvas, uploads, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+// ---- VR: the stereo panorama in a headset, where the browser has one (vr.js) ----
+
+const vr = new VrSession($("enter-vr"), view360, {
+  enter: () => toggle360(true),
+  stereo: (layout) => {
+    view360.stereo = layout;
+    state.lastCamera = null;
+    sendCamera();
+  },
+  advance,
+  speed: () => walk.speed,
+  move: (delta) => {
+    walk.walk = { ...walk.walk, eye: walk.walk.eye.map((x, k) => x + delta[k]) };
+  },
+  notice,
+});
+
+window.rcp = { state, sent, overlay, walk, connection, panel, objects, path, canvas, uploads, view360, vr, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

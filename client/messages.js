@@ -85,9 +85,9 @@ export function message(type, fields = {}) {
 export const MESSAGES = {
   /** Open or switch a walk-through; the server answers `ready` and resets the camera to the scene's. */
   hello: (scene, width, height, quality) => message("hello", { scene, width, height, quality }),
-  /** The newest camera; the server echoes `id` as `camera_id` on the frame showing it. */
-  camera: (camera, id) =>
-    message("camera", { eye: camera.eye, look_at: camera.look_at, up: camera.up, fov: camera.fov, id }),
+  /** The newest camera (every field it has: a panorama's projection and stereo too); the server echoes `id` as
+   * `camera_id` on the frame showing it. */
+  camera: (camera, id) => message("camera", { ...camera, id }),
   /** Painting settings that changed; null restores the scene's default. */
   paint: (changes) => message("paint", changes),
   mode: (temporal, animate) => message("mode", { temporal, animate }),

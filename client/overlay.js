@@ -19,6 +19,18 @@ export class Overlay {
     this.latencies = []; // ms, the last LATENCY_SAMPLES
     this.sentAt = new Map(); // camera id -> when it was sent (ms), until a frame shows it or a newer one
     this.frame = null; // the description of the frame shown
+    this.view = null; // the 360° view or a headset drawing locally: {label, drawnAt: ms of each draw, last second}
+  }
+
+  /** The 360° view or a headset ("360°", "VR") has drawn `total` frames so far; null `label`: the flat view. */
+  viewDrawn(label, total, now) {
+    if (label === null) {
+      this.view = null;
+      return;
+    }
+    if (this.view?.label !== label) this.view = { label, total, drawnAt: [] };
+    for (let k = this.view.total; k < total; k++) this.view.drawnAt.push(now);
+    this.view.total = total;
   }
 
   cameraSent(id) {
@@ -56,6 +68,12 @@ export class Overlay {
     $("o-fps").textContent = this.shownAt.length;
     $("o-latency").textContent = latency === null ? "–" : `${Math.round(latency)} ms`;
     $("o-frames").textContent = this.frames;
+    for (const row of document.querySelectorAll("#overlay .view-row")) row.hidden = this.view === null;
+    if (this.view) {
+      const drawnAt = this.view.drawnAt;
+      while (drawnAt.length && drawnAt[0] < now - 1000) drawnAt.shift();
+      $("o-view").textContent = `${this.view.label} · ${drawnAt.length} a second`; // drawn here, no server
+    }
     const f = this.frame;
     if (!f) return;
     $("o-size").textContent = `${f.width}×${f.height}`;

@@ -25,8 +25,9 @@ export function pathPanel(root, hooks) {
   // ---- keyframes ----
 
   function snapshot() {
-    const { eye, look_at, up, fov } = hooks.camera();
-    return { eye: eye.map(round), look_at: look_at.map(round), up: [...up], fov: round(fov) };
+    const { eye, look_at, up, fov, projection, stereo } = hooks.camera();
+    const kind = projection ? { projection, stereo } : {}; // a panorama's, in the 360° view: a 360° video
+    return { eye: eye.map(round), look_at: look_at.map(round), up: [...up], fov: round(fov), ...kind };
   }
 
   function add(t) {

@@ -272,7 +272,8 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
     if count == 1 and args.path is None:  # a still, painted on Ray
         writer = video.ImageFrames(lambda index: args.out, args.quality)
     elif video.is_video(args.out) or video.is_folder(args.out):
-        writer = video.open_writer(args.out, args.width, args.height, fps, count)
+        first = path.cameras[0] if args.path is not None else base  # a sequence keeps one projection
+        writer = video.open_writer(args.out, args.width, args.height, fps, count, first.projection, first.stereo)
     else:
         writer = video.ImageFrames(lambda index: _frame_path(args.out, index), args.quality)
 

@@ -163,7 +163,10 @@ def paint(
             begin = start[n] if isinstance(start, list) else start.rows(tile)
             return _run_tile(iteration(tile), begin, iterations, keep, should_stop)
 
-        return on_tiles(one, list(range(len(tiles) + (beside is not None))))[: len(tiles)]
+        # the job beside first: started with the tiles, on a core of its own, it ends with them (queued last, it
+        # ran alone once they were done, the other cores idle)
+        order = ([len(tiles)] if beside is not None else []) + list(range(len(tiles)))
+        return on_tiles(one, order)[1:] if beside is not None else on_tiles(one, order)
 
     def then(first: list, rest: list) -> list:
         """The parts of two runs over the same tiles, one after the other: the second's states, both's seconds."""

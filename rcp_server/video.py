@@ -16,7 +16,8 @@ from typing import Protocol
 
 import numpy as np
 
-from . import images
+from . import images, spherical
+from .camera import PROJECTIONS, STEREO
 
 VIDEO_FORMATS = {".mp4": "mp4"}
 CRF = 18
@@ -45,12 +46,19 @@ def check_video_size(width: int, height: int) -> None:
 
 class Mp4Writer:
     """H.264 (yuv420p, CRF :data:`CRF`) in MP4 with its index at the front, so a browser plays it while it
-    downloads. ``fps`` may be fractional (23.976 is written as 24000/1001)."""
+    downloads. ``fps`` may be fractional (23.976 is written as 24000/1001). An ``equirect`` painting's video
+    carries the spherical-video metadata (``spherical.py``) of its ``stereo`` layout, so that 360° players
+    and headsets show it all around."""
 
-    def __init__(self, out: Path, width: int, height: int, fps: float):
+    def __init__(
+        self, out: Path, width: int, height: int, fps: float, projection: str = "perspective", stereo: str = "mono"
+    ):
         import av  # the video writer's own dependency: importing it costs a quarter of a second
 
         check_video_size(width, height)
+        if projection not in PROJECTIONS or stereo not in STEREO:
+            raise ValueError(f"no video of projection {projection!r} in stereo {stereo!r}")
+        self.spherical = stereo if projection == "equirect" else None  # a perspective video is a flat one
         self.out = Path(out)
         self.out.parent.mkdir(parents=True, exist_ok=True)
         self._partial = self.out.with_name(f".{self.out.name}.part")
@@ -88,6 +96,13 @@ class Mp4Writer:
         try:
             self._mux(self._stream.encode(None))  # flush the encoder's delayed frames
             self._container.close()
+            if self.spherical is not None:
+                flat = self._partial.with_name(self._partial.name + ".flat")
+                os.replace(self._partial, flat)
+                try:
+                    spherical.add_spherical(flat, self._partial, self.spherical)
+                finally:
+                    flat.unlink(missing_ok=True)
         except BaseException:
             self.abort()
             raise
@@ -127,12 +142,15 @@ def frame_names(folder: Path, count: int) -> Callable[[int], Path]:
     return lambda index: Path(folder) / f"frame_{index:0{digits}d}.png"
 
 
-def open_writer(out: Path, width: int, height: int, fps: float, count: int) -> FrameWriter:
-    """An MP4 for ``*.mp4``; numbered PNGs in ``out`` when it is a folder (an existing one, or a path ending
-    in a separator or without a suffix). Raises ``ValueError`` for anything else."""
+def open_writer(
+    out: Path, width: int, height: int, fps: float, count: int, projection: str = "perspective", stereo: str = "mono"
+) -> FrameWriter:
+    """An MP4 for ``*.mp4`` (an ``equirect`` one with the spherical metadata of its ``stereo`` layout);
+    numbered PNGs in ``out`` when it is a folder (an existing one, or a path ending in a separator or without
+    a suffix). Raises ``ValueError`` for anything else."""
     out = Path(out)
     if is_video(out):
-        return Mp4Writer(out, width, height, fps)
+        return Mp4Writer(out, width, height, fps, projection, stereo)
     if is_folder(out):
         out.mkdir(parents=True, exist_ok=True)
         return ImageFrames(frame_names(out, count))

@@ -31,7 +31,7 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import Literal
@@ -133,8 +133,8 @@ class VideoJob:
 def path_spec(path: CameraPath) -> dict:
     """A resolved path written out in full (every camera and scene time explicit), so that resolving it again
     gives the same path whatever the scene's camera: JSON keeps every float exactly."""
-    keyframes = [
-        {"t": t, "eye": list(c.eye), "look_at": list(c.look_at), "up": list(c.up), "fov": c.fov, "scene_time": st}
+    keyframes = [  # every camera field (a panorama's projection, stereo and ipd too): none is dropped
+        {"t": t, **asdict(c), "scene_time": st}
         for t, c, st in zip(path.times, path.cameras, path.scene_times, strict=True)
     ]
     return {"fps": path.fps, "keyframes": keyframes, "loop": path.loop}
@@ -393,7 +393,8 @@ class Videos:
 
     def _assemble(self, job: VideoJob) -> None:
         """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""
-        writer = Mp4Writer(job.file, job.width, job.height, job.path.fps)
+        camera = job.path.cameras[0]  # a path keeps one projection: its frames are all laid out alike
+        writer = Mp4Writer(job.file, job.width, job.height, job.path.fps, camera.projection, camera.stereo)
         try:
             for k in range(job.frames):
                 if job.cancelled.is_set():

@@ -296,3 +296,31 @@ def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(
         finally:
             videos.close()
             workshop.close()
+
+
+def test_an_equirect_stereo_path_becomes_a_360_video_that_players_recognise(server):
+    """Keyframes with ``projection: "equirect"`` and ``stereo: "top-bottom"``: frames of both eyes (2H x H
+    each, the left on top), and the MP4's spherical metadata as FFmpeg's reader finds it."""
+    keyframes = [{**key, "projection": "equirect", "stereo": "top-bottom"} for key in PATH["keyframes"]]
+    body = {"scene": "tiny", "path": {**PATH, "fps": 2, "keyframes": keyframes}, "width": 32, "height": 16}
+    answer = server.post("/api/videos", json=body)
+    assert answer.status_code == 202, answer.text
+    assert wait_until(server, answer.json()["id"])["state"] == "done"
+    video = server.get(f"/api/videos/{answer.json()['id']}/file").content
+    with av.open(io.BytesIO(video)) as container:
+        frame = next(container.decode(video=0))
+        assert (frame.width, frame.height) == (32, 32)
+        found = {sd.type.name: bytes(sd) for sd in frame.side_data}
+    assert int.from_bytes(found["SPHERICAL"][:4], "little") == 0  # AV_SPHERICAL_EQUIRECTANGULAR
+    assert int.from_bytes(found["STEREO3D"][:4], "little") == 2  # AV_STEREO3D_TOPBOTTOM
+    refused = server.post("/api/videos", json={**body, "width": 32, "height": 24})
+    assert "width must be 2 x height" in one_line(refused, 422)
+
+
+def test_a_kept_job_keeps_its_cameras_whole():
+    """What the store keeps of a path gives back the same cameras, a panorama's projection, stereo and ipd
+    among them (a job resumed after a restart paints what was asked)."""
+    keyframes = [{**key, "projection": "equirect", "stereo": "side-by-side", "ipd": 0.1} for key in PATH["keyframes"]]
+    path = parse_path({**PATH, "keyframes": keyframes}).resolve(CAMERA)
+    again = parse_path(path_spec(path)).resolve(CAMERA.moved(fov=30))
+    assert again.cameras == path.cameras and again.times == path.times

@@ -1,0 +1,146 @@
+"""VR in a real headless Chromium against a real server, the headset emulated in the page by Meta's WebXR
+runtime ``iwer`` (a Quest 3): entering VR draws both eyes from a stereo top-bottom panorama, a head turn
+changes the view with no message to the server, and the thumbstick walks by sending cameras.
+
+``iwer`` comes from the npm registry at a pinned version, once per machine, into a cache directory (npm is
+on every machine of this project's kind); the test hands it to the page with ``add_init_script``, never
+through the product's client.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from .test_client_360 import CHROMIUM, browser, client, decode  # noqa: F401 - browser is a fixture
+
+IWER_VERSION = "2.5.0"
+CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rcp-tests" / f"iwer-{IWER_VERSION}"
+BUNDLE = Path("node_modules/iwer/build/iwer.min.js")  # the UMD build: defines window.IWER
+HEADSET = """
+window.xrDevice = new IWER.XRDevice(IWER.metaQuest3);
+xrDevice.installRuntime({ forceInstall: true }); // over Chromium's own navigator.xr, which has no headset
+xrDevice.stereoEnabled = true; // two eyes, each its half of the layer
+"""
+
+# the headset's frames drawn a second, over a second of the head turning a little in every one
+XR_RATE = """() => new Promise((done) => {
+  const frames = rcp.vr.frames, start = performance.now();
+  let yaw = 1.2;
+  const timer = setInterval(() => {
+    yaw += 0.01;
+    xrDevice.quaternion.set(0, Math.sin(yaw / 2), 0, Math.cos(yaw / 2));
+    const seconds = (performance.now() - start) / 1000;
+    if (seconds >= 1) { clearInterval(timer); done((rcp.vr.frames - frames) / seconds); }
+  }, 8);
+})"""
+
+pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+
+
+@pytest.fixture(scope="session")
+def iwer() -> str:
+    """The source of ``iwer``'s browser bundle, installed with npm into :data:`CACHE` the first time."""
+    if not (CACHE / BUNDLE).is_file():
+        npm = shutil.which("npm")
+        assert npm, "the VR test needs npm to install iwer (apt-get install npm, or Node.js with npm)"
+        CACHE.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix="iwer-", dir=CACHE.parent))  # a worker's own: xdist runs two
+        command = [npm, "install", "--prefix", str(staging), "--no-audit", "--no-fund", "--ignore-scripts"]
+        subprocess.run([*command, f"iwer@{IWER_VERSION}"], check=True, capture_output=True, timeout=600)
+        try:
+            staging.rename(CACHE)
+        except OSError:  # another worker got there first: its copy is the same
+            shutil.rmtree(staging, ignore_errors=True)
+    return (CACHE / BUNDLE).read_text()
+
+
+def shot(page) -> np.ndarray:
+    """What the next headset frame draws (both eyes, side by side)."""
+    page.evaluate("rcp.vr.shot = null; rcp.vr.capture = true")
+    page.wait_for_function("rcp.vr.shot !== null", timeout=10_000)
+    return decode(page.evaluate("rcp.vr.shot"))
+
+
+def head_turned(page, yaw: float) -> None:
+    """The emulated head turned ``yaw`` radians to the left (about +y), level."""
+    page.evaluate(f"xrDevice.quaternion.set(0, {math.sin(yaw / 2)}, 0, {math.cos(yaw / 2)})")
+
+
+def test_enter_vr_is_offered_only_where_a_headset_is(browser, live_server):  # noqa: F811
+    with client(browser, live_server.url, scene="sky") as page:
+        page.wait_for_timeout(500)  # isSessionSupported has answered
+        assert page.is_hidden("#enter-vr")  # Chromium's own navigator.xr: no immersive-vr here
+
+
+def test_vr_shows_each_eye_its_half_turns_with_the_head_and_walks_with_the_thumbstick(
+    browser,  # noqa: F811
+    live_server,
+    iwer,
+):
+    with client(browser, live_server.url, init_script=iwer + HEADSET) as page:
+        page.click("#enter-vr")  # a click: the session needs a user gesture
+        page.wait_for_function("rcp.vr.frames > 2", timeout=30_000)
+        assert page.text_content("#enter-vr") == "Exit VR"
+        # the client asks for stereo top-bottom panoramas and draws them, each eye in its half of the layer
+        camera = [m for m in page.evaluate("rcp.sent") if m["type"] == "camera"][-1]
+        assert (camera["projection"], camera["stereo"], camera["eyes"]) == ("equirect", "top-bottom", "shared")
+        page.wait_for_function(
+            """(id) => { const f = rcp.overlay.frame; return f.final && f.camera_id === id
+                && rcp.view360.pano.layout.stereo === 'top-bottom'; }""",
+            arg=camera["id"],
+            timeout=60_000,
+        )
+        frame = page.evaluate("rcp.overlay.frame")
+        assert frame["width"] == frame["height"]  # 2H x H an eye, one eye above the other
+        views = page.evaluate("rcp.vr.views")
+        assert [v["eye"] for v in views] == ["left", "right"]
+        (lx, ly, lw, lh), (rx, ry, rw, rh) = views[0]["viewport"], views[1]["viewport"]
+        assert lw > 0 and (rx, ry, rw, rh) == (lx + lw, ly, lw, lh)  # side by side, the same size
+        ahead = shot(page)
+        left, right = ahead[:, : ahead.shape[1] // 2], ahead[:, ahead.shape[1] // 2 :]
+        assert left.std() > 10 and right.std() > 10  # both eyes see the village
+        assert 0 < np.abs(left - right).mean() < 30  # two eyes apart: alike, not the same image
+        # a head turn: another view, drawn from the panorama here, with nothing sent to the server
+        page.wait_for_timeout(300)  # the last refinement's messages are all sent
+        sent, counted = len(page.ws_sent), page.evaluate("rcp.state.messages")
+        frames = page.evaluate("rcp.vr.frames")
+        head_turned(page, 1.2)
+        turned = shot(page)
+        assert np.abs(turned - ahead).mean() > 10
+        assert page.evaluate("rcp.vr.frames") > frames
+        assert len(page.ws_sent) == sent and page.evaluate("rcp.state.messages") == counted
+        rate = page.evaluate(XR_RATE)
+        print(f"\nVR: {rate:.1f} headset frames a second, both eyes drawn in each, {len(page.ws_sent) - sent} messages")
+        assert len(page.ws_sent) == sent
+        head_turned(page, 1.2)  # as it was before the second of turning
+        shot(page)  # a frame drawn with it
+        # the thumbstick pushed forward walks along the head's heading: cameras sent, each a new eye
+        eye = camera["eye"]
+        page.evaluate("xrDevice.controllers.right.updateAxes('thumbstick', 0, -1)")
+        page.wait_for_function("(n) => rcp.state.messages > n", arg=counted, timeout=10_000)
+        page.wait_for_timeout(300)
+        page.evaluate("xrDevice.controllers.right.updateAxes('thumbstick', 0, 0)")
+        moved = [json.loads(m) for m in page.ws_sent[sent:]]
+        assert moved and all(m["type"] == "camera" and m["stereo"] == "top-bottom" for m in moved)
+        step = np.subtract(moved[-1]["eye"], eye)
+        assert abs(step[1]) < 1e-9 and np.hypot(step[0], step[2]) > 0.05  # level, and somewhere
+        # the head turned left by 1.2 rad from the panorama's heading: the walk goes that way
+        hx, _, hz = np.subtract(camera["look_at"], camera["eye"]) / np.linalg.norm(
+            np.subtract(camera["look_at"], camera["eye"])
+        )
+        c, s = math.cos(1.2), math.sin(1.2)
+        expected = np.array([hx * c + hz * s, 0.0, -hx * s + hz * c])  # the heading turned about +y
+        assert np.dot(step / np.linalg.norm(step), expected) > 0.99
+        # leaving VR (from the headset: the emulator's view covers the page) goes back to the mono panorama
+        page.evaluate("rcp.vr.session.end()")
+        page.wait_for_function("rcp.vr.session === null", timeout=10_000)
+        assert page.evaluate("rcp.sent.at(-1)")["stereo"] == "mono"
