@@ -7,6 +7,8 @@ import { PROTOCOL } from "./protocol.js";
 import { checkValue, valueSchema } from "./messages.js";
 
 const OWN = PROTOCOL.paint.$defs.OwnPaintModel.properties;
+const FIRST = ["mapping", "lambda_p", "eye_mapping", "lambda_e"]; // the rest follow in the schema's order
+const FIELDS = [...FIRST.filter((n) => n in OWN), ...Object.keys(OWN).filter((n) => !FIRST.includes(n))];
 
 function element(tag, attributes = {}, ...children) {
   const node = document.createElement(tag);
@@ -54,7 +56,7 @@ export function objectsPanel(container, onChange) {
   const which = element("div", { class: "choices", role: "group", id: "own-target" });
   const controls = element("div", { id: "own-controls", hidden: "" });
   const list = element("ul", { id: "overrides", "aria-label": "Settings per object and material" });
-  for (const name of Object.keys(OWN)) {
+  for (const name of FIELDS) {
     controls.append(
       control(name, (value) => {
         if (!target) return;
