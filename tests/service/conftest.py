@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+from pathlib import Path
 
 import httpx
 import numpy as np
@@ -13,6 +14,29 @@ from PIL import Image
 from websockets.sync.client import connect
 
 from rcp_server.bench.harness import BackgroundServer
+
+CHROMIUM = Path("/usr/bin/chromium")  # Debian's package (.ci/run installs it), driven by Playwright
+CHROMIUM_ARGS = (
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+)
+SOFTWARE_WEBGL = ("--use-angle=swiftshader", "--enable-unsafe-swiftshader")  # the same pixels on every machine
+
+
+@contextlib.contextmanager
+def chromium(*extra: str):
+    """A headless Chromium for the client's tests (``extra``: more command-line switches)."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=[*CHROMIUM_ARGS, *extra])
+        yield browser
+        browser.close()
 
 
 @pytest.fixture(scope="session")

@@ -23,16 +23,8 @@ from rcp_server.painting import paint
 from rcp_server.params import PaintParams
 from rcp_server.service import protocol
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-]
+from .conftest import CHROMIUM, chromium
+
 SIZE = (480, 270)  # the painting's size (small: fast frames); the window is larger, so the panel is open
 WINDOW = (1024, 576)
 WAIT_MS = 30_000  # two shared cores: a refined frame may take a few seconds under load
@@ -42,12 +34,8 @@ pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {
 
 @pytest.fixture(scope="module")
 def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        yield browser
-        browser.close()
+    with chromium() as launched:
+        yield launched
 
 
 @contextlib.contextmanager

@@ -11,7 +11,6 @@ from __future__ import annotations
 import base64
 import contextlib
 import io
-from pathlib import Path
 
 import av
 import httpx
@@ -19,18 +18,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARGS = [
-    "--headless",
-    "--no-sandbox",
-    "--disable-gpu",
-    "--no-first-run",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--use-angle=swiftshader",  # WebGL2 in software: the same pixels on every machine
-    "--enable-unsafe-swiftshader",
-]
+from .conftest import CHROMIUM, SOFTWARE_WEBGL, chromium
+
 WINDOW = (1024, 576)
 SIZE = (480, 270)  # the flat painting's size; the panorama's costs about as much (view360.js panoramaSize)
 WAIT_MS = 60_000
@@ -66,12 +55,8 @@ TURNING = """() => new Promise((done) => {
 
 @pytest.fixture(scope="module")
 def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        yield browser
-        browser.close()
+    with chromium(*SOFTWARE_WEBGL) as launched:
+        yield launched
 
 
 @contextlib.contextmanager

@@ -11,8 +11,8 @@ from pathlib import Path
 import av
 import pytest
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
+from .conftest import CHROMIUM, chromium
+
 WAIT_MS = 60_000
 
 pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
@@ -22,10 +22,7 @@ SIDE = {"eye": [0, 1.6, 0], "look_at": [3, 1.6, -3], "up": [0, 1, 0], "fov": 50}
 
 @pytest.fixture
 def page(live_server, tmp_path):
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+    with chromium() as browser:
         context = browser.new_context(viewport={"width": 1024, "height": 900}, accept_downloads=True)
         page = context.new_page()
         problems = []
