@@ -30,7 +30,8 @@ def points(camera: Camera, region: Region, seen: kernels.Seen) -> tuple[np.ndarr
     d, *_ = directions_at(camera, region, ei + 0.5, ej + 0.5)
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     hit = seen.face >= 0
-    distance = np.where(hit, seen.distance.astype(np.float64), np.nan)
+    distance = np.full(len(hit), np.nan)
+    distance[hit] = seen.distance[hit]  # a miss's distance is whatever the buffer held: not read
     return eyes + distance[:, None] * d, eyes
 
 
