@@ -169,6 +169,17 @@ POLE = math.radians(89.0)  # the latitude up to which a piece's bend is estimate
 
 
 @numba.njit(inline="always")
+def _bend_margin(ys, y_off, eye_h, big):
+    """The cells to grow a piece ``big`` cells across by, at rows ``ys`` of an eye's panorama starting at row
+    ``y_off``: how far its curved edges may stray from the straight ones. A chord of length L of a curve of
+    curvature k strays L^2 k / 8, and a great circle's image bends by about tan(latitude) pi / H a cell; twice
+    that, and :data:`MARGIN` besides."""
+    pole = max(abs(0.5 - (ys[0] - y_off + 0.5) / eye_h), abs(0.5 - (ys[1] - y_off + 0.5) / eye_h))
+    pole = max(pole, abs(0.5 - (ys[2] - y_off + 0.5) / eye_h)) * math.pi
+    return MARGIN + 0.25 * big * big * math.tan(min(pole, POLE)) * math.pi / eye_h
+
+
+@numba.njit(inline="always")
 def _cells(near, xs, ys, z, row0, rows, x_lo, x_hi, y_lo, y_hi, width, margin, wrap):
     """Lower ``near`` to ``z`` in every cell of rows ``row0 .. row0 + rows`` that the triangle ``(xs, ys)`` (grid
     coordinates, centres on the integers) overlaps, grown by ``margin`` cells; the cell columns allowed are
@@ -178,6 +189,18 @@ def _cells(near, xs, ys, z, row0, rows, x_lo, x_hi, y_lo, y_hi, width, margin, w
     first = max(int(math.floor(top_y)), row0, y_lo)
     last = min(int(math.floor(bottom_y)), row0 + rows - 1, y_hi)
     span = x_hi - x_lo + 2  # the eye image's width, for the wrap
+    left = int(math.floor(min(xs[0], xs[1], xs[2]) - margin))
+    right = int(math.floor(max(xs[0], xs[1], xs[2]) + margin))
+    if right - left <= 1 and last - first <= 1:  # a speck: the cells of its box (most triangles of a panorama)
+        for cy in range(first, last + 1):
+            for cx in range(left, right + 1):
+                col = x_lo + (cx - x_lo) % span if wrap else cx
+                if col < x_lo or col > x_hi:
+                    continue
+                cell = (cy - row0) * width + col
+                if z < near[cell]:
+                    near[cell] = z
+        return
     for cy in range(first, last + 1):
         top = cy - margin
         bottom = cy + 1.0 + margin
@@ -279,6 +302,8 @@ def cover_thin(triangles, eye, plane, rows, near):
                     continue  # around a pole
             y_lo = min(ys[0], ys[1], ys[2])
             y_hi = max(ys[0], ys[1], ys[2])
+            x_lo_t = min(xs[0], xs[1], xs[2])
+            x_hi_t = max(xs[0], xs[1], xs[2])
             if y_hi < row0 - 1 or y_lo > row0 + rows + 1:
                 continue  # off these rows of the grid
             if not sphere and (max(xs[0], xs[1], xs[2]) < x_off or min(xs[0], xs[1], xs[2]) > x_off + eye_w - 1):
@@ -298,7 +323,12 @@ def cover_thin(triangles, eye, plane, rows, near):
             if not sphere:
                 _cells(near, xs, ys, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, 0.0, False)
                 continue
-            # ---- on the sphere: pieces small enough that their curved edges are nearly straight ----
+            # ---- on the sphere: pieces small enough that their curved edges are nearly straight (most thin
+            # triangles already are: drawn as projected, without cutting and projecting them again) ----
+            if max(x_hi_t - x_lo_t, y_hi - y_lo) <= SPLIT:
+                margin = _bend_margin(ys, y_off, eye_h, max(x_hi_t - x_lo_t, y_hi - y_lo))
+                _cells(near, xs, ys, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, margin, True)
+                continue
             for k in range(3):
                 for q in range(3):
                     stack[0, k, q] = triangles[f, k, q]
@@ -321,12 +351,7 @@ def cover_thin(triangles, eye, plane, rows, near):
                     max(py[0], py[1], py[2]) - min(py[0], py[1], py[2]),
                 )
                 if big <= SPLIT or top + 2 > stack.shape[0]:
-                    # how far its curved edges may stray from the straight ones: a chord of length L of a curve of
-                    # curvature k strays L^2 k / 8; a great circle's image bends by about tan(latitude) pi / H a cell
-                    pole = max(abs(0.5 - (py[0] - y_off + 0.5) / eye_h), abs(0.5 - (py[1] - y_off + 0.5) / eye_h))
-                    pole = max(pole, abs(0.5 - (py[2] - y_off + 0.5) / eye_h)) * math.pi
-                    bend = math.tan(min(pole, POLE)) * math.pi / eye_h
-                    margin = MARGIN + 0.25 * big * big * bend  # twice the estimate
+                    margin = _bend_margin(py, y_off, eye_h, big)
                     _cells(near, px, py, z_min, row0, rows, x_lo, x_hi, y_first, y_last, width, margin, True)
                     continue
                 # cut the longest edge (in space) at its middle: two pieces
