@@ -3,7 +3,7 @@
 // `rcp render --path` and POST /api/videos read, and rendered to an MP4 by the server with a progress bar.
 //
 // Playback asks the server for the cameras of every frame (POST /api/paths): the spline is declared once,
-// in rcp_server/camerapath.py, so what plays here is what the video paints.
+// in rcp_server/media/camerapath.py, so what plays here is what the video paints.
 
 const RECORD_EVERY_S = 0.5; // a keyframe this often while recording: the spline smooths between them
 const POLL_MS = 500;

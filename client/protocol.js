@@ -1737,7 +1737,7 @@ export const PROTOCOL = {
   }
  }
 };
-// The engine's painting settings (rcp_server/params.py), for those a scene leaves out.
+// The engine's painting settings (rcp_server/settings/params.py), for those a scene leaves out.
 export const ENGINE_DEFAULTS = {
  "mapping": "color",
  "eye_mapping": "color",

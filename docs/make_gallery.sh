@@ -29,7 +29,7 @@ for k, frame in enumerate(frames):
 strip.save(sys.argv[2], quality=88)
 PY
 rm -rf "$its"
-# the styles (rcp_server/styles.py), each on the default scene
+# the styles (rcp_server/settings/styles.py), each on the default scene
 for style in smudge focus fractured cross-hatching layered; do
   rcp -q render default --out "$out/style-$style.jpg" --style "$style" --quality 85
 done

@@ -9,11 +9,11 @@ for _name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
 
 # ruff: noqa: E402 (the imports below must come after the settings above)
 
-from .camera import Camera, Region
-from .mappings import MappingInput, register_mapping
-from .painting import PaintResult, PaintState, paint
-from .params import PaintParams
-from .scenefile import SceneError, load_scene
+from .camera.camera import Camera, Region
+from .painting.loop import PaintResult, PaintState, paint
+from .scene.scenefile import SceneError, load_scene
+from .settings.mappings import MappingInput, register_mapping
+from .settings.params import PaintParams
 
 __all__ = [
     "Camera",

@@ -13,20 +13,21 @@ from pathlib import Path
 
 import numpy as np
 
-from . import images, video
-from .argtypes import finite, positive_int
 from .bench.cli import MissingExtra, add_bench_commands
-from .camera import CAMERA_FIELDS, Camera, CameraError
-from .camerapath import PathError, PathFrame, load_path
-from .cluster import ClusterError
-from .painting import PaintState, paint
-from .params import PAINT_SETTINGS, PER, PaintParams
-from .scene import Scene
-from .scenefile import SceneError, load_environment, load_scene, one_line, scene_names
-from .sequence import paint_sequence
+from .camera.camera import CAMERA_FIELDS, Camera, CameraError
+from .cluster.painter import ClusterError
+from .engine.tracer import EmbreeMissing
+from .media import video
+from .media.camerapath import PathError, PathFrame, load_path
+from .painting.loop import PaintState, paint
+from .painting.sequence import paint_sequence
+from .scene.scene import Scene
+from .scene.scenefile import SceneError, load_environment, load_scene, one_line, scene_names
 from .service.store import DataFolderError
-from .styles import STYLE, STYLES
-from .tracer import EmbreeMissing
+from .settings.params import PAINT_SETTINGS, PER, PaintParams
+from .settings.styles import STYLE, STYLES
+from .util import images
+from .util.argtypes import finite, positive_int
 
 log = logging.getLogger("rcp")
 
@@ -294,7 +295,7 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
         if args.ray is None:
             paintings = paint_sequence(paint_frame, shots, params, args.temporal)
         else:
-            from .cluster import RayPainter
+            from .cluster.painter import RayPainter
 
             painter = RayPainter(None if args.ray == "local" else args.ray, threads=args.threads or 1)
             painter.start()

@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rcp_server.camera import Camera
-from rcp_server.mappings import register_mapping
-from rcp_server.meshes import Part, primitive
-from rcp_server.scene import Environment, Light, Scene, SceneObject
+from rcp_server.camera.camera import Camera
+from rcp_server.scene.meshes import Part, primitive
+from rcp_server.scene.scene import Environment, Light, Scene, SceneObject
+from rcp_server.settings.mappings import register_mapping
 
 SPINNING_BOX = """
 title = "tiny"

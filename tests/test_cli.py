@@ -8,9 +8,9 @@ import pytest
 from conftest import SPINNING_BOX
 from PIL import Image
 
-from rcp_server.camera import Camera
+from rcp_server.camera.camera import Camera
 from rcp_server.cli import camera_path, main
-from rcp_server.scenefile import scene_names
+from rcp_server.scene.scenefile import scene_names
 
 SMALL = ["--width", "48", "--height", "32"]
 

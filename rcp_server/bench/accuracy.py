@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ..painting import default_threads, paint
-from ..scenefile import load_scene
+from ..painting.loop import default_threads, paint
+from ..scene.scenefile import load_scene
 from .metrics import edge_band, psnr, ssim, upscale
 
 SCENES = ("default", "sea", "sky")

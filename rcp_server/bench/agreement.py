@@ -15,11 +15,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..camera import Camera
-from ..painting import paint
-from ..params import PaintParams
-from ..scene import Scene
-from ..scenefile import load_scene, scene_names
+from ..camera.camera import Camera
+from ..painting.loop import paint
+from ..scene.scene import Scene
+from ..scene.scenefile import load_scene, scene_names
+from ..settings.params import PaintParams
 
 WITHIN = 2 / 255
 TARGET = 0.99

@@ -11,7 +11,7 @@ import argparse
 import importlib.util
 from pathlib import Path
 
-from ..argtypes import finite, positive_int
+from ..util.argtypes import finite, positive_int
 
 EXTRA = "pip install '.[bench]' in the rcp source folder"
 # (module to find, requirement to name): what the bench extra adds to a plain install
@@ -105,7 +105,7 @@ def _stability(args: argparse.Namespace) -> None:
 
 
 def _memory(args: argparse.Namespace) -> None:
-    from ..painting import default_threads
+    from ..painting.loop import default_threads
     from .memory import bench_memory
 
     bench_memory(args.models, args.width, args.height, args.threads or default_threads())

@@ -26,11 +26,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..camerapath import parse_path
-from ..cluster import RayPainter, connect
-from ..painting import default_threads, paint
-from ..scenefile import load_scene
-from ..sequence import frame_params, paint_sequence
+from ..cluster.painter import RayPainter, connect
+from ..media.camerapath import parse_path
+from ..painting.loop import default_threads, paint
+from ..painting.sequence import frame_params, paint_sequence
+from ..scene.scenefile import load_scene
 
 
 def walk_path(scene, seconds: float, fps: float) -> dict:
@@ -174,6 +174,6 @@ def bench_cluster(
 
 
 def _u8(image):
-    from ..images import to_uint8
+    from ..util.images import to_uint8
 
     return to_uint8(image)

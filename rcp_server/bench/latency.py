@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 import websockets
 
-from ..painting import paint
-from ..params import PaintParams
-from ..scenefile import load_scene
+from ..painting.loop import paint
+from ..scene.scenefile import load_scene
+from ..settings.params import PaintParams
 from .harness import BackgroundServer, get_json, request
 
 WINDOW = (1280, 720)

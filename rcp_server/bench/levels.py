@@ -11,9 +11,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import kernels
-from ..painting import paint
-from ..scenefile import load_scene
+from ..engine import kernels
+from ..painting.loop import paint
+from ..scene.scenefile import load_scene
 
 SCENES = ("default", "sea", "sky")
 

@@ -14,7 +14,7 @@ import json
 import subprocess
 import sys
 
-from ..scenefile import scene_names
+from ..scene.scenefile import scene_names
 
 CHILD = r"""
 import json, sys, time
@@ -25,8 +25,9 @@ def status():
         if key in ("VmRSS", "VmHWM"):
             out[key] = int(value.split()[0]) * 1024
     return out
-from rcp_server import painting, scenefile
-from rcp_server.params import PaintParams
+from rcp_server.painting import loop as painting
+from rcp_server.scene import scenefile
+from rcp_server.settings.params import PaintParams
 ref, width, height, threads = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
 base = status()
 try:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.ndimage import uniform_filter
 
-from ..imagespace import bilinear
+from ..painting.imagespace import bilinear
 
 PSNR_CAP = 100.0  # dB, reported for identical images (an infinite PSNR does not chart or serialise)
 SSIM_WINDOW = 7  # pixels, a uniform window as scikit-image's default

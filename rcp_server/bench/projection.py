@@ -16,14 +16,14 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import kernels
-from ..camera import Camera, Region, eye_pixels
-from ..painting import paint
-from ..params import PaintParams
-from ..raytrace import visible_faces
-from ..scene import Scene
-from ..scenefile import load_scene
-from ..stereo import partners
+from ..camera.camera import Camera, Region, eye_pixels
+from ..engine import kernels
+from ..painting.loop import paint
+from ..painting.raytrace import visible_faces
+from ..painting.stereo import partners
+from ..scene.scene import Scene
+from ..scene.scenefile import load_scene
+from ..settings.params import PaintParams
 
 RIVALRY = 16 / 255
 

@@ -14,13 +14,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..camera import Region
-from ..painting import STAGES, default_threads, paint, tile_rows
-from ..params import PaintParams
-from ..raytrace import Rays, assign_cameras, setup_tile
-from ..scene import Scene
-from ..scenefile import load_scene
-from ..tracer import EmbreexScene
+from ..camera.camera import Region
+from ..engine.tracer import EmbreexScene
+from ..painting.loop import STAGES, default_threads, paint, tile_rows
+from ..painting.raytrace import Rays, assign_cameras, setup_tile
+from ..scene.scene import Scene
+from ..scene.scenefile import load_scene
+from ..settings.params import PaintParams
 
 
 def _embree_alone(query, origins, directions, tiles, pool, passes: int) -> float:

@@ -24,16 +24,16 @@ from typing import Any
 import numpy as np
 from scipy.ndimage import binary_dilation
 
-from ..camera import Camera, CameraError, Region, directions_at
-from ..camera import project as camera_project
-from ..imagespace import bilinear, lookup_coords
-from ..mappings import register_mapping, unregister_mapping
-from ..meshes import Part, primitive
-from ..painting import paint
-from ..params import EDGES, PaintParams
-from ..raytrace import Rays, assign_cameras, displacements, setup_tile
-from ..scene import Environment, Scene, SceneObject
-from ..scenefile import load_scene
+from ..camera.camera import Camera, CameraError, Region, directions_at
+from ..camera.camera import project as camera_project
+from ..painting.imagespace import bilinear, lookup_coords
+from ..painting.loop import paint
+from ..painting.raytrace import Rays, assign_cameras, displacements, setup_tile
+from ..scene.meshes import Part, primitive
+from ..scene.scene import Environment, Scene, SceneObject
+from ..scene.scenefile import load_scene
+from ..settings.mappings import register_mapping, unregister_mapping
+from ..settings.params import EDGES, PaintParams
 from .metrics import edge_band, psnr
 
 # ---- measures ----

@@ -17,7 +17,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Literal
 
-from ..params import PaintParams
+from ..settings.params import PaintParams
 
 SCALES = (1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25)  # walk-frame sizes, as fractions of the canvas
 FIRST_SCALE = 0.5  # the walk-frame size before any painting has been timed

@@ -19,14 +19,14 @@ from functools import partial
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from .. import images
-from ..camera import Camera, CameraError
-from ..camerawire import camera_of
-from ..painting import Abandoned, PaintResult, PaintState
-from ..params import PaintParams
-from ..raytrace import pick
-from ..scene import Scene
-from ..scenefile import one_line
+from ..camera.camera import Camera, CameraError
+from ..camera.wire import camera_of
+from ..painting.loop import Abandoned, PaintResult, PaintState
+from ..painting.raytrace import pick
+from ..scene.scene import Scene
+from ..scene.scenefile import one_line
+from ..settings.params import PaintParams
+from ..util import images
 from . import protocol
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality

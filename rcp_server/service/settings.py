@@ -12,9 +12,9 @@ from typing import Annotated
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
-from ..painting import default_threads
-from ..params import PaintParams
-from ..untrusted import Limits
+from ..painting.loop import default_threads
+from ..scene.untrusted import Limits
+from ..settings.params import PaintParams
 
 REPOSITORY = Path(__file__).resolve().parent.parent.parent
 CLIENT_DIR = REPOSITORY / "client"

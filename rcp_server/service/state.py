@@ -13,11 +13,11 @@ from fastapi import Depends
 from starlette.applications import Starlette
 from starlette.requests import HTTPConnection
 
-from ..camerawire import spec_of
-from ..painting import paint
-from ..params import PaintParams
-from ..scene import Scene, material_names, object_names
-from ..scenefile import SceneError, load_scene, scene_names
+from ..camera.wire import spec_of
+from ..painting.loop import paint
+from ..scene.scene import Scene, material_names, object_names
+from ..scene.scenefile import SceneError, load_scene, scene_names
+from ..settings.params import PaintParams
 from . import protocol
 from .settings import Settings
 from .store import Store
@@ -26,7 +26,7 @@ from .videos import Videos
 from .workshop import Workshop
 
 if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
-    from ..cluster import RayPainter
+    from ..cluster.painter import RayPainter
 
 log = logging.getLogger("rcp.service")
 
@@ -62,14 +62,14 @@ class Service:
     @classmethod
     def open(cls, settings: Settings) -> Service:
         """Blocking: take the data folder (:class:`~.store.DataFolderError` if another server has it), join Ray
-        when told to (:class:`~rcp_server.cluster.ClusterError` if it does not answer in bounded time), load the
+        when told to (:class:`~rcp_server.cluster.painter.ClusterError` if it does not answer in bounded time), load the
         scenes of ``settings.scenes``, compile the kernels, open the workshop, load the stored uploads and
         resume the stored video jobs."""
         store = Store(settings.data)
         cluster = workshop = videos = None
         try:
             if settings.ray_address is not None:  # joined before serving: healthy means Ray is there
-                from ..cluster import RayPainter
+                from ..cluster.painter import RayPainter
 
                 cluster = RayPainter(settings.ray_address)
                 cluster.start(settings.ray_join_s)

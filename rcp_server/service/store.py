@@ -30,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Region
-from ..paintstate import CHANNELS, PaintState
+from ..camera.camera import Region
+from ..engine.paintstate import CHANNELS, PaintState
 
 log = logging.getLogger("rcp.service")
 

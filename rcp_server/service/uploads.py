@@ -1,4 +1,4 @@
-"""Scenes that visitors upload: read in the sandbox (:mod:`rcp_server.untrusted`), kept apart from the
+"""Scenes that visitors upload: read in the sandbox (:mod:`rcp_server.scene.untrusted`), kept apart from the
 operator's under new unguessable names, within a count and a memory budget, and removed when nobody has
 used them for a while.
 
@@ -23,10 +23,10 @@ from typing import BinaryIO
 
 import numpy as np
 
-from ..meshes import Model
-from ..scene import Scene
-from ..scenefile import SceneError, model_scene
-from ..untrusted import Limits, NoRoom, Refused, parts_from_arrays, read_model
+from ..scene.meshes import Model
+from ..scene.scene import Scene
+from ..scene.scenefile import SceneError, model_scene
+from ..scene.untrusted import Limits, NoRoom, Refused, parts_from_arrays, read_model
 from . import protocol
 from .store import Store, UploadRecord
 
@@ -216,7 +216,7 @@ def stored_scene(folder: Path, name: str, title: str, limits: Limits) -> Scene:
 
 
 def scene_of(model: Model, name: str, title: str) -> Scene:
-    """A model as read from the sandbox's arrays (:func:`~rcp_server.untrusted.parts_from_arrays`) as a scene
+    """A model as read from the sandbox's arrays (:func:`~rcp_server.scene.untrusted.parts_from_arrays`) as a scene
     as its authors made it (``scenefile.model_scene``), its tree built now rather than on the first frame.
     Raises :class:`Refused` for a model no camera can frame."""
     try:

@@ -39,15 +39,15 @@ from typing import Literal
 import numpy as np
 from PIL import Image
 
-from .. import images
-from ..camera import Camera
-from ..camerapath import CameraPath, PathSpec
-from ..cluster import ClusterError, PaintingFailed
-from ..painting import Abandoned, PaintState
-from ..params import PaintParams
-from ..scene import Scene
-from ..sequence import frame_params, paint_results
-from ..video import Mp4Writer
+from ..camera.camera import Camera
+from ..cluster.painter import ClusterError, PaintingFailed
+from ..media.camerapath import CameraPath, PathSpec
+from ..media.video import Mp4Writer
+from ..painting.loop import Abandoned, PaintState
+from ..painting.sequence import frame_params, paint_results
+from ..scene.scene import Scene
+from ..settings.params import PaintParams
+from ..util import images
 from .faults import fault_message, report_fault
 from .settings import Settings
 from .store import Store, VideoRecord, load_state, save_state, write_whole

@@ -23,9 +23,9 @@ from concurrent.futures import Executor, Future, ThreadPoolExecutor
 from functools import partial
 from typing import TypeVar
 
-from ..painting import paint
-from ..params import PaintParams
-from ..scene import Scene
+from ..painting.loop import paint
+from ..scene.scene import Scene
+from ..settings.params import PaintParams
 
 T = TypeVar("T")
 
@@ -183,7 +183,7 @@ class Workshop:
             self._seconds = 0.7 * self._seconds + 0.3 * (time.monotonic() - clock)
 
     def stop(self) -> None:
-        """Stop every painting at its next tile (each raises :class:`~rcp_server.painting.Abandoned`), and any
+        """Stop every painting at its next tile (each raises :class:`~rcp_server.painting.loop.Abandoned`), and any
         that starts from now on at once: the server is stopping."""
         self.stopping = True
 

@@ -19,12 +19,12 @@ from rcp_server.bench.stability import (
     smudge_correlations,
     thin_poles_scene,
 )
-from rcp_server.camera import Camera, CameraError, Region
-from rcp_server.imagespace import bilinear, lookup_coords
-from rcp_server.mappings import MAPPINGS
-from rcp_server.painting import paint
-from rcp_server.params import EDGES, PaintParams
-from rcp_server.raytrace import displacements, setup_tile
+from rcp_server.camera.camera import Camera, CameraError, Region
+from rcp_server.painting.imagespace import bilinear, lookup_coords
+from rcp_server.painting.loop import paint
+from rcp_server.painting.raytrace import displacements, setup_tile
+from rcp_server.settings.mappings import MAPPINGS
+from rcp_server.settings.params import EDGES, PaintParams
 
 W, H = 48, 32
 

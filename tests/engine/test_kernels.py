@@ -9,14 +9,14 @@ directional light plus ambient, two-sided, and the per-pixel means of color, dep
 import numpy as np
 import pytest
 
-from rcp_server import kernels
-from rcp_server.camera import Camera, Region, pixel_frames, sample_targets
-from rcp_server.outlines import NO_INK
-from rcp_server.painting import PaintState
-from rcp_server.paintstate import CHANNELS, channel_shape
-from rcp_server.params import PaintParams
-from rcp_server.raytrace import displacements, setup_tile
-from rcp_server.tracer import Hits
+from rcp_server.camera.camera import Camera, Region, pixel_frames, sample_targets
+from rcp_server.engine import kernels
+from rcp_server.engine.paintstate import CHANNELS, channel_shape
+from rcp_server.engine.tracer import Hits
+from rcp_server.painting.loop import PaintState
+from rcp_server.painting.outlines import NO_INK
+from rcp_server.painting.raytrace import displacements, setup_tile
+from rcp_server.settings.params import PaintParams
 
 KINDS = {
     "zero": kernels.FIELD_ZERO,

@@ -9,8 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from rcp_server.meshes import primitive
-from rcp_server.tracer import EmbreexScene, Hits, Tracer, intersect_rays
+from rcp_server.engine.tracer import EmbreexScene, Hits, Tracer, intersect_rays
+from rcp_server.scene.meshes import primitive
 
 RNG = np.random.default_rng(11)
 

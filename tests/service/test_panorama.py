@@ -10,9 +10,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rcp_server import images
-from rcp_server.camerawire import camera_of
-from rcp_server.painting import paint
+from rcp_server.camera.wire import camera_of
+from rcp_server.painting.loop import paint
+from rcp_server.util import images
 
 from .conftest import decode, post
 
@@ -54,7 +54,7 @@ def test_a_camera_the_projection_cannot_take_is_refused_in_one_line(live_server,
 
 
 def test_the_wire_camera_carries_every_field_of_the_engines():
-    from rcp_server.camerawire import CameraSpec
+    from rcp_server.camera.wire import CameraSpec
 
     spec = CameraSpec(**CAMERA, projection="equirect", stereo="side-by-side", ipd=0.5)
     camera = camera_of(spec)

@@ -1,4 +1,4 @@
-"""Every painting setting, declared once in ``rcp_server/params.py``, reaches every caller.
+"""Every painting setting, declared once in ``rcp_server/settings/params.py``, reaches every caller.
 
 Each test is parametrized by the fields of ``PaintParams``: a new field fails here until it has a value in
 ``CHANGED`` and reaches REST, the WebSocket walk-through, ``rcp render`` and the client. A setting reaches a
@@ -18,11 +18,11 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from rcp_server import images
 from rcp_server.cli import main
-from rcp_server.painting import paint
-from rcp_server.params import PAINT_SETTINGS, PER, PaintParams
+from rcp_server.painting.loop import paint
 from rcp_server.service import protocol
+from rcp_server.settings.params import PAINT_SETTINGS, PER, PaintParams
+from rcp_server.util import images
 
 from .conftest import decode
 

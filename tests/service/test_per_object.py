@@ -9,9 +9,9 @@ import httpx
 import numpy as np
 from PIL import Image
 
-from rcp_server import images
 from rcp_server.cli import main
-from rcp_server.painting import paint
+from rcp_server.painting.loop import paint
+from rcp_server.util import images
 
 from .conftest import decode, post
 

@@ -6,8 +6,8 @@ from dataclasses import replace
 
 import pytest
 
-from rcp_server.params import PaintParams
 from rcp_server.service.planner import FIRST_SCALE, REFINE_SPP, SOON, Plan, Planner, View
+from rcp_server.settings.params import PaintParams
 
 PARAMS = PaintParams(iterations=6, spp=1)
 WIDTH, HEIGHT = 160, 90

@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from rcp_server.camera import Camera
+from rcp_server.camera.camera import Camera
 from rcp_server.service import protocol
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -12,8 +12,8 @@ import httpx
 import numpy as np
 import pytest
 
-from rcp_server import images
-from rcp_server.painting import paint
+from rcp_server.painting.loop import paint
+from rcp_server.util import images
 
 from .conftest import decode, post
 

@@ -18,11 +18,11 @@ import pytest
 from conftest import CAMERA, SPINNING_BOX
 
 from rcp_server.bench.harness import BackgroundServer
-from rcp_server.camerapath import PathSpec, parse_path
-from rcp_server.painting import paint
-from rcp_server.params import PaintParams
+from rcp_server.media.camerapath import PathSpec, parse_path
+from rcp_server.painting.loop import paint
 from rcp_server.service.store import DataFolderError, Store, load_state, save_state
 from rcp_server.service.videos import ANY_CAMERA, path_spec
+from rcp_server.settings.params import PaintParams
 
 from . import upload_files as files
 

@@ -1,4 +1,4 @@
-"""Styles (``rcp_server/styles.py``) reach every caller: REST, the WebSocket, ``rcp render`` and the client.
+"""Styles (``rcp_server/settings/styles.py``) reach every caller: REST, the WebSocket, ``rcp render`` and the client.
 
 A style reaches a path when the painting that comes back is exactly the engine's painting with the style's
 settings over the scene's; explicit settings beside a style win over it.
@@ -12,16 +12,16 @@ import json
 import httpx
 import numpy as np
 import pytest
+from client.test_client import CHROMIUM, browser, client, sent, set_slider, wait_final  # noqa: F401 - browser is a fixture
 from PIL import Image
 
-from rcp_server import images
 from rcp_server.cli import main
-from rcp_server.painting import paint
-from rcp_server.params import PaintParams
-from rcp_server.styles import LOOK, STYLES, get_style, with_style
+from rcp_server.painting.loop import paint
+from rcp_server.settings.params import PaintParams
+from rcp_server.settings.styles import LOOK, STYLES, get_style, with_style
+from rcp_server.util import images
 
 from .conftest import decode
-from .test_client import CHROMIUM, browser, client, sent, set_slider, wait_final  # noqa: F401 - browser is a fixture
 
 SCENE = "sky"
 W, H = 48, 27

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from rcp_server.bench.harness import BackgroundServer
-from rcp_server.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
-from rcp_server.untrusted import Limits, NoRoom, read_model
+from rcp_server.scene.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
+from rcp_server.scene.untrusted import Limits, NoRoom, read_model
 
 from . import upload_files as files
 from .conftest import decode
@@ -250,7 +250,7 @@ def test_an_uploaded_scene_makes_a_video(server):
 def test_a_gltf_arrives_as_authored_its_cameras_offered_and_its_cut_outs_seen_through(server):
     """Through the sandbox: the file's first camera is the scene's, the second a viewpoint; its cut-out shows
     the wall behind it."""
-    from engine.gltf_helpers import GltfBuilder
+    from scene.gltf_helpers import GltfBuilder
 
     b = GltfBuilder()
     b.quad(

@@ -14,17 +14,17 @@ import pytest
 from conftest import CAMERA, SPINNING_BOX, make_scene
 from PIL import Image
 
-from rcp_server import images
 from rcp_server.bench.harness import BackgroundServer
-from rcp_server.camerapath import parse_path
-from rcp_server.cluster import Backoff, ClusterError
-from rcp_server.painting import paint
-from rcp_server.params import PaintParams
-from rcp_server.scenefile import load_scene
+from rcp_server.cluster.painter import Backoff, ClusterError
+from rcp_server.media.camerapath import parse_path
+from rcp_server.painting.loop import paint
+from rcp_server.scene.scenefile import load_scene
 from rcp_server.service.settings import Settings
 from rcp_server.service.store import Store, VideoRecord
 from rcp_server.service.videos import VideoRefused, Videos, path_spec, video_bytes
 from rcp_server.service.workshop import Workshop
+from rcp_server.settings.params import PaintParams
+from rcp_server.util import images
 
 PATH = {
     "fps": 6,

@@ -9,11 +9,11 @@ import time
 
 from fastapi import APIRouter, HTTPException, Request, Response
 
-from ... import images
-from ...camera import CameraError
-from ...camerawire import camera_of
-from ...cluster import ClusterError
-from ...painting import Abandoned
+from ...camera.camera import CameraError
+from ...camera.wire import camera_of
+from ...cluster.painter import ClusterError
+from ...painting.loop import Abandoned
+from ...util import images
 from .. import protocol
 from ..access import admits
 from ..state import ServiceDep

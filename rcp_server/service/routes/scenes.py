@@ -12,7 +12,7 @@ from typing import Annotated
 from fastapi import APIRouter, HTTPException, Path, Request, Response, UploadFile
 from starlette.concurrency import run_in_threadpool
 
-from ...scenefile import SCENE_NAME
+from ...scene.scenefile import SCENE_NAME
 from .. import protocol
 from ..access import presented
 from ..state import Service, ServiceDep, scene_info

@@ -6,7 +6,7 @@ from dataclasses import asdict
 
 from fastapi import APIRouter
 
-from ...styles import STYLES
+from ...settings.styles import STYLES
 from .. import protocol
 
 router = APIRouter(prefix="/api")

@@ -6,9 +6,9 @@ from fastapi import APIRouter, HTTPException, Response
 from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
-from ...camera import CameraError
-from ...camerapath import PathError
-from ...camerawire import spec_of
+from ...camera.camera import CameraError
+from ...camera.wire import spec_of
+from ...media.camerapath import PathError
 from .. import protocol
 from ..state import ServiceDep
 from ..videos import VideoJob, VideoRefused

@@ -1,0 +1,1 @@
+"""The camera: projections, per-pixel frames and the camera on the wire."""

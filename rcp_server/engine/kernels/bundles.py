@@ -1,0 +1,236 @@
+"""The named bundles the kernels take (numba passes tuples of arrays and numbers without copying).
+
+A kernel is called by keyword, with these bundles for the arrays that travel together, so that two
+arguments of the same type cannot swap without an error: positionally, a swap gave a wrong image.
+"""
+
+from __future__ import annotations
+
+from collections import namedtuple
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from ...camera.camera import PROJECTIONS, STEREO, Camera, Region
+from ..paintstate import CHANNELS, channel_shape
+from ..tracer import Hits
+
+_DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
+
+Channels = namedtuple("Channels", CHANNELS, defaults=[_DUMMY[len(channel_shape(name, 1))] for name in CHANNELS[1:]])
+Channels.__doc__ = """Per-pixel data of n pixels, row-major, as PaintState holds it (fields: ``paintstate.CHANNELS``).
+
+color : (n, 3) float32;  depth, object, material : (n,) float32;  uv : (n, 2) float32;  the others
+(n, 3) float32 (``paintstate.PaintState`` says what each holds). A channel that is not recorded is a
+dummy (:func:`channels`; the default of every channel but color): numba needs an array of the right type
+even where it reads or writes nothing."""
+
+
+Records = namedtuple("Records", CHANNELS[1:])  # type: ignore[misc]  # fields from the one list of channels
+Records.__doc__ = """Which channels beside color an iteration records (and compares and carries): a bool each, by
+the names of ``paintstate.CHANNELS``."""
+
+
+def records(channels) -> Records:
+    """The :data:`Records` of the channel names in ``channels``."""
+    return Records(*(name in channels for name in CHANNELS[1:]))
+
+
+class ImagePlane(NamedTuple):
+    """The frame camera's projection and where a tile of the painting lies (``camera.py`` has the formulas,
+    ``projection.py`` the kernels' functions over this)."""
+
+    basis: np.ndarray  # (3, 3) float64, rows r, u, f
+    tan_half: float  # tan(fov / 2)
+    aspect: float  # W / H of an eye's image
+    full_width: int  # the painting's size (both eyes of a stereo painting)
+    full_height: int
+    x0: int  # the tile's top-left pixel
+    y0: int
+    width: int  # the tile's width: its pixels are row-major
+    projection: int  # projection.PERSPECTIVE, EQUIRECT
+    layout: int  # projection.MONO, TOP_BOTTOM, SIDE_BY_SIDE
+    eye_width: int  # W x H: an eye's image
+    eye_height: int
+    half_ipd: float  # a pixel's eye sits at eye + side * half_ipd * r_ij
+    columns: np.ndarray  # (W, 2) float64 cos, sin of the longitude of each column's centre (equirect; else a dummy)
+    rows: np.ndarray  # (H, 2) float64 cos, sin of the latitude of each row's centre
+
+    @classmethod
+    def of(cls, camera: Camera, region: Region) -> ImagePlane:
+        """The projection of ``camera`` and where ``region`` lies in its painting."""
+        width, height = camera.eye_size(region.full_width, region.full_height)
+        equirect = camera.projection == "equirect"
+        columns = rows = np.zeros((1, 2))
+        if equirect:
+            phi = (2.0 * (np.arange(width) + 0.5) / width - 1.0) * np.pi
+            theta = (1.0 - 2.0 * (np.arange(height) + 0.5) / height) * np.pi / 2.0
+            columns = np.stack([np.cos(phi), np.sin(phi)], axis=1)
+            rows = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        return cls(
+            basis=np.stack(camera.basis()),
+            tan_half=camera.half_height(),
+            aspect=width / height,
+            full_width=region.full_width,
+            full_height=region.full_height,
+            x0=region.x0,
+            y0=region.y0,
+            width=region.width,
+            projection=PROJECTIONS.index(camera.projection),
+            layout=STEREO.index(camera.stereo),
+            eye_width=width,
+            eye_height=height,
+            half_ipd=0.5 * camera.ipd if camera.stereo != "mono" else 0.0,
+            columns=columns,
+            rows=rows,
+        )
+
+
+class Field(NamedTuple):
+    """How :func:`~rcp_server.engine.kernels.cast.fill_field` computes a displacement field (see mappings.py)."""
+
+    kind: int  # FIELD_*
+    scale: float  # lambda_p * p for V_p, lambda_e for V_e
+    given: np.ndarray  # (n, 3) float32: the field itself when kind is FIELD_GIVEN, else a dummy
+
+
+class Surfaces(NamedTuple):
+    """What shading reads of the scene's triangles (``scene.Geometry`` has the shapes)."""
+
+    triangles: np.ndarray  # (F, 3, 3) float32 world corners (the geometric normal)
+    normals: np.ndarray  # (F, 3, 3) float32 unit shading normals per corner
+    colors: np.ndarray  # (F, 3, 3) float32 albedo per corner
+    uv: np.ndarray  # (F, 3, 2) float32
+    texture_id: np.ndarray  # (F,) int32, -1 none
+    texels: np.ndarray  # (T, 3) uint8 RGB display colors, every texture packed
+    texture_offset: np.ndarray  # (K,) int64 first texel of each texture
+    texture_width: np.ndarray  # (K,) int64
+    texture_height: np.ndarray  # (K,) int64
+    alpha_texels: np.ndarray  # (A,) uint8 coverage of the textures that have one (``alpha.py`` reads it)
+    texture_alpha_offset: np.ndarray  # (K,) int64 where a texture's coverage starts in alpha_texels, -1 none
+    face_object: np.ndarray  # (F,) int32 the scene's object (``Geometry.object_names``)
+    face_material: np.ndarray  # (F,) int32 row of the material tables; row 0 is plain
+    material_emission: np.ndarray  # (M, 3) float32 display color added after the light
+    material_emission_texture: np.ndarray  # (M,) int32, -1 none
+    material_unlit: np.ndarray  # (M,) bool
+    material_alpha_cutoff: np.ndarray  # (M,) float32, 0 opaque (``alpha.py`` reads it)
+    material_bands: np.ndarray  # (M,) int32 toon shading's bands of light, 0: smooth
+    material_outline: np.ndarray  # (M,) float32 how dark its outlines (``outlines.py``), 0: none
+
+
+class Cast(NamedTuple):
+    """A tile's cameras, as ``cast.cast_rays`` takes them (its docstring has the shapes)."""
+
+    eye: np.ndarray  # (3,) float64
+    plane: ImagePlane
+    xi: np.ndarray  # (n, spp) float64
+    eta: np.ndarray
+    z0: float
+    target: Field
+    eye_field: Field
+    noise: np.ndarray  # (n, 3) float32, or a dummy
+    noise_scale: float
+    write_origins: bool
+
+
+class Compare(NamedTuple):
+    """Which channels decide whether a pixel is painted again (``reuse.changed_pixels``); ``any``: compare at
+    all (else every pixel is painted)."""
+
+    any: bool
+    color: bool
+    channels: Records  # the other channels, each compared as bits
+    color_levels: int
+
+
+class Trace(NamedTuple):
+    """The scene as intersection needs it: Embree's handle (``tracer.Embree``; scene 0 when there are no
+    triangles), the triangles (F, 3, 3) float32 where hits are placed, and whether some of them have cut-outs
+    that rays pass through (``alpha.pass_masked``, stepping at least ``floor`` scene units past a hit)."""
+
+    embree: tuple
+    triangles: np.ndarray
+    masked: bool
+    floor: float
+
+
+class Ink(NamedTuple):
+    """Where outlines are drawn (``outlines.py``): per pixel of the painting, row-major, the ink there and the
+    distance from its eye to the surface it is on (``projection.to_pixel`` finds a hit's pixel). ``any`` False:
+    no material draws outlines (the arrays are dummies)."""
+
+    any: bool
+    ink: np.ndarray  # (H*W,) float32 in [0, 1]
+    distance: np.ndarray  # (H*W,) float32 from the pixel's eye to the surface the ink is on
+
+
+class Shading(NamedTuple):
+    """What ``shade.shade`` needs of a painting beyond the rays, and the channels it records."""
+
+    surfaces: Surfaces
+    environment: np.ndarray  # (h, w, 3) float32
+    light_dir: np.ndarray  # (3,) float64
+    ambient: float
+    lit: bool
+    z_max: float
+    records: Records  # the channels beside color to record
+    ink: Ink  # outlines
+
+
+class Scratch(NamedTuple):
+    """A tile's working buffers, reused by all its iterations (a large allocation inside a kernel costs more
+    than the kernel): n pixels, spp samples."""
+
+    v_p: np.ndarray  # (n, 3) float64
+    v_e: np.ndarray  # (n, 3) float64
+    origins: np.ndarray  # (n*spp, 3) float32
+    directions: np.ndarray  # (n*spp, 3) float32
+    hits: Hits  # of n*spp rays
+    pending: np.ndarray  # (n*spp,) int64 rays left to Embree
+    changed: np.ndarray  # (n,) int64 pixels painted again
+    every: np.ndarray  # (n*spp,) int64 0, 1, 2, ...
+    starts: np.ndarray  # (n*spp, 3) float32 where rays through cut-outs go on (one row when none can)
+    todo: np.ndarray  # (n*spp,) int64 rays through cut-outs, two lists in turn (one entry when none can)
+    next_todo: np.ndarray
+
+
+class Seen(NamedTuple):
+    """What the camera sees at the pixel centres of a ``width x height`` image (the painting's, or a finer
+    one for many samples): the hits of its plain render's rays, row-major (``raytrace.visible_faces``), and
+    where thin geometry lies between the centres (``seen.cover_thin``); ``seen.resolve_seen`` reads it."""
+
+    face: np.ndarray  # (height * width,) int32, -1: the sky
+    distance: np.ndarray  # (height * width,) float32 along the unit ray to the hit, meaningless on the sky
+    near: np.ndarray  # (height * width,) float32 least view depth of a thin part in the cell right-below, or inf
+    width: int
+    height: int
+
+    @classmethod
+    def empty(cls, width: int, height: int) -> Seen:
+        n = width * height
+        return cls(np.empty(n, np.int32), np.empty(n, np.float32), np.full(n, np.inf, np.float32), width, height)
+
+    @classmethod
+    def joined(cls, parts: Sequence[Seen]) -> Seen:
+        """Parts of full-width rows, top to bottom, as one."""
+        face, distance, near = (
+            np.concatenate([getattr(p, name) for p in parts]) for name in ("face", "distance", "near")
+        )
+        return cls(face, distance, near, parts[0].width, sum(p.height for p in parts))
+
+    def rows(self, tile: Region) -> Seen:
+        """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""
+        rows = slice(tile.y0 * self.width, (tile.y0 + tile.height) * self.width)
+        return Seen(self.face[rows], self.distance[rows], self.near[rows], self.width, tile.height)
+
+
+def or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:
+    """``array``, or a one-row float32 stand-in of ``ndim`` dimensions for a kernel argument that is absent."""
+    return array if array is not None else _DUMMY[ndim]
+
+
+def channels(source) -> Channels:
+    """The channels of ``source`` (anything with the attributes of :data:`CHANNELS`, such as a PaintState),
+    dummies for those it does not hold."""
+    return Channels(*(or_dummy(getattr(source, name), len(channel_shape(name, 1))) for name in CHANNELS))

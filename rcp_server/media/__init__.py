@@ -1,0 +1,1 @@
+"""Media: camera paths, videos and spherical video metadata."""

@@ -1,0 +1,430 @@
+"""Camera paths: keyframed views in time, and the cameras of a video's frames between them.
+
+The one JSON format of the client, ``rcp render --path`` and ``POST /api/videos``::
+
+    {"fps": 24, "loop": false, "keyframes": [
+        {"t": 0.0, "eye": [x, y, z], "look_at": [x, y, z], "up": [0, 1, 0], "fov": 60, "scene_time": 0.0}, ...]}
+
+``t`` is seconds along the path and increases from keyframe to keyframe, by :data:`MIN_GAP` at least (the
+first at ``t >= 0``; before it the camera holds). ``up`` and ``fov`` may be left out: the previous keyframe's,
+and for the first one the scene camera's. ``scene_time`` (seconds of the scene's animation) may be left out:
+the scene's clock then runs on with ``t`` from the previous keyframe's (so a path that gives none has
+``scene_time = t``).
+
+Frames are taken every ``1 / fps`` seconds from ``t = 0`` to the last keyframe's ``t``, both included (the
+last one when it falls on that grid). With ``loop``, the path closes: after the last keyframe it returns to
+the first keyframe's view over one mean keyframe interval, every curve is periodic, and the frames stop just
+before the closing time, whose frame would repeat the first one: the video plays in a seamless loop.
+
+Between keyframes (all curves pass through the keyframes at their times, with no overshoot in the scalars):
+
+* The eye follows a centripetal Catmull-Rom spline (knots spaced by the square root of the chord), which
+  has no cusps or self-intersections within a segment. The knot parameter is mapped to time by a monotone
+  cubic (PCHIP) through ``(t_i, knot_i)``, so the eye's velocity is continuous in time, including at the
+  keyframes, and zero where the eye rests (two keyframes at the same eye).
+* The view (forward and up together, as one rotation) follows a cubic rotation spline: continuous angular
+  velocity, the shortest turn between consecutive keyframes, so it never flips or rolls over.
+* The distance to ``look_at`` (the depth mapping's default focus), ``fov`` and ``scene_time`` follow PCHIP:
+  smooth, and never beyond their neighbouring keyframes' values.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterator
+from dataclasses import asdict, dataclass
+from typing import Annotated, Any, NamedTuple
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, create_model
+from scipy.interpolate import PchipInterpolator
+from scipy.spatial.transform import Rotation, RotationSpline
+
+from ..camera.camera import Camera, CameraError, camera_faults
+from ..camera.wire import camera_fields
+from ..scene.scenefile import one_line
+
+MAX_FRAMES = 100_000
+"""The most frames one path may give (over an hour at 24 fps): a bound on what a path file can ask for."""
+MAX_KEYFRAMES = 10_000
+MAX_FPS = 240.0
+MAX_DURATION = 24 * 3600.0  # seconds along a path
+MIN_GAP = 1e-3
+"""Seconds between consecutive keyframes, at least: closer ones are no view a video could show (a frame at the
+highest fps lasts 4 ms), and a curve's slopes through them overflow."""
+
+
+class PathError(ValueError):
+    """A camera path that cannot be used; the message is one line naming the bad field."""
+
+
+# ---- the file format ----
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+HELD = ("projection", "stereo", "ipd", "eyes")
+"""Camera fields a path holds from start to end (a video is one projection): given once, or given alike."""
+CARRIED = frozenset({"up", "fov", *HELD})
+"""Camera fields a keyframe may leave out: then as the keyframe before (at first, the scene camera's)."""
+
+KeyframeSpec = create_model(  # type: ignore[call-overload]  # its camera is declared once, in camera.py
+    "KeyframeSpec",
+    __base__=_Model,
+    __doc__="One keyframe: the camera's view at ``t`` seconds along the path (``fov`` vertical, in degrees).",
+    t=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)], ...),
+    **camera_fields(optional=CARRIED),
+    scene_time=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] | None, None),
+)
+
+
+class PathSpec(_Model):
+    """A camera path as written: frames per second, two or more keyframes in increasing ``t``, ``loop``."""
+
+    fps: Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_FPS)] = 24.0
+    keyframes: Annotated[list[KeyframeSpec], Field(min_length=2, max_length=MAX_KEYFRAMES)]  # type: ignore[valid-type]
+    loop: bool = False
+
+    def resolve(self, scene_camera: Camera) -> CameraPath:
+        """The path with every default filled in (``up`` and ``fov`` from ``scene_camera`` where no earlier
+        keyframe gives them), checked as a whole, for everything a video of it will ask: increasing ``t`` at
+        least :data:`MIN_GAP` apart, valid cameras, a bounded frame count, curves that fit, and a valid camera
+        at every frame (:meth:`CameraPath.check`). Raises :class:`PathError`."""
+        keyframes: list[Any] = list(self.keyframes)  # models built from the camera declaration
+        for k in range(1, len(keyframes)):
+            if not keyframes[k].t >= keyframes[k - 1].t + MIN_GAP:
+                raise PathError(
+                    f"keyframes.{k}.t: must be greater than the previous keyframe's t, by {MIN_GAP:g} s at least "
+                    f"({keyframes[k].t:g} after {keyframes[k - 1].t:g})"
+                )
+        carried = {name: getattr(scene_camera, name) for name in CARRIED}
+        for name in HELD:  # the one value every keyframe then has
+            given = [(k, value) for k, key in enumerate(keyframes) if (value := getattr(key, name)) is not None]
+            for k, value in given[1:]:
+                if value != given[0][1]:
+                    raise PathError(
+                        f"keyframes.{k}.{name}: a path keeps one {name} from start to end, "
+                        f"and keyframe {given[0][0]} gave {given[0][1]!r}"
+                    )
+            if given:
+                carried[name] = given[0][1]
+        times: list[float] = []
+        cameras: list[Camera] = []
+        scene_times: list[float] = []
+        for k, key in enumerate(keyframes):
+            carried.update({name: value for name in ("up", "fov") if (value := getattr(key, name)) is not None})
+            try:
+                cameras.append(Camera(key.eye, key.look_at, **carried))
+            except CameraError as exc:
+                raise PathError(f"keyframes.{k}: {exc}") from None
+            if key.scene_time is not None:
+                scene_times.append(key.scene_time)
+            else:
+                scene_times.append(key.t if k == 0 else scene_times[-1] + key.t - times[-1])
+            times.append(key.t)
+        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop)
+        if path.frame_count > MAX_FRAMES:
+            raise PathError(
+                f"keyframes: {path.duration:g} s at {self.fps:g} fps is {path.frame_count:,} frames, "
+                f"more than the {MAX_FRAMES:,} a path may have"
+            )
+        path.check()
+        return path
+
+
+def parse_path(source: str | bytes | dict) -> PathSpec:
+    """A path from JSON text or an already decoded object; raises :class:`PathError` in one line."""
+    try:
+        if isinstance(source, dict):
+            return PathSpec.model_validate(source)
+        return PathSpec.model_validate_json(source)
+    except ValidationError as exc:
+        raise PathError(one_line(exc)) from None
+
+
+def load_path(file, scene_camera: Camera, fps: float | None = None) -> CameraPath:
+    """A path file, resolved against the scene's camera (``fps``, when given, in place of the file's); every
+    fault is a :class:`PathError` naming the file."""
+    try:
+        with open(file, "rb") as handle:
+            text = handle.read(MAX_KEYFRAMES * 1024)
+    except OSError as exc:
+        raise PathError(f"{file}: {exc.strerror or exc}") from None
+    try:
+        spec = parse_path(text)
+        if fps is not None:
+            spec = parse_path({**spec.model_dump(), "fps": fps})
+        return spec.resolve(scene_camera)
+    except PathError as exc:
+        raise PathError(f"{file}: {exc}") from None
+
+
+# ---- the path between keyframes ----
+
+
+class PathFrame(NamedTuple):
+    """One frame of a path: its index, seconds along the path, the camera, and the scene's time."""
+
+    index: int  # type: ignore[assignment]  # the frame's number, in place of tuple.index (which nobody calls)
+    t: float
+    camera: Camera
+    scene_time: float
+
+
+def _centripetal_knots(points: np.ndarray) -> np.ndarray:
+    """Knots ``(n,)`` spaced by the square root of the distance between consecutive ``points (n, 3)``."""
+    return np.concatenate([[0.0], np.cumsum(np.sqrt(np.linalg.norm(np.diff(points, axis=0), axis=1)))])
+
+
+def _catmull_rom(points: np.ndarray, knots: np.ndarray, segment: np.ndarray, k: np.ndarray) -> np.ndarray:
+    """Points ``(m, 3)`` on the Catmull-Rom curve through ``points (n, 3)`` with ``knots (n,)``, at knot
+    values ``k (m,)`` in segments ``segment (m,)`` (segment i runs from point i to i + 1, 1 <= i <= n - 3: the
+    first and last points only shape the ends). Barry and Goldman's pyramid; a segment of zero length is its
+    point, and a zero-length neighbour chord is replaced by the reflection of the other side."""
+    i = segment
+    p0, p1, p2, p3 = points[i - 1], points[i], points[i + 1], points[i + 2]
+    k0, k1, k2, k3 = knots[i - 1], knots[i], knots[i + 1], knots[i + 2]
+    # a neighbour on the same spot as its end gives no direction: reflect the segment through that end instead
+    flat0 = k1 - k0 <= 0
+    p0 = np.where(flat0[:, None], 2 * p1 - p2, p0)
+    k0 = np.where(flat0, k1 - (k2 - k1), k0)
+    flat3 = k3 - k2 <= 0
+    p3 = np.where(flat3[:, None], 2 * p2 - p1, p3)
+    k3 = np.where(flat3, k2 + (k2 - k1), k3)
+    still = k2 - k1 <= 0
+    span = np.where(still, 1.0, k2 - k1)
+    k0 = np.where(still, k1 - 1.0, k0)
+    k3 = np.where(still, k2 + 1.0, k3)
+
+    def lerp(a, b, ka, kb):
+        w = ((k - ka) / (kb - ka))[:, None]
+        return a + w * (b - a)
+
+    a1, a2, a3 = lerp(p0, p1, k0, k1), lerp(p1, p2, k1, k1 + span), lerp(p2, p3, k2, k3)
+    b1, b2 = lerp(a1, a2, k0, k1 + span), lerp(a2, a3, k1, k3)
+    c = lerp(b1, b2, k1, k1 + span)
+    return np.where(still[:, None], p1, c)
+
+
+@dataclass(frozen=True)
+class CameraPath:
+    """A resolved path: ``times (n,)`` seconds, increasing, with a valid camera and a scene time each."""
+
+    fps: float
+    times: tuple[float, ...]
+    cameras: tuple[Camera, ...]
+    scene_times: tuple[float, ...]
+    loop: bool = False
+
+    @property
+    def end(self) -> float:
+        """Seconds at which the path ends: the last keyframe's ``t``, or with ``loop`` the closing time."""
+        if not self.loop:
+            return self.times[-1]
+        return self.times[-1] + (self.times[-1] - self.times[0]) / (len(self.times) - 1)
+
+    @property
+    def duration(self) -> float:
+        return self.end
+
+    @property
+    def frame_count(self) -> int:
+        """Frames at ``k / fps`` from 0 to :attr:`end` (excluded with ``loop``: it repeats frame 0)."""
+        steps = self.end * self.fps
+        if self.loop:
+            return max(1, math.ceil(steps - 1e-9))
+        return math.floor(steps + 1e-9) + 1
+
+    def check(self) -> None:
+        """Fits the curves and checks the camera of every frame, all at once (a fraction of a second for the
+        longest path): a path that passes paints every one of its frames. Raises :class:`PathError` naming the
+        first frame whose camera is not valid (the curves between keyframes near the coordinate limit can
+        reach past it)."""
+        try:
+            with np.errstate(all="ignore"):
+                curves = self._curves()
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            raise PathError(f"keyframes: no smooth path passes through them ({' '.join(str(exc).split())})") from None
+        times = self.frame_times()
+        with np.errstate(all="ignore"):
+            eye, look_at, up = curves.view(times)
+            fov, scene_time = curves.fov(times), curves.scene_time(times)
+        bad, reason = camera_faults(eye, look_at, up, fov)
+        if reason is None and not np.isfinite(scene_time).all():
+            bad, reason = ~np.isfinite(scene_time), "its scene_time is not a finite number"
+        if reason is not None:
+            k = int(np.argmax(bad))
+            raise PathError(
+                f"keyframes: the camera of frame {k} (t = {times[k]:g} s), between them, is not valid: {reason}"
+            )
+
+    def frame_times(self) -> np.ndarray:
+        """Seconds along the path of every frame, ``(frame_count,)`` float64."""
+        return np.arange(self.frame_count, dtype=np.float64) / self.fps
+
+    def frames(self, start: int = 0, stop: int | None = None) -> Iterator[PathFrame]:
+        """The frames ``start`` to ``stop`` (default all), in order, computed in chunks (a path is lazy)."""
+        stop = self.frame_count if stop is None else min(stop, self.frame_count)
+        times = self.frame_times()
+        for first in range(start, stop, 1024):
+            chunk = times[first : min(stop, first + 1024)]
+            for n, (t, camera, scene_time) in enumerate(zip(chunk, *self.at(chunk), strict=True)):
+                yield PathFrame(first + n, float(t), camera, scene_time)
+
+    def at(self, t: np.ndarray) -> tuple[list[Camera], list[float]]:
+        """Cameras and scene times at seconds ``t (m,)`` along the path (held before the first keyframe)."""
+        t = np.clip(np.asarray(t, dtype=np.float64), self.times[0], self.end)
+        curves = self._curves()
+        eye, look_at, up = curves.view(t)
+        fov, scene_time = curves.fov(t), curves.scene_time(t)
+        held = {name: getattr(self.cameras[0], name) for name in HELD}  # the same in every keyframe
+        cameras = [
+            Camera(tuple(e), tuple(a), tuple(u), float(f), **held)
+            for e, a, u, f in zip(eye, look_at, up, fov, strict=True)
+        ]
+        return cameras, [float(s) for s in scene_time]
+
+    def _curves(self) -> _Curves:
+        cached = self.__dict__.get("_cached_curves")
+        if cached is None:
+            cached = _Curves.fit(self)
+            object.__setattr__(self, "_cached_curves", cached)  # a cache, not state: the path stays frozen
+        return cached
+
+    def to_json(self) -> str:
+        """The resolved path in the file format (every default written out)."""
+        keyframes = [
+            {"t": t, **asdict(c), "scene_time": s}
+            for t, c, s in zip(self.times, self.cameras, self.scene_times, strict=True)
+        ]
+        return json.dumps({"fps": self.fps, "keyframes": keyframes, "loop": self.loop})
+
+
+@dataclass(frozen=True)
+class _Spline:
+    """A centripetal Catmull-Rom curve through points at times, as a function of seconds ``(m,)`` -> ``(m, 3)``.
+    ``points (n, 3)`` and ``times (n,)`` include one neighbour beyond each end, which only shapes the ends."""
+
+    points: np.ndarray
+    knots: np.ndarray
+    knot_of_time: PchipInterpolator
+
+    @classmethod
+    def through(cls, points: np.ndarray, times: np.ndarray) -> _Spline:
+        knots = _centripetal_knots(points)
+        return cls(points, knots, PchipInterpolator(times, knots))
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        k = np.clip(self.knot_of_time(t), self.knots[1], self.knots[-2])
+        # at a knot shared by a resting segment either segment gives the same point
+        segment = np.clip(np.searchsorted(self.knots, k, side="right") - 1, 1, len(self.knots) - 3)
+        return _catmull_rom(self.points, self.knots, segment, k)
+
+
+def _smoothstep(x: np.ndarray) -> np.ndarray:
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass(frozen=True)
+class _Curves:
+    """The fitted curves of a path, each a function of seconds ``(m,)``."""
+
+    eye: _Spline
+    target: _Spline
+    rotation: RotationSpline
+    distance: PchipInterpolator
+    fov: PchipInterpolator
+    scene_time: PchipInterpolator
+
+    def view(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Eye, look-at point and up vector at seconds ``t (m,)``, each ``(m, 3)``.
+
+        The view looks at the look-at points' own spline, so an orbit keeps its target on screen; where that
+        direction strays from the rotation spline's (the eye passing its target, a turn on the spot) the
+        view blends smoothly into the rotation spline's, which cannot flip. The blend weight is 1 at every
+        keyframe, where both directions are the keyframe's."""
+        eye, target = self.eye(t), self.target(t)
+        rotation = self.rotation(t).as_matrix()  # columns: right, up, backward (the view looks down -z)
+        turned, up = -rotation[:, :, 2], rotation[:, :, 1]
+        distance = self.distance(t)
+        offset = target - eye
+        reach = np.linalg.norm(offset, axis=1)
+        aimed = offset / np.maximum(reach, 1e-300)[:, None]
+        agree = np.einsum("ij,ij->i", aimed, turned)
+        # fully the look-at spline's within 25 degrees of the rotation's and at half the distance or more;
+        # fully the rotation's beyond 60 degrees or under a fifth of the distance
+        w = _smoothstep((agree - 0.5) / (0.906 - 0.5)) * _smoothstep((reach / distance - 0.2) / 0.3)
+        forward = _slerp(turned, aimed, w)
+        look_at = eye + forward * ((1 - w) * distance + w * reach)[:, None]
+        return eye, look_at, up
+
+    @classmethod
+    def fit(cls, path: CameraPath) -> _Curves:
+        times = np.asarray(path.times)
+        eyes = np.array([c.eye for c in path.cameras])
+        targets = np.array([c.look_at for c in path.cameras])
+        rotations = Rotation.from_matrix(np.stack([_view_matrix(c) for c in path.cameras]))
+        distance = np.linalg.norm(targets - eyes, axis=1)
+        fov = np.array([c.fov for c in path.cameras])
+        scene_time = np.asarray(path.scene_times)
+        n = len(times)
+        if path.loop:
+            # close the path with the first view after one mean interval, and wrap the ends (one keyframe on
+            # each side is all a local curve needs; the rotation spline is global, so it gets the whole loop
+            # on either side)
+            period = path.end - times[0]
+            closing = scene_time[-1] + path.end - times[-1]
+            wrap = np.r_[n - 1, np.arange(n), 0, 1]
+            times_wrapped = times[wrap] + np.r_[-period, np.zeros(n), period, period]
+            rotation = RotationSpline(
+                np.r_[times - period, times, times + period, times[0] + 2 * period],
+                rotations[np.r_[wrap[1:-2], wrap[1:-2], wrap[1:-2], 0]],
+            )
+            eye = _Spline.through(eyes[wrap], times_wrapped)
+            target = _Spline.through(targets[wrap], times_wrapped)
+            # the scene's clock runs on through the closing segment and, before the first keyframe, as long
+            scene_time = np.r_[
+                scene_time[0] - (closing - scene_time[-1]), scene_time, closing, closing + scene_time[1] - scene_time[0]
+            ]
+            times, distance, fov = times_wrapped, distance[wrap], fov[wrap]
+        else:
+            # phantom neighbours beyond the ends: the reflections of the second and second-to-last keyframes
+            rotation = RotationSpline(times, rotations)
+            ends = np.r_[2 * times[0] - times[1], times, 2 * times[-1] - times[-2]]
+
+            def padded(p):
+                return np.concatenate([2 * p[:1] - p[1:2], p, 2 * p[-1:] - p[-2:-1]])
+
+            eye, target = _Spline.through(padded(eyes), ends), _Spline.through(padded(targets), ends)
+        return cls(
+            eye=eye,
+            target=target,
+            rotation=rotation,
+            distance=PchipInterpolator(times, distance),
+            fov=PchipInterpolator(times, fov),
+            scene_time=PchipInterpolator(times, scene_time),
+        )
+
+
+def _slerp(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Unit vectors ``(m, 3)`` a fraction ``w (m,)`` of the way along the great circle from ``a`` to ``b``
+    (unit, ``(m, 3)``, never opposite where ``w > 0``)."""
+    cos = np.clip(np.einsum("ij,ij->i", a, b), -1.0, 1.0)
+    angle = np.arccos(cos)
+    sin = np.sin(angle)
+    small = sin < 1e-9
+    safe = np.where(small, 1.0, sin)
+    wa = np.where(small, 1 - w, np.sin((1 - w) * angle) / safe)
+    wb = np.where(small, w, np.sin(w * angle) / safe)
+    v = wa[:, None] * a + wb[:, None] * b
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _view_matrix(camera: Camera) -> np.ndarray:
+    """The camera's orientation, (3, 3): columns right, up and backward (``-f``), a proper rotation."""
+    r, u, f = camera.basis()
+    return np.stack([r, u, -f], axis=1)

@@ -1,0 +1,72 @@
+"""Outlines, a shading result: ink where the object, the surface normal or the depth jumps between
+neighbouring pixels of the frame camera's plain view (the paper's "nonphotorealistic shaders").
+
+What the pixel centres see is traced once a painting (``raytrace.visible_faces``); a pixel gets ink where
+it and a neighbour (right or below) show different objects, normals more than ``CREASE_DEGREES`` apart, or
+depths more than ``DEPTH_JUMP`` apart (relative). Shading then inks a hit of a material with an outline when
+it lies on the surface its pixel of that view saw (``kernels.shade``): every iteration shades its displaced
+rays so, and the painting smudges the lines like any other paint.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ..camera.camera import Camera, Region, directions_at, eye_pixels, pixel_frames
+from ..engine import kernels
+from ..scene.scene import Geometry
+
+CREASE_DEGREES = 40.0  # a fold sharper than this is drawn (a smooth sphere's facets are not)
+DEPTH_JUMP = 0.1  # a step in depth of more than a tenth is drawn (a floor seen at a grazing angle is not)
+
+NO_INK = kernels.Ink(False, np.zeros(1, np.float32), np.zeros(1, np.float32))
+
+
+def edges(face: np.ndarray, distance: np.ndarray, camera: Camera, geometry: Geometry, width: int, height: int):
+    """Ink (H*W,) float32 (1 on an edge, else 0) and each pixel's distance to what it sees (H*W,) float32 (0 on
+    the sky), from what the pixel centres of a ``width x height`` painting see: ``face`` (H*W,) int32 (-1 the
+    sky) and ``distance`` along each unit primary ray. Neighbours in two eyes' images are not compared."""
+    region = Region(width, height)
+    i, j = region.pixel_coords()
+    side, ei, ej = eye_pixels(camera, region, i, j)
+    directions, *_ = directions_at(camera, region, ei + 0.5, ej + 0.5)
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    *_, forward = pixel_frames(camera, region, i, j)
+    hit = face >= 0
+    depth = np.where(hit, distance * (directions * forward).sum(axis=1), np.inf).reshape(height, width)
+    eye = side.reshape(height, width)
+    tri = geometry.triangles[np.maximum(face, 0)].astype(np.float64)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
+    normal *= np.where(np.einsum("nk,nk->n", normal, directions) > 0, -1.0, 1.0)[:, None]  # towards the eye
+    normal = normal.reshape(height, width, 3)
+    obj = np.where(hit, geometry.face_object[np.maximum(face, 0)], -1).reshape(height, width)
+    crease = math.cos(math.radians(CREASE_DEGREES))
+    ink = np.zeros((height, width), bool)
+    for a, b in (
+        ((slice(None), slice(None, -1)), (slice(None), slice(1, None))),
+        ((slice(None, -1),), (slice(1, None),)),
+    ):
+        with np.errstate(invalid="ignore"):  # the sky's depth is infinite
+            jump = (obj[a] != obj[b]) | (np.abs(depth[a] - depth[b]) > DEPTH_JUMP * np.minimum(depth[a], depth[b]))
+        jump |= (obj[a] >= 0) & (obj[b] >= 0) & ((normal[a] * normal[b]).sum(axis=-1) < crease)
+        jump &= eye[a] == eye[b]
+        ink[a] |= jump
+        ink[b] |= jump
+    return ink.astype(np.float32).ravel(), np.where(hit, distance, 0.0).astype(np.float32)
+
+
+def ink(scene, time: float, camera: Camera, width: int, height: int) -> kernels.Ink:
+    """The ink of a painting of ``scene`` at ``time`` seen by ``camera`` at ``width x height``; none (no pass
+    at all) unless some material draws outlines."""
+    from .raytrace import visible_faces  # the camera's pass; raytrace takes the ink from here
+
+    geometry, tracer = scene.geometry(time)
+    if tracer is None or not (geometry.material_outline > 0).any():
+        return NO_INK
+    seen = kernels.Seen.empty(width, height)
+    visible_faces(scene, time, camera, Region(width, height), seen)
+    grid, far = edges(seen.face, seen.distance, camera, geometry, width, height)
+    return kernels.Ink(True, grid, far)

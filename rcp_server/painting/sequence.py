@@ -1,0 +1,70 @@
+"""Painting a sequence of frames, in order, per frame or temporally; whoever paints a frame is given.
+
+A sequence is a list of shots (a camera and a scene time each): a camera path's frames
+(``camerapath.PathFrame``) or ``rcp render --frames``' orbit and walk. Per-frame mode paints every frame from
+``I_0`` with all of ``params.iterations``; temporal mode (``temporal=K``) paints the first frame so, then each
+later one with ``K`` iterations from the previous frame's painting (the paper's ``I_n = F(I_{n-1}, S(n))``).
+That rule lives here only: the threads of one machine (:func:`paint_sequence`), the service's shared pool and
+Ray's actors (``cluster.py``) all follow it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import replace
+from typing import Protocol
+
+import numpy as np
+
+from ..camera.camera import Camera
+from ..engine.paintstate import PaintState
+from ..settings.params import PaintParams
+
+
+class Shot(Protocol):
+    """A frame to paint: what the camera sees at what scene time (``camerapath.PathFrame`` is one)."""
+
+    @property
+    def camera(self) -> Camera: ...
+
+    @property
+    def scene_time(self) -> float: ...
+
+
+class FramePainter(Protocol):
+    """Paints one frame: ``(camera, scene_time, params, previous) -> PaintResult`` (``painting.paint`` with the
+    scene, the size and where the tiles run already bound)."""
+
+    def __call__(self, camera: Camera, scene_time: float, params: PaintParams, previous: PaintState | None, /): ...
+
+
+def frame_params(params: PaintParams, temporal: int | None, index: int) -> PaintParams:
+    """The settings of frame ``index``: all iterations from ``I_0``, or ``temporal`` from the previous frame."""
+    return params if not temporal or index == 0 else replace(params, iterations=temporal)
+
+
+def paint_sequence(
+    paint_frame: FramePainter, shots: Iterable[Shot], params: PaintParams, temporal: int | None = None
+) -> Iterator[np.ndarray]:
+    """The paintings of ``shots`` in order, each (h, w, 3) float32, painted one after another."""
+    for result in paint_results(paint_frame, shots, params, temporal):
+        yield result.image
+
+
+def paint_results(
+    paint_frame: FramePainter,
+    shots: Iterable[Shot],
+    params: PaintParams,
+    temporal: int | None = None,
+    first: int = 0,
+    previous: PaintState | None = None,
+) -> Iterator:
+    """:func:`paint_sequence`'s paintings as the painter's results (image and state), from frame ``first`` of
+    the sequence on (``shots`` start there); temporal from ``first > 0``, ``previous`` is frame ``first - 1``'s
+    state (a job that resumes after a restart)."""
+    if temporal and first > 0 and previous is None:
+        raise ValueError("a temporal sequence resumed past its first frame needs the previous frame's state")
+    for index, shot in enumerate(shots, first):
+        result = paint_frame(shot.camera, shot.scene_time, frame_params(params, temporal, index), previous)
+        previous = result.state if temporal else None
+        yield result

@@ -1,0 +1,1 @@
+"""Painting settings: the parameters, the mappings that displace cameras, and the styles."""
