@@ -16,7 +16,7 @@ import numpy as np
 from .bench.cli import MissingExtra, add_bench_commands
 from .camera.camera import CAMERA_FIELDS, Camera, CameraError
 from .cluster.painter import ClusterError
-from .engine.tracer import EmbreeMissing
+from .engine.kernels.embree import EmbreeMissing
 from .media import video
 from .media.camerapath import PathError, PathFrame, load_path
 from .painting.loop import PaintState, paint

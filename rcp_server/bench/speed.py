@@ -15,7 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..camera.camera import Region
-from ..engine.tracer import EmbreexScene
+from ..engine.kernels.embree import EmbreexScene
 from ..painting.loop import STAGES, default_threads, paint, tile_rows
 from ..painting.raytrace import Rays, assign_cameras, setup_tile
 from ..scene.scene import Scene

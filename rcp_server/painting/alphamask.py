@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..engine import kernels
-from ..engine.tracer import Hits, Tracer
+from ..engine.kernels.embree import Hits, Tracer
 from ..scene.scene import Geometry
 
 

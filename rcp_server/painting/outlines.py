@@ -1,9 +1,9 @@
 """Outlines, a shading result: ink where the object, the surface normal or the depth jumps between
 neighbouring pixels of the frame camera's plain view (the paper's "nonphotorealistic shaders").
 
-What the pixel centres see is traced once a painting (``raytrace.visible_faces``); a pixel gets ink where
-it and a neighbour (right or below) show different objects, normals more than ``CREASE_DEGREES`` apart, or
-depths more than ``DEPTH_JUMP`` apart (relative). Shading then inks a hit of a material with an outline when
+What the pixel centres see is traced once a painting (``raytrace.ink``, the one caller of :func:`edges`); a
+pixel gets ink where it and a neighbour (right or below) show different objects, normals more than
+``CREASE_DEGREES`` apart, or depths more than ``DEPTH_JUMP`` apart (relative). Shading then inks a hit of a material with an outline when
 it lies on the surface its pixel of that view saw (``kernels.shade``): every iteration shades its displaced
 rays so, and the painting smudges the lines like any other paint.
 """
@@ -56,17 +56,3 @@ def edges(face: np.ndarray, distance: np.ndarray, camera: Camera, geometry: Geom
         ink[a] |= jump
         ink[b] |= jump
     return ink.astype(np.float32).ravel(), np.where(hit, distance, 0.0).astype(np.float32)
-
-
-def ink(scene, time: float, camera: Camera, width: int, height: int) -> kernels.Ink:
-    """The ink of a painting of ``scene`` at ``time`` seen by ``camera`` at ``width x height``; none (no pass
-    at all) unless some material draws outlines."""
-    from .raytrace import visible_faces  # the camera's pass; raytrace takes the ink from here
-
-    geometry, tracer = scene.geometry(time)
-    if tracer is None or not (geometry.material_outline > 0).any():
-        return NO_INK
-    seen = kernels.Seen.empty(width, height)
-    visible_faces(scene, time, camera, Region(width, height), seen)
-    grid, far = edges(seen.face, seen.distance, camera, geometry, width, height)
-    return kernels.Ink(True, grid, far)

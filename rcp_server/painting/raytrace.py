@@ -15,8 +15,8 @@ import numpy as np
 
 from ..camera.camera import RAY_DTYPE, Camera, Region, pixel_frames, sample_targets
 from ..engine import kernels
+from ..engine.kernels.embree import Embree, Hits, Tracer, intersect_rays
 from ..engine.paintstate import PaintState
-from ..engine.tracer import Embree, Hits, Tracer, intersect_rays
 from ..scene.scene import Scene
 from ..settings.mappings import MappingInput, get_mapping
 from ..settings.params import PaintParams
@@ -250,7 +250,7 @@ class Frame:
             lit=light is not None,
             z_max=float(z_max),
             records=kernels.records(reads),
-            ink=outlines.ink(scene, time, camera, width, height),
+            ink=ink(scene, time, camera, width, height),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
         trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry))
@@ -351,3 +351,15 @@ class TracedTile:
 
 
 _NO_SEEN = kernels.Seen.empty(1, 1)
+
+
+def ink(scene, time: float, camera: Camera, width: int, height: int) -> kernels.Ink:
+    """The ink of a painting of ``scene`` at ``time`` seen by ``camera`` at ``width x height``; none (no pass
+    at all) unless some material draws outlines."""
+    geometry, tracer = scene.geometry(time)
+    if tracer is None or not (geometry.material_outline > 0).any():
+        return outlines.NO_INK
+    seen = kernels.Seen.empty(width, height)
+    visible_faces(scene, time, camera, Region(width, height), seen)
+    grid, far = outlines.edges(seen.face, seen.distance, camera, geometry, width, height)
+    return kernels.Ink(True, grid, far)

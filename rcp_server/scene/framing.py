@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from ..camera.camera import RAY_DTYPE, Camera
-from ..engine.tracer import Tracer
+from ..engine.kernels.embree import Tracer
 from .gltf import PunctualLight, Viewpoint, triple
 from .scene import Geometry, Light
 

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..camera.camera import Camera
-from ..engine.tracer import Tracer
+from ..engine.kernels.embree import Tracer
 from ..settings.params import PaintParams
 from ..settings.styles import with_style
 from .meshes import PLAIN, Material, Part, corner_normals, rgb8

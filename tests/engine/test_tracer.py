@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from rcp_server.engine.tracer import EmbreexScene, Hits, Tracer, intersect_rays
+from rcp_server.engine.kernels.embree import EmbreexScene, Hits, Tracer, intersect_rays
 from rcp_server.scene.meshes import primitive
 
 RNG = np.random.default_rng(11)

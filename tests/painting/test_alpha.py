@@ -6,7 +6,7 @@ import numpy as np
 
 from rcp_server.engine import kernels
 from rcp_server.engine.kernels.alpha import masked_rays
-from rcp_server.engine.tracer import Hits
+from rcp_server.engine.kernels.embree import Hits
 
 
 def ref_masked(rays, face, b1, b2, uv, texture_id, alphas, offsets, widths, heights, face_material, cutoff):

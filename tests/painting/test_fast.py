@@ -13,8 +13,8 @@ from conftest import CAMERA, facing_plane, make_scene, noise_texture, sphere, tr
 
 from rcp_server.camera.camera import Camera, Region
 from rcp_server.engine import kernels
+from rcp_server.engine.kernels.embree import Hits
 from rcp_server.engine.paintstate import PaintState
-from rcp_server.engine.tracer import Hits
 from rcp_server.painting.loop import paint, see, seen_grid
 from rcp_server.painting.raytrace import Rays, assign_cameras, setup_tile, visible_faces
 from rcp_server.scene.meshes import primitive

@@ -13,7 +13,7 @@ from conftest import CAMERA, facing_plane, make_scene, translate
 from rcp_server.camera.camera import Camera, Region
 from rcp_server.camera.camera import project as camera_project
 from rcp_server.engine import kernels
-from rcp_server.engine.tracer import Hits
+from rcp_server.engine.kernels.embree import Hits
 from rcp_server.painting.loop import paint
 from rcp_server.painting.raytrace import Rays, assign_cameras, setup_tile, thin_parts, visible_faces
 from rcp_server.scene.meshes import primitive

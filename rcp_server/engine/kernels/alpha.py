@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from ..tracer import intersect_rays
+from .embree import intersect_rays
 from .jit import jit
 from .triangle import place_hits
 

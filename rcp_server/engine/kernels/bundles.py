@@ -14,7 +14,7 @@ import numpy as np
 
 from ...camera.camera import PROJECTIONS, STEREO, Camera, Region
 from ..paintstate import CHANNELS, channel_shape
-from ..tracer import Hits
+from .embree import Hits
 
 _DUMMY = {1: np.zeros(1, np.float32), 2: np.zeros((1, 3), np.float32)}
 

@@ -6,10 +6,10 @@ of its own module, tested there against its numpy reference; this one only chain
 
 from __future__ import annotations
 
-from ..tracer import intersect_rays
 from .alpha import pass_masked
 from .cast import cast_rays
 from .clock import cycles
+from .embree import intersect_rays
 from .jit import jit
 from .reuse import carry, changed_pixels
 from .seen import resolve_seen

@@ -26,7 +26,8 @@ from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
 
-from ..camera.camera import RAY_DTYPE
+from ...camera.camera import RAY_DTYPE
+from .triangle import place_hits
 
 
 class Hits(NamedTuple):
@@ -334,8 +335,6 @@ class Tracer:
         """Closest hit of each ray (or of the listed ``rays``, (m,) int64, into hits of all n). origins,
         directions : (n, 3) float32, directions unit length. Rays with a non-finite component miss. The face
         is Embree's; where the ray meets it is ``kernels.place_hits``'s (one definition, whoever finds the face)."""
-        from .kernels import place_hits  # the kernels import this module's binding
-
         n = len(origins)
         hits = Hits.misses(n)
         listed = np.arange(n) if rays is None else rays
