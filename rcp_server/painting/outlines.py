@@ -3,9 +3,9 @@ neighbouring pixels of the frame camera's plain view (the paper's "nonphotoreali
 
 What the pixel centres see is traced once a painting (``raytrace.ink``, the one caller of :func:`edges`); a
 pixel gets ink where it and a neighbour (right or below) show different objects, normals more than
-``CREASE_DEGREES`` apart, or depths more than ``DEPTH_JUMP`` apart (relative). Shading then inks a hit of a material with an outline when
-it lies on the surface its pixel of that view saw (``kernels.shade``): every iteration shades its displaced
-rays so, and the painting smudges the lines like any other paint.
+``CREASE_DEGREES`` apart, or depths more than ``DEPTH_JUMP`` apart (relative). Shading then inks a hit of a
+material with an outline when it lies on the surface its pixel of that view saw (``kernels.shade``): every
+iteration shades its displaced rays so, and the painting smudges the lines like any other paint.
 """
 
 from __future__ import annotations
