@@ -109,6 +109,18 @@ class PaintState:
         b = a + tile.pixel_count
         return PaintState(tile, blank=self.blank, **self._pick(slice(a, b)))
 
+    def first(self, n: int, region: Region) -> PaintState:
+        """This state's first ``n`` pixels, as a state of ``region`` (of ``n`` pixels): views to write into."""
+        return PaintState(region, blank=self.blank, **self._pick(slice(n)))
+
+    def write_into(self, target: PaintState) -> None:
+        """Copy this state's values into ``target`` (of as many pixels), channel by channel: every channel
+        ``target`` holds must be here."""
+        for name in CHANNELS:
+            out = getattr(target, name)
+            if out is not None:
+                out[...] = getattr(self, name)
+
     def paste_color(self, image: np.ndarray) -> None:
         """Write this state's color into ``image`` (H, W, 3) float32 of the full image, at this region's rows
         (a region of full-width rows)."""

@@ -12,9 +12,12 @@ render. ``I_0`` is mid-grey and moves no ray, so iteration 1 is the plain ray-tr
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ThreadPoolExecutor
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field
+from functools import partial
+from typing import Protocol
 
 import numpy as np
 
@@ -26,6 +29,7 @@ from ..settings.params import PaintParams
 from ..util.stopwatch import STAGES, Stopwatch, total
 from . import imagespace, raytrace, stereo
 from .raytrace import setup_tile
+from .workspace import Workspace
 
 __all__ = [
     "STAGES",
@@ -33,6 +37,7 @@ __all__ = [
     "PaintResult",
     "PaintState",
     "TILE_WORK",
+    "Workspace",
     "default_threads",
     "paint",
     "see",
@@ -51,26 +56,6 @@ class PaintResult:
     @property
     def image(self) -> np.ndarray:
         return self.state.image()
-
-
-def _run_tile(
-    iterate: TileIteration,
-    state: PaintState,
-    iterations: int,
-    keep: list[np.ndarray] | None,
-    should_stop: Callable[[], bool] | None,
-) -> tuple[PaintState, dict[str, float]]:
-    """``iterations`` iterations of one tile from ``state``: the tile's last state and its stage seconds.
-    ``keep`` (full images, one per iteration) gets each iteration's color at the tile's rows."""
-    watch = Stopwatch()
-    for iteration in range(iterations):
-        if should_stop is not None and should_stop():
-            raise Abandoned
-        state = iterate(state, watch)
-        with watch.stage("bookkeeping"):
-            if keep is not None:
-                state.paste_color(keep[iteration])
-    return state, watch.seconds
 
 
 TILE_WORK = 1 << 18  # most rays x iterations one tile may hold its thread for (about 50 ms on our machine)
@@ -105,6 +90,7 @@ def paint(
     pool: Executor | None = None,
     should_stop: Callable[[], bool] | None = None,
     seen: kernels.Seen | None = None,
+    workspace: Workspace | None = None,
 ) -> PaintResult:
     """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera`` (a stereo
     camera's painting holds both eyes' images: ``camera.image_size`` of one eye's).
@@ -120,135 +106,295 @@ def paint(
     ``seen``: what the pixel centres of the whole :func:`seen_grid` see (:func:`see`), found already, for a
     region painted apart from the rest of its image (on Ray, a band an actor): else the painting finds it
     itself, over the whole image, whatever its region.
+
+    ``workspace``: the buffers to paint in (:class:`workspace.Workspace`), kept by a caller that paints many
+    frames; the result then lives until the painting after next on it.
     """
+    job = Job.of(
+        scene, camera, width, height, params, time, previous, region, threads, keep_iterations, pool, should_stop,
+        seen, workspace or Workspace(),
+    )  # fmt: skip
+    method: Method = ImageSpace(job) if params.method == "image" else FastAtRest(job) if job.seen else Traced(job)
+    seconds = method.paint(TileLoop(job))
+    return PaintResult(job.result, total(seconds), job.keep or [])
+
+
+def check(scene: Scene, camera: Camera, width: int, height: int, params: PaintParams, region: Region) -> None:
+    """Every reason not to paint ``region`` of a ``width x height`` painting with these settings: ValueError
+    (or ``CameraError``) saying which."""
     camera.check_painting(width, height)
-    region = region or Region(width, height)
+    full = Region(width, height)
     if (region.full_width, region.full_height) != (width, height):
         raise ValueError("region belongs to an image of another size")
-    if params.method == "image" and region != Region(width, height):
+    if params.method == "image" and region != full:
         raise ValueError("the image-space method needs the full image: its lookups reach anywhere on screen")
     shared = camera.eyes == "shared" and camera.stereo != "mono"
-    if shared and (region != Region(width, height) or params.method != "raytrace"):
+    if shared and (region != full or params.method != "raytrace"):
         raise ValueError("eyes that share their smudges are traced, over the whole painting (the right reads the left)")
     scene.check_names(params)
-    if previous is None or previous.region != region:
-        previous = PaintState.canvas(region)
-    threads = threads or default_threads()
-    frame = raytrace.Frame.of(
-        scene, time, camera, params, width, height
-    )  # the scene as every tile's kernels take it, once
-    tiles = region.tiles(tile_rows(region, threads, params.spp * params.iterations))
-    keep = [np.empty((height, width, 3), np.float32) for _ in range(params.iterations)] if keep_iterations else None
-    if keep is not None and region != Region(width, height):
-        raise ValueError("keep_iterations needs the full image")
 
-    def on_tiles(work, over: list[Region] = tiles) -> list:
-        if pool is not None:
-            return list(pool.map(work, over))
-        if threads == 1 or len(over) == 1:
-            return [work(tile) for tile in over]
-        with ThreadPoolExecutor(threads, thread_name_prefix="rcp-tile") as own:
-            return list(own.map(work, over))
+
+@dataclass
+class Job:
+    """One painting as the tile loop runs it: what :func:`check` let through, and what every method reads."""
+
+    scene: Scene
+    camera: Camera
+    width: int
+    height: int
+    params: PaintParams
+    time: float
+    region: Region
+    previous: PaintState | None  # I_{n-1} of the first iteration; None: the canvas I_0
+    threads: int
+    pool: Executor | None
+    should_stop: Callable[[], bool] | None
+    frame: raytrace.Frame  # the scene as every tile's kernels take it, once
+    tiles: list[Region]
+    keep: list[np.ndarray] | None  # (h, w, 3) float32 per iteration, when kept
+    workspace: Workspace
+    result: PaintState  # where each tile's last iteration goes
+    grid: Region | None  # the seen grid (seen_grid), when pixel centres decide rays
+    seen: kernels.Seen | None  # what its cells see
+    given: bool  # ``seen`` was found by the caller
+    shared: bool  # the eyes share their smudges
+
+    @classmethod
+    def of(
+        cls, scene, camera, width, height, params, time, previous, region, threads, keep_iterations, pool,
+        should_stop, seen, workspace,
+    ) -> Job:  # fmt: skip
+        """The job of :func:`paint`'s arguments, checked."""
+        full = Region(width, height)
+        region = region or full
+        check(scene, camera, width, height, params, region)
+        if keep_iterations and region != full:
+            raise ValueError("keep_iterations needs the full image")
+        if previous is not None and (previous.region != region or previous.blank):
+            previous = None  # another region: the canvas restarts
+        threads = threads or default_threads()
+        grid = seen_grid(scene, time, camera, width, height, params)
+        given = seen is not None
+        if given and (grid is None or (seen.width, seen.height) != (grid.width, grid.height)):
+            raise ValueError("seen does not cover this painting's grid of pixel centres (seen_grid)")
+        if not given and grid is not None:
+            seen = workspace.seen(grid.width, grid.height)
+        return cls(
+            scene=scene,
+            camera=camera,
+            width=width,
+            height=height,
+            params=params,
+            time=time,
+            region=region,
+            previous=previous,
+            threads=threads,
+            pool=pool,
+            should_stop=should_stop,
+            frame=raytrace.Frame.of(scene, time, camera, params, width, height),
+            tiles=region.tiles(tile_rows(region, threads, params.spp * params.iterations)),
+            keep=[np.empty((height, width, 3), np.float32) for _ in range(params.iterations)]
+            if keep_iterations
+            else None,
+            workspace=workspace,
+            result=workspace.result(region, params.reads(), keep=previous),
+            grid=grid,
+            seen=seen,
+            given=given,
+            shared=camera.eyes == "shared" and camera.stereo != "mono",
+        )
+
+    @property
+    def free(self) -> bool:
+        """A one-sample painting's first iteration from the canvas casts the plain render's rays: what they hit
+        comes free, as the seen grid of the whole image."""
+        full = self.region == Region(self.width, self.height)
+        return self.seen is not None and self.previous is None and self.params.spp == 1 and full and not self.given
+
+
+class Method(Protocol):
+    """A way to paint (as pbrt-v4's integrators plug into ``ImageTileIntegrator::Render``): the iteration of
+    each tile that the loop runs, lent its buffers for a run, and the runs a whole painting takes."""
+
+    def lend(self, tile: Region) -> AbstractContextManager[TileIteration]: ...
+
+    def paint(self, loop: TileLoop) -> list[dict[str, float]]: ...
+
+
+class TileLoop:
+    """Runs a method's iterations over the tiles of one painting, on the pool: the one loop of every method."""
+
+    def __init__(self, job: Job):
+        self.job = job
+
+    def map(self, work: Callable, items: list) -> list:
+        """``work`` of every item, on the painting's pool (or its own threads, or here)."""
+        job = self.job
+        if job.pool is not None:
+            return list(job.pool.map(work, items))
+        if job.threads == 1 or len(items) == 1:
+            return [work(item) for item in items]
+        with ThreadPoolExecutor(job.threads, thread_name_prefix="rcp-tile") as own:
+            return list(own.map(work, items))
 
     def run(
-        iteration: Callable[[Region], TileIteration], start, iterations: int, keep, beside: Callable | None = None
-    ) -> list:
-        """Every tile: ``iterations`` of ``iteration(tile)`` from ``start`` (a PaintState of the region, or one
-        per tile); each tile's state and seconds. ``beside``: a job for the same pool at the same time."""
+        self,
+        method: Method,
+        start: PaintState | None,
+        iterations: int,
+        keep: list[np.ndarray] | None,
+        into: PaintState | None = None,
+        beside: Callable[[], None] | None = None,
+    ) -> list[dict[str, float]]:
+        """Every tile: ``iterations`` of ``method`` from ``start``'s rows (None: the canvas), the last into
+        ``into``'s rows (default the painting's result); each tile's stage seconds. ``beside``: a job for the
+        same pool at the same time, started first, on a core of its own, so that it ends with the tiles
+        (queued last, it ran alone once they were done, the other cores idle)."""
+        work = partial(self.tile, method, start, iterations, keep, self.job.result if into is None else into)
+        tiles = list(range(len(self.job.tiles)))
+        if beside is None:
+            return self.map(work, tiles)
+        return self.map(partial(_beside_first, beside, work), [None, *tiles])[1:]
 
-        def one(n: int) -> tuple[PaintState, dict[str, float]]:
-            if n == len(tiles):
-                beside()
-                return None
-            tile = tiles[n]
-            begin = start[n] if isinstance(start, list) else start.rows(tile)
-            return _run_tile(iteration(tile), begin, iterations, keep, should_stop)
+    def tile(
+        self,
+        method: Method,
+        start: PaintState | None,
+        iterations: int,
+        keep: list[np.ndarray] | None,
+        into: PaintState,
+        n: int,
+    ) -> dict[str, float]:
+        """``iterations`` iterations of tile ``n``: its stage seconds. ``keep`` (full images, one per iteration)
+        gets each iteration's color at the tile's rows."""
+        tile, should_stop = self.job.tiles[n], self.job.should_stop
+        state = PaintState.canvas(tile) if start is None else start.rows(tile)
+        watch = Stopwatch()
+        with method.lend(tile) as iterate:
+            for iteration in range(iterations):
+                if should_stop is not None and should_stop():
+                    raise Abandoned
+                state = iterate(state, watch)
+                with watch.stage("bookkeeping"):
+                    if keep is not None:
+                        state.paste_color(keep[iteration])
+            with watch.stage("bookkeeping"):
+                state.write_into(into.rows(tile))
+        return watch.seconds
 
-        # the job beside first: started with the tiles, on a core of its own, it ends with them (queued last, it
-        # ran alone once they were done, the other cores idle)
-        order = ([len(tiles)] if beside is not None else []) + list(range(len(tiles)))
-        return on_tiles(one, order)[1:] if beside is not None else on_tiles(one, order)
 
-    def then(first: list, rest: list) -> list:
-        """The parts of two runs over the same tiles, one after the other: the second's states, both's seconds."""
-        return [(state, total([first[n][1], seconds])) for n, (state, seconds) in enumerate(rest)]
+def _beside_first(beside: Callable[[], None], work: Callable[[int], dict[str, float]], n: int | None):
+    """``beside()`` for the item None, else ``work(n)``."""
+    if n is None:
+        beside()
+        return None
+    return work(n)
 
-    full = Region(width, height)
-    grid = seen_grid(scene, time, camera, width, height, params)
-    given = seen is not None
-    if given and (grid is None or (seen.width, seen.height) != (grid.width, grid.height)):
-        raise ValueError("seen does not cover this painting's grid of pixel centres (seen_grid)")
-    if not given and grid is not None:
-        seen = kernels.Seen.empty(grid.width, grid.height)
-    # a one-sample painting's first iteration casts the plain render's rays: what they hit comes free
-    free = previous.blank and params.spp == 1 and region == full and not given
-    extra: list[dict[str, float]] = []  # seconds outside the tiles' iterations
 
-    painters: dict[Region, raytrace.TracedTile] = {}
+class Traced:
+    """Every ray traced: each tile's iterations are a :class:`raytrace.TracedTile`, set up once a painting.
+    With shared eyes, one iteration at a time over the whole painting, each reading what the eyes share of
+    the one before."""
 
-    def traced(tile: Region) -> TileIteration:
-        """The traced iterations of a tile, set up once for the painting (both runs of the fast path use it).
-        A painting whose first iteration is free records what it hits into ``seen``."""
-        if tile not in painters:
-            record = seen.rows(tile) if seen is not None and free else None
-            painters[tile] = raytrace.TracedTile(frame, setup_tile(camera, tile, params), params, seen, record)
-        return painters[tile]
+    def __init__(self, job: Job):
+        self.job = job
+        self.painters: dict[Region, raytrace.TracedTile] = {}
+        self.sources: np.ndarray | None = None  # with shared eyes: the pixel each pixel's fields read
+        reads = job.params.reads()
+        capacity = max(tile.pixel_count for tile in job.tiles)
+        self.buffers = partial(job.workspace.tile_buffers, capacity, job.params.spp, job.frame.trace.masked, reads)
 
-    sources: list[np.ndarray] = []  # with shared eyes: the pixel each pixel's fields read (stereo.shared_sources)
+    def painter(self, tile: Region) -> raytrace.TracedTile:
+        """The tile's traced iterations (the same over the runs of a painting). A painting whose first
+        iteration is free records what it hits into the seen grid."""
+        if tile not in self.painters:
+            job = self.job
+            record = job.seen.rows(tile) if job.seen is not None and job.free else None
+            setup = setup_tile(job.camera, tile, job.params)
+            self.painters[tile] = raytrace.TracedTile(job.frame, setup, job.params, job.seen, record)
+        return self.painters[tile]
 
-    def iterate(start, iterations: int, keep) -> list:
-        """``iterations`` traced iterations of every tile from ``start`` (as :func:`run`); with shared eyes one
-        iteration at a time over the whole painting, each reading what the eyes share of the one before."""
-        if not shared:
-            return run(traced, start, iterations, keep)
-        parts: list = []
+    @contextmanager
+    def lend(self, tile: Region) -> Iterator[TileIteration]:
+        painter = self.painter(tile)
+        with self.buffers() as buffers:
+            painter.bind(buffers)
+            yield painter
+
+    def paint(self, loop: TileLoop) -> list[dict[str, float]]:
+        return self.iterate(loop, self.job.previous, self.job.params.iterations, self.job.keep)
+
+    def iterate(
+        self, loop: TileLoop, start: PaintState | None, iterations: int, keep: list[np.ndarray] | None
+    ) -> list[dict[str, float]]:
+        """``iterations`` traced iterations of every tile from ``start`` (None: the canvas) into the result."""
+        job = self.job
+        if not job.shared:
+            return loop.run(self, start, iterations, keep)
+        seconds: list[dict[str, float]] = []
         for n in range(iterations):
-            states = start if not parts else [p[0] for p in parts]
-            whole = PaintState.joined(states, region) if isinstance(states, list) else states
+            states = start if n == 0 else job.result
             source = None
-            if not whole.blank:
-                if not sources:
-                    known = seen if seen is not None and (seen.width, seen.height) == (width, height) else None
-                    sources.append(stereo.shared_sources(scene, time, camera, region, known))
-                source = whole.gathered(sources[0])
-            for tile in tiles:
-                traced(tile).source = source.rows(tile) if source is not None else None
-            step = run(traced, states, 1, keep[n : n + 1] if keep is not None else None)
-            parts = then(parts, step) if parts else step
-        return parts
+            if states is not None:
+                if self.sources is None:
+                    known = job.seen if job.grid is not None and job.grid == Region(job.width, job.height) else None
+                    self.sources = stereo.shared_sources(job.scene, job.time, job.camera, job.region, known)
+                source = states.gathered(self.sources)
+            for tile in job.tiles:
+                self.painter(tile).source = source.rows(tile) if source is not None else None
+            seconds += loop.run(self, states, 1, keep[n : n + 1] if keep is not None else None)
+        return seconds
 
-    if seen is not None and free:
-        # ---- fast, eyes at rest: the first iteration casts the plain render's rays; what they hit decides
-        # most rays of the later iterations (raytrace.TracedTile), once every tile has painted it ----
-        first = run(traced, previous, 1, keep, beside=lambda: raytrace.thin_parts(scene, time, camera, grid, seen))
-        parts = first
-        if params.iterations > 1:
-            kept = keep[1:] if keep is not None else None
-            parts = then(first, iterate([p[0] for p in first], params.iterations - 1, kept))
-    elif params.method == "raytrace":
-        if seen is not None and not given:  # what the pixel centres see, in a pass of its own
-            visible = grid.tiles(tile_rows(grid, threads))
-            extra = on_tiles(lambda tile: _visible(scene, time, camera, tile, seen), [*visible, None])
-        parts = iterate(previous, params.iterations, keep)
-    else:
-        # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
-        temporal = not previous.blank
-        plain_keep = keep[:1] if keep is not None and not temporal else None
-        plain_parts = run(traced, PaintState.canvas(region), 1, plain_keep)
-        plain = PaintState.joined([p[0] for p in plain_parts], region)
-        # ---- the later iterations (all of them in temporal mode), looked up tile by tile ----
-        start = previous if temporal else plain
-        lookups = params.iterations if temporal else params.iterations - 1
-        kept = (keep if temporal else keep[1:]) if keep is not None else None
-        looked = run(
-            lambda tile: imagespace.tile_iteration(plain, setup_tile(camera, tile, params), params, frame.looks),
-            start,
-            lookups,
-            kept,
+
+class FastAtRest(Traced):
+    """Traced, eyes at rest, where what the pixel centres see decides most rays (``kernels.resolve_seen``):
+    found by the first iteration when it casts the plain render's rays, else in a pass of its own."""
+
+    def paint(self, loop: TileLoop) -> list[dict[str, float]]:
+        job = self.job
+        iterations, keep = job.params.iterations, job.keep
+        assert job.seen is not None and job.grid is not None
+        if job.free:
+            # ---- the first iteration casts the plain render's rays; what they hit decides most rays of the
+            # later iterations, once every tile has painted it ----
+            thin = partial(raytrace.thin_parts, job.scene, job.time, job.camera, job.grid, job.seen)
+            first = loop.run(self, None, 1, keep, beside=thin)
+            rest = self.iterate(loop, job.result, iterations - 1, keep[1:] if keep else None) if iterations > 1 else []
+            return first + rest
+        visible: list[dict[str, float]] = []
+        if not job.given:  # what the pixel centres see, in a pass of its own
+            cells = job.grid.tiles(tile_rows(job.grid, job.threads))
+            look = partial(_visible, job.scene, job.time, job.camera, seen=job.seen)
+            visible = loop.map(look, [*cells, None])
+        return visible + self.iterate(loop, job.previous, iterations, keep)
+
+
+class ImageSpace:
+    """The image-space method: the plain render traced, every later iteration looked up in it tile by tile
+    (``imagespace.tile_iteration``); in temporal mode every iteration looks up."""
+
+    def __init__(self, job: Job):
+        self.job = job
+        self.plain = PaintState.empty(job.region, job.params.reads())
+
+    @contextmanager
+    def lend(self, tile: Region) -> Iterator[TileIteration]:
+        job = self.job
+        yield imagespace.tile_iteration(
+            self.plain, setup_tile(job.camera, tile, job.params), job.params, job.frame.looks
         )
-        parts = then(plain_parts, looked)
-    state = PaintState.joined([p[0] for p in parts], region)
-    return PaintResult(state, total([p[1] for p in parts] + extra), keep or [])
+
+    def paint(self, loop: TileLoop) -> list[dict[str, float]]:
+        job = self.job
+        temporal = job.previous is not None
+        keep = job.keep
+        # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
+        plain = loop.run(Traced(job), None, 1, keep[:1] if keep is not None and not temporal else None, into=self.plain)
+        # ---- the later iterations (all of them in temporal mode), looked up tile by tile ----
+        start = job.previous if temporal else self.plain
+        lookups = job.params.iterations if temporal else job.params.iterations - 1
+        kept = (keep if temporal else keep[1:]) if keep is not None else None
+        return plain + loop.run(self, start, lookups, kept)
 
 
 def seen_grid(scene: Scene, time: float, camera: Camera, width: int, height: int, params: PaintParams) -> Region | None:

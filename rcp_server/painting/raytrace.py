@@ -93,6 +93,64 @@ def displacements(
 
 
 @dataclass
+class TileBuffers:
+    """The buffers of one tile's traced iterations, lent to one tile at a time (``workspace.Workspace``): the
+    kernels' :class:`kernels.Scratch` and the two states an iteration alternates between, for tiles of up to
+    ``capacity`` pixels. A large allocation inside a kernel costs more than the kernel, and a painting needs
+    only as many of these as it runs tiles at once, however large it is."""
+
+    scratch: kernels.Scratch
+    states: tuple[PaintState, PaintState]
+    capacity: int  # pixels
+    spp: int
+
+    @classmethod
+    def allocate(cls, capacity: int, spp: int, masked: bool, channels: frozenset[str]) -> TileBuffers:
+        """Buffers for tiles of up to ``capacity`` pixels at ``spp`` samples; ``masked``: rays may pass
+        cut-outs (their lists then have a row per ray); ``channels``: what the states record beside color."""
+        rays = capacity * spp
+        cut = rays if masked else 1
+        scratch = kernels.Scratch(
+            v_p=np.empty((capacity, 3)),
+            v_e=np.empty((capacity, 3)),
+            origins=np.empty((rays, 3), RAY_DTYPE),
+            directions=np.empty((rays, 3), RAY_DTYPE),
+            hits=Hits.empty(rays),
+            pending=np.empty(rays, np.int64),
+            changed=np.empty(capacity, np.int64),
+            every=np.arange(rays),
+            starts=np.empty((cut, 3), RAY_DTYPE),
+            todo=np.empty(cut, np.int64),
+            next_todo=np.empty(cut, np.int64),
+        )
+        whole = Region(capacity, 1)
+        return cls(scratch, (PaintState.empty(whole, channels), PaintState.empty(whole, channels)), capacity, spp)
+
+    def fit(self, region: Region) -> tuple[kernels.Scratch, tuple[PaintState, PaintState]]:
+        """Views of these buffers for ``region``'s pixels (at most ``capacity``)."""
+        n = region.pixel_count
+        if n > self.capacity:
+            raise ValueError(f"a tile of {n} pixels does not fit buffers for {self.capacity}")
+        rays = n * self.spp
+        s = self.scratch
+        cut = slice(None) if len(s.todo) == 1 else slice(rays)
+        scratch = kernels.Scratch(
+            v_p=s.v_p[:n],
+            v_e=s.v_e[:n],
+            origins=s.origins[:rays],
+            directions=s.directions[:rays],
+            hits=Hits(*(a[:rays] for a in s.hits)),
+            pending=s.pending[:rays],
+            changed=s.changed[:n],
+            every=s.every[:rays],
+            starts=s.starts[cut],
+            todo=s.todo[cut],
+            next_todo=s.next_todo[cut],
+        )
+        return scratch, tuple(state.first(n, region) for state in self.states)  # type: ignore[return-value]
+
+
+@dataclass
 class Rays:
     """One tile's buffers for camera assignment, reused over its iterations (a large allocation inside a
     kernel costs more than the kernel). ``at_eye``: every origin already is the camera's eye."""
@@ -285,28 +343,22 @@ class TracedTile:
         self.record_seen = record_seen
         self.z0 = params.focus(setup.camera)
         self.reads = params.reads()
-        n, spp = setup.region.pixel_count, params.spp
-        self.scratch = kernels.Scratch(
-            v_p=np.empty((n, 3)),
-            v_e=np.empty((n, 3)),
-            origins=np.empty((n * spp, 3), RAY_DTYPE),
-            directions=np.empty((n * spp, 3), RAY_DTYPE),
-            hits=Hits.empty(n * spp),
-            pending=np.empty(n * spp, np.int64),
-            changed=np.empty(n, np.int64),
-            every=np.arange(n * spp),
-            starts=np.empty((n * spp if frame.trace.masked else 1, 3), RAY_DTYPE),
-            todo=np.empty(n * spp if frame.trace.masked else 1, np.int64),
-            next_todo=np.empty(n * spp if frame.trace.masked else 1, np.int64),
-        )
-        self.buffers = (PaintState.empty(setup.region, self.reads), PaintState.empty(setup.region, self.reads))
+        self.scratch: kernels.Scratch | None = None  # lent by bind(), for the iterations of one run
+        self.buffers: tuple[PaintState, PaintState] | None = None
         self.at_eye = False  # every origin in the ray buffers already is the camera's eye
         self.last: PaintState | None = None  # the state the iteration before started from
         self.source: PaintState | None = None  # what the next iteration's fields read, when not its own state
         self.clock = np.zeros(3, np.int64)
         self.anchor: np.ndarray | None = None  # where the surface noise is read: the plain render's points
 
+    def bind(self, buffers: TileBuffers) -> None:
+        """Work in ``buffers`` (lent for one run of this tile's iterations): their ray origins are not yet the
+        eye's."""
+        self.scratch, self.buffers = buffers.fit(self.setup.region)
+        self.at_eye = False
+
     def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
+        assert self.scratch is not None and self.buffers is not None, "bind() lends a tile its buffers first"
         params, reads, before = self.params, self.reads, self.last
         self.last = state
         source = self.source if self.source is not None else state
