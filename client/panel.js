@@ -25,7 +25,6 @@ const PAINT_UI = {
   seed: { label: "Seed", slider: [0, 99], step: 1, more: true },
   z_max: { label: "Miss depth z_max", unit: "units", slider: [1, 10000], log: true, more: true },
   edge: { label: "Edge (image method)", more: true },
-  fast: { label: "Fast", hint: "shortcuts that keep every pixel within 2/255 of tracing every ray", more: true },
 };
 
 const LOG_STEPS = 1000;

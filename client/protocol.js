@@ -418,19 +418,6 @@ export const PROTOCOL = {
      "description": "eye displacement mapping",
      "title": "Eye Mapping"
     },
-    "fast": {
-     "anyOf": [
-      {
-       "type": "boolean"
-      },
-      {
-       "type": "null"
-      }
-     ],
-     "default": null,
-     "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
-     "title": "Fast"
-    },
     "grain": {
      "anyOf": [
       {
@@ -999,19 +986,6 @@ export const PROTOCOL = {
     "default": null,
     "description": "eye displacement mapping",
     "title": "Eye Mapping"
-   },
-   "fast": {
-    "anyOf": [
-     {
-      "type": "boolean"
-     },
-     {
-      "type": "null"
-     }
-    ],
-    "default": null,
-    "description": "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change (off: trace every ray of every iteration)",
-    "title": "Fast"
    },
    "grain": {
     "anyOf": [
@@ -1755,7 +1729,6 @@ export const ENGINE_DEFAULTS = {
  "z_max": null,
  "method": "raytrace",
  "edge": "mirror",
- "fast": true,
  "objects": {},
  "materials": {}
 };

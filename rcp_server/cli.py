@@ -62,7 +62,7 @@ def _add_paint_options(p: argparse.ArgumentParser) -> None:
         help = declared.help + (f": {', '.join(declared.choices)}" if open_names else "")
         help += "" if declared.default is None else f" (default {declared.default})"
         flag = f"--{name.replace('_', '-')}"
-        if declared.kind is bool:  # --fast / --no-fast
+        if declared.kind is bool:  # --hatch / --no-hatch
             g.add_argument(flag, action=argparse.BooleanOptionalAction, default=None, help=help)
             continue
         choices = None if open_names or not declared.choices else declared.choices

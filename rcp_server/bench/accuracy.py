@@ -1,7 +1,7 @@
 """``rcp bench accuracy``: time per frame against error, for each way to paint, over samples per pixel and resolution.
 
-The curves (:data:`CURVES`): the ray-traced method tracing every ray (``raytrace``), the same with its
-shortcuts (``raytrace fast``, the default) and the image-space method (``image``).
+The curves (:data:`CURVES`): the ray-traced method (``raytrace``, the default) and the image-space method
+(``image``).
 
 Every point paints a shipped scene with its own painting settings (``lambda_e`` set to 0, so every curve
 paint the same thing), at ``spp`` samples per pixel and at a fraction ``scale`` of the resolution
@@ -30,8 +30,7 @@ from .metrics import edge_band, psnr, ssim, upscale
 
 SCENES = ("default", "sea", "sky")
 CURVES: dict[str, dict[str, Any]] = {  # name -> the settings that paint it
-    "raytrace": {"method": "raytrace", "fast": False},
-    "raytrace fast": {"method": "raytrace", "fast": True},
+    "raytrace": {"method": "raytrace"},
     "image": {"method": "image"},
 }
 
@@ -54,7 +53,7 @@ def measure(scene_name: str, sweep: Sweep, threads: int) -> tuple[list[dict], di
     """Every (method, spp, scale) point of one scene, and what its reference is."""
     scene = load_scene(scene_name)
     camera = scene.camera
-    base = replace(scene.paint, lambda_e=0.0, method="raytrace", spp=1, fast=False)
+    base = replace(scene.paint, lambda_e=0.0, method="raytrace", spp=1)
     w, h = sweep.width, sweep.height
     clock = time.perf_counter()
     reference = paint(scene, camera, w, h, replace(base, spp=sweep.reference_spp), threads=threads).image
@@ -110,7 +109,7 @@ def pareto(points: list[dict], error: str) -> list[dict]:
     return front
 
 
-COLORS = {"raytrace": "tab:blue", "raytrace fast": "tab:green", "image": "tab:orange"}
+COLORS = {"raytrace": "tab:blue", "image": "tab:orange"}
 SHAPES = {1.0: "o", 0.5: "s", 0.25: "^"}
 PANELS = (("psnr", "PSNR, whole image (dB)"), ("ssim", "SSIM, whole image"), ("psnr_edge", "PSNR, edge band (dB)"))
 

@@ -53,18 +53,6 @@ def _projection(args: argparse.Namespace) -> None:
     bench_projection(args.scene, args.width, args.repeats, args.ipd)
 
 
-def _agreement(args: argparse.Namespace) -> None:
-    from .agreement import run
-
-    run(args.models, args.width, args.height)
-
-
-def _levels(args: argparse.Namespace) -> None:
-    from .levels import levels
-
-    levels(args.width, args.height)
-
-
 def _latency(args: argparse.Namespace) -> None:
     require("latency", WEBSOCKETS)
     from .latency import latency
@@ -166,17 +154,6 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--repeats", type=positive_int, default=5, help="paintings timed of each kind (default 5)")
     p.add_argument("--ipd", type=finite, help="distance between the eyes, scene units (default: the scene camera's)")
     p.set_defaults(run_bench=_projection)
-
-    p = command("agreement", "how often fast changes a pixel, against tracing every ray, on scenes and models")
-    p.add_argument("models", nargs="*", help="model or scene files to check besides the shipped scenes")
-    p.add_argument("--width", type=positive_int, default=320, help="pixels (default 320)")
-    p.add_argument("--height", type=positive_int, default=180, help="pixels (default 180)")
-    p.set_defaults(run_bench=_agreement)
-
-    p = command("levels", "fast's colors compared in 8 display levels, against a change of seed")
-    p.add_argument("--width", type=positive_int, default=640, help="pixels (default 640)")
-    p.add_argument("--height", type=positive_int, default=360, help="pixels (default 360)")
-    p.set_defaults(run_bench=_levels)
 
     p = command("latency", "the walk-through's latency and frame rate, against a real server")
     p.add_argument("--scene", default="default", help="a scene the server serves (default: default)")

@@ -26,6 +26,7 @@ def status():
             out[key] = int(value.split()[0]) * 1024
     return out
 from rcp_server.painting import loop as painting
+from rcp_server.painting.workspace import pixel_bytes
 from rcp_server.scene import scenefile
 from rcp_server.settings.params import PaintParams
 ref, width, height, threads = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
@@ -42,12 +43,13 @@ geometry, _ = scene.geometry(0.0)
 loaded_s = time.perf_counter() - start
 loaded = status()
 painting.paint(scene, scene.camera, width, height, scene.paint, threads=threads)
+declared = pixel_bytes(scene.paint, outlines=bool((geometry.material_outline > 0).any()))
 first_frame_s = time.perf_counter() - start
 painted = status()
 textures = geometry.texels.nbytes if geometry.texture_id.max(initial=-1) >= 0 else 0  # not the stand-in
 print(json.dumps(dict(base=base["VmRSS"], loaded=loaded["VmRSS"] - base["VmRSS"],
     peak=painted["VmHWM"] - base["VmRSS"] if resettable else None, triangles=geometry.face_count,
-    textures=textures, loaded_s=loaded_s, first_frame_s=first_frame_s)))
+    textures=textures, loaded_s=loaded_s, first_frame_s=first_frame_s, declared=declared)))
 """
 
 MB = 1 << 20
@@ -79,9 +81,14 @@ def bench_memory(models: list[str], width: int, height: int, threads: int) -> No
     print(f"rcp bench memory: each scene in a fresh process, painted once at {width}x{height} on {threads} threads")
     print(f"bare interpreter: {bare_interpreter() / MB:.0f} MB resident")
     base_shown = False
+    print(
+        f"bytes a pixel: the slope of the painted peak between {width}x{height} and {2 * width}x{2 * height}, "
+        "beside what painting/workspace.py declares (the result, ink, anchor, picture)"
+    )
     for ref in refs:
         try:
             m = measure(ref, width, height, threads)
+            twice = measure(ref, 2 * width, 2 * height, threads)
         except RuntimeError as exc:
             print(f"{ref}: not measured ({exc})")
             continue
@@ -94,3 +101,8 @@ def bench_memory(models: list[str], width: int, height: int, threads: int) -> No
             f"loaded +{m['loaded'] / MB:.0f} MB in {m['loaded_s']:.1f} s; "
             f"painted peak +{peak} (first frame {m['first_frame_s']:.1f} s after loading began)"
         )
+        declared = m["declared"]
+        parts = ", ".join(f"{name} {size}" for name, size in declared.items() if size)
+        if m["peak"] is not None and twice["peak"] is not None:
+            slope = (twice["peak"] - m["peak"]) / (3 * width * height)
+            print(f"  {slope:.0f} bytes a pixel measured; {sum(declared.values())} declared ({parts})")

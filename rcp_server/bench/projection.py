@@ -35,7 +35,7 @@ def _timed(scene: Scene, camera: Camera, width: int, height: int, params: PaintP
 
 
 def costs(scene: Scene, width: int, repeats: int) -> dict[str, float]:
-    """Median seconds of each kind of painting, fast on and off; an eye's image is ``width x width / 2``."""
+    """Median seconds of each kind of painting; an eye's image is ``width x width / 2``."""
     height = width // 2
     base = scene.camera.moved(projection="perspective", stereo="mono")
     kinds = {
@@ -45,15 +45,11 @@ def costs(scene: Scene, width: int, repeats: int) -> dict[str, float]:
         "equirect stereo": base.moved(projection="equirect", stereo="top-bottom"),
     }
     times: dict[str, list[float]] = {}
-    for fast in (True, False):
-        params = replace(scene.paint, fast=fast)
-        for camera in kinds.values():
-            _timed(scene, camera, width, height, params)  # compiled, and the scene built, before timing
-        for _ in range(repeats):
-            for name, camera in kinds.items():
-                times.setdefault(f"{name}, fast {'on' if fast else 'off'}", []).append(
-                    _timed(scene, camera, width, height, params)
-                )
+    for camera in kinds.values():
+        _timed(scene, camera, width, height, scene.paint)  # compiled, and the scene built, before timing
+    for _ in range(repeats):
+        for name, camera in kinds.items():
+            times.setdefault(name, []).append(_timed(scene, camera, width, height, scene.paint))
     return {name: statistics.median(t) for name, t in times.items()}
 
 
@@ -80,14 +76,13 @@ def bench_projection(scene_name: str, width: int, repeats: int, ipd: float | Non
     print(f"scene {scene_name}: {scene.paint.iterations} iterations, an eye's image {width}x{width // 2}, ipd {ipd:g}")
     scene.camera = scene.camera.moved(ipd=ipd)
     seconds = costs(scene, width, repeats)
-    for fast in ("on", "off"):
-        base = seconds[f"perspective, fast {fast}"]
-        print(f"fast {fast}: perspective {base * 1e3:.0f} ms")
-        for name in ("equirect", "perspective stereo", "equirect stereo"):
-            t = seconds[f"{name}, fast {fast}"]
-            mono = seconds[f"{name.split()[0]}, fast {fast}"]
-            against = f"{t / mono:.2f}x its mono" if "stereo" in name else f"{t / base:.2f}x perspective"
-            print(f"  {name:20s} {t * 1e3:7.0f} ms  {against} (targets: equirect 1.15x, stereo 2.1x)")
+    base = seconds["perspective"]
+    print(f"perspective {base * 1e3:.0f} ms")
+    for name in ("equirect", "perspective stereo", "equirect stereo"):
+        t = seconds[name]
+        mono = seconds[name.split()[0]]
+        against = f"{t / mono:.2f}x its mono" if "stereo" in name else f"{t / base:.2f}x perspective"
+        print(f"  {name:20s} {t * 1e3:7.0f} ms  {against} (targets: equirect 1.15x, stereo 2.1x)")
     for projection in ("perspective", "equirect"):
         camera = scene.camera.moved(projection=projection, stereo="side-by-side")
         for eyes in ("own", "shared"):

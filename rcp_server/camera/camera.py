@@ -214,12 +214,6 @@ class Camera:
                 f"a {self.stereo} painting cannot be {width}x{height}: it holds two eye images of one size"
             )
 
-    @property
-    def one_eye_point(self) -> bool:
-        """Whether every ray of the painting starts at one eye's point (not so in omnidirectional stereo, whose
-        eyes go round a circle)."""
-        return not (self.projection == "equirect" and self.stereo != "mono" and self.ipd > 0.0)
-
     def moved(self, **changes) -> Camera:
         return replace(self, **changes)  # validated again, in __post_init__
 

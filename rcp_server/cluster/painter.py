@@ -35,8 +35,7 @@ from urllib.parse import urlsplit
 import numpy as np
 
 from ..camera.camera import Camera, Region
-from ..engine import kernels
-from ..painting.loop import Abandoned, PaintState, paint, see, seen_grid, uses_seen
+from ..painting.loop import Abandoned, PaintState, paint
 from ..painting.sequence import Shot, frame_params
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
@@ -206,18 +205,6 @@ class Painter:
         result = paint(self._scene(held), camera, width, height, params, time=time, threads=self.threads)
         return images.to_uint8(result.image)
 
-    def see(self, held: Held, shot: tuple[Camera, float], band: Region, params: PaintParams) -> kernels.Seen | None:
-        """What the pixel centres of ``band``'s rows of a painting's ``painting.seen_grid`` see: found once
-        a frame, a part a band, and shared by every band of the frame, rather than found whole by each band;
-        None when the painting traces every ray."""
-        camera, time = shot
-        scene = self._scene(held)
-        grid = seen_grid(scene, time, camera, band.full_width, band.full_height, params)
-        if grid is None:
-            return None
-        fine = grid.height // band.full_height
-        return see(scene, time, camera, Region(grid.width, grid.height, 0, fine * band.y0, -1, fine * band.height))
-
     def band(
         self,
         held: Held,
@@ -226,12 +213,9 @@ class Painter:
         index: int,
         shot: tuple[Camera, float],
         params: PaintParams,
-        *seen: kernels.Seen | None,
     ) -> np.ndarray:
         """The rows of ``region`` of frame ``index``: from ``I_0`` for frame 0, else continuing from this band's
-        painting of ``job``'s frame ``index - 1`` (kept when ``job`` is given): (rows, width, 3) uint8.
-        ``seen``: the parts of :meth:`see` (Ray hands them over once they are found); without them (a band
-        that is the whole image, a band painted again) the painting finds what it needs itself."""
+        painting of ``job``'s frame ``index - 1`` (kept when ``job`` is given): (rows, width, 3) uint8."""
         camera, time = shot
         previous = None
         if index > 0:
@@ -248,9 +232,6 @@ class Painter:
             previous=previous,
             region=region,
             threads=self.threads,
-            seen=kernels.Seen.joined([part for part in seen if part is not None])
-            if seen and seen[0] is not None
-            else None,
         )
         if job is not None:
             states = self.previous.setdefault((job, region), {})
@@ -638,13 +619,8 @@ def _paint_bands(
     shot: tuple[Camera, float],
     params: PaintParams,
 ) -> list:
-    """The refs of one frame's bands. Several bands first find, a part each, what the frame's pixel centres
-    see (``fast``), and each band reads all the parts (Ray waits for them, the driver does not): the whole
-    image is seen once a frame, not once a band, and each band paints exactly its crop of the painting."""
-    seen = []
-    if len(workers) > 1 and uses_seen(params, shot[0]):
-        seen = [actor.see.remote(held, shot, band, params) for actor, band in workers]
-    return [actor.band.remote(held, job, band, index, shot, params, *seen) for actor, band in workers]
+    """The refs of one frame's bands: each band paints exactly its crop of the painting."""
+    return [actor.band.remote(held, job, band, index, shot, params) for actor, band in workers]
 
 
 def _cancel(refs: list) -> None:

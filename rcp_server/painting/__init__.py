@@ -1,1 +1,1 @@
-"""The painting: the tile loop and the methods it runs (traced, fast at rest, image space)."""
+"""The painting: the tile loop and the methods it runs (traced, image space)."""

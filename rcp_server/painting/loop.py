@@ -22,7 +22,6 @@ from typing import Protocol
 import numpy as np
 
 from ..camera.camera import Camera, Region
-from ..engine import kernels
 from ..engine.paintstate import Abandoned, PaintState, TileIteration
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
@@ -40,9 +39,6 @@ __all__ = [
     "Workspace",
     "default_threads",
     "paint",
-    "see",
-    "seen_grid",
-    "uses_seen",
     "tile_rows",
 ]
 
@@ -89,7 +85,6 @@ def paint(
     keep_iterations: bool = False,
     pool: Executor | None = None,
     should_stop: Callable[[], bool] | None = None,
-    seen: kernels.Seen | None = None,
     workspace: Workspace | None = None,
 ) -> PaintResult:
     """Paint ``region`` (default: all) of a ``width x height`` image of ``scene`` seen by ``camera`` (a stereo
@@ -103,18 +98,14 @@ def paint(
     queue for the same cores; pass its size as ``threads``), else on a pool of this call's own. ``should_stop`` is
     asked before every iteration of every tile; once it says yes the painting raises :class:`Abandoned`.
 
-    ``seen``: what the pixel centres of the whole :func:`seen_grid` see (:func:`see`), found already, for a
-    region painted apart from the rest of its image (on Ray, a band an actor): else the painting finds it
-    itself, over the whole image, whatever its region.
-
     ``workspace``: the buffers to paint in (:class:`workspace.Workspace`), kept by a caller that paints many
     frames; the result then lives until the painting after next on it.
     """
     job = Job.of(
         scene, camera, width, height, params, time, previous, region, threads, keep_iterations, pool, should_stop,
-        seen, workspace or Workspace(),
+        workspace or Workspace(),
     )  # fmt: skip
-    method: Method = ImageSpace(job) if params.method == "image" else FastAtRest(job) if job.seen else Traced(job)
+    method: Method = ImageSpace(job) if params.method == "image" else Traced(job)
     seconds = method.paint(TileLoop(job))
     return PaintResult(job.result, total(seconds), job.keep or [])
 
@@ -154,15 +145,12 @@ class Job:
     keep: list[np.ndarray] | None  # (h, w, 3) float32 per iteration, when kept
     workspace: Workspace
     result: PaintState  # where each tile's last iteration goes
-    grid: Region | None  # the seen grid (seen_grid), when pixel centres decide rays
-    seen: kernels.Seen | None  # what its cells see
-    given: bool  # ``seen`` was found by the caller
     shared: bool  # the eyes share their smudges
 
     @classmethod
     def of(
         cls, scene, camera, width, height, params, time, previous, region, threads, keep_iterations, pool,
-        should_stop, seen, workspace,
+        should_stop, workspace,
     ) -> Job:  # fmt: skip
         """The job of :func:`paint`'s arguments, checked."""
         full = Region(width, height)
@@ -173,12 +161,6 @@ class Job:
         if previous is not None and (previous.region != region or previous.blank):
             previous = None  # another region: the canvas restarts
         threads = threads or default_threads()
-        grid = seen_grid(scene, time, camera, width, height, params)
-        given = seen is not None
-        if given and (grid is None or (seen.width, seen.height) != (grid.width, grid.height)):
-            raise ValueError("seen does not cover this painting's grid of pixel centres (seen_grid)")
-        if not given and grid is not None:
-            seen = workspace.seen(grid.width, grid.height)
         return cls(
             scene=scene,
             camera=camera,
@@ -198,18 +180,8 @@ class Job:
             else None,
             workspace=workspace,
             result=workspace.result(region, params.reads(), keep=previous),
-            grid=grid,
-            seen=seen,
-            given=given,
             shared=camera.eyes == "shared" and camera.stereo != "mono",
         )
-
-    @property
-    def free(self) -> bool:
-        """A one-sample painting's first iteration from the canvas casts the plain render's rays: what they hit
-        comes free, as the seen grid of the whole image."""
-        full = self.region == Region(self.width, self.height)
-        return self.seen is not None and self.previous is None and self.params.spp == 1 and full and not self.given
 
 
 class Method(Protocol):
@@ -305,13 +277,11 @@ class Traced:
         self.buffers = partial(job.workspace.tile_buffers, capacity, job.params.spp, job.frame.trace.masked, reads)
 
     def painter(self, tile: Region) -> raytrace.TracedTile:
-        """The tile's traced iterations (the same over the runs of a painting). A painting whose first
-        iteration is free records what it hits into the seen grid."""
+        """The tile's traced iterations (the same over the runs of a painting)."""
         if tile not in self.painters:
             job = self.job
-            record = job.seen.rows(tile) if job.seen is not None and job.free else None
             setup = setup_tile(job.camera, tile, job.params)
-            self.painters[tile] = raytrace.TracedTile(job.frame, setup, job.params, job.seen, record)
+            self.painters[tile] = raytrace.TracedTile(job.frame, setup, job.params, keeps_anchor=job.shared)
         return self.painters[tile]
 
     @contextmanager
@@ -337,36 +307,12 @@ class Traced:
             source = None
             if states is not None:
                 if self.sources is None:
-                    known = job.seen if job.grid is not None and job.grid == Region(job.width, job.height) else None
-                    self.sources = stereo.shared_sources(job.scene, job.time, job.camera, job.region, known)
+                    self.sources = stereo.shared_sources(job.scene, job.time, job.camera, job.region)
                 source = states.gathered(self.sources)
             for tile in job.tiles:
                 self.painter(tile).source = source.rows(tile) if source is not None else None
             seconds += loop.run(self, states, 1, keep[n : n + 1] if keep is not None else None)
         return seconds
-
-
-class FastAtRest(Traced):
-    """Traced, eyes at rest, where what the pixel centres see decides most rays (``kernels.resolve_seen``):
-    found by the first iteration when it casts the plain render's rays, else in a pass of its own."""
-
-    def paint(self, loop: TileLoop) -> list[dict[str, float]]:
-        job = self.job
-        iterations, keep = job.params.iterations, job.keep
-        assert job.seen is not None and job.grid is not None
-        if job.free:
-            # ---- the first iteration casts the plain render's rays; what they hit decides most rays of the
-            # later iterations, once every tile has painted it ----
-            thin = partial(raytrace.thin_parts, job.scene, job.time, job.camera, job.grid, job.seen)
-            first = loop.run(self, None, 1, keep, beside=thin)
-            rest = self.iterate(loop, job.result, iterations - 1, keep[1:] if keep else None) if iterations > 1 else []
-            return first + rest
-        visible: list[dict[str, float]] = []
-        if not job.given:  # what the pixel centres see, in a pass of its own
-            cells = job.grid.tiles(tile_rows(job.grid, job.threads))
-            look = partial(_visible, job.scene, job.time, job.camera, seen=job.seen)
-            visible = loop.map(look, [*cells, None])
-        return visible + self.iterate(loop, job.previous, iterations, keep)
 
 
 class ImageSpace:
@@ -395,46 +341,3 @@ class ImageSpace:
         lookups = job.params.iterations if temporal else job.params.iterations - 1
         kept = (keep if temporal else keep[1:]) if keep is not None else None
         return plain + loop.run(self, start, lookups, kept)
-
-
-def seen_grid(scene: Scene, time: float, camera: Camera, width: int, height: int, params: PaintParams) -> Region | None:
-    """The image whose pixel centres decide most rays of a ``width x height`` painting (:func:`uses_seen`),
-    None when every ray is traced. At several samples it is twice as fine: it sees the
-    thin geometry that the samples antialias."""
-    if not uses_seen(params, camera) or scene.geometry(time)[1] is None:
-        return None
-    fine = 1 if params.spp == 1 else 2
-    return Region(fine * width, fine * height)
-
-
-def see(scene: Scene, time: float, camera: Camera, rows: Region) -> kernels.Seen:
-    """What the pixel centres of ``rows`` (full-width rows of a :func:`seen_grid`) see: that part of a
-    painting's ``seen``, found apart (``kernels.Seen.joined`` puts the parts together)."""
-    part = kernels.Seen.empty(rows.width, rows.height)
-    raytrace.visible_faces(scene, time, camera, rows, part)
-    raytrace.thin_parts(scene, time, camera, rows, part)
-    return part
-
-
-def uses_seen(params: PaintParams, camera: Camera) -> bool:
-    """Whether paintings with these settings decide rays by what the pixel centres see
-    (``kernels.resolve_seen``), in a scene with triangles: with ``fast``, traced, eyes at rest (every ray
-    of an eye starts at its point: not omnidirectional stereo, ``Camera.one_eye_point``) and targets that
-    move (else every iteration casts the first one's rays, and the exact painting costs nothing more), and
-    more than one ray a pixel. Not the region's size: a tile must be a crop."""
-    looks = params.looks()
-    eyes_rest = all(look.lambda_e == 0.0 for look in looks)
-    fast = params.fast and params.method == "raytrace" and eyes_rest and any(look.lambda_p != 0.0 for look in looks)
-    return fast and camera.one_eye_point and params.iterations * params.spp > 1
-
-
-def _visible(scene: Scene, time: float, camera: Camera, tile: Region | None, seen: kernels.Seen) -> dict[str, float]:
-    """:func:`raytrace.visible_faces` of one tile of the grid into ``seen`` (None: where its thin parts lie,
-    over the whole grid, :func:`raytrace.thin_parts`); its seconds."""
-    watch = Stopwatch()
-    with watch.stage("intersect"):
-        if tile is None:
-            raytrace.thin_parts(scene, time, camera, Region(seen.width, seen.height), seen)
-        else:
-            raytrace.visible_faces(scene, time, camera, tile, seen.rows(tile))
-    return watch.seconds

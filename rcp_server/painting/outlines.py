@@ -21,14 +21,15 @@ from ..scene.scene import Geometry
 CREASE_DEGREES = 40.0  # a fold sharper than this is drawn (a smooth sphere's facets are not)
 DEPTH_JUMP = 0.1  # a step in depth of more than a tenth is drawn (a floor seen at a grazing angle is not)
 
-NO_INK = kernels.Ink(False, np.zeros(1, np.float32), np.zeros(1, np.float32))
+NO_INK = kernels.Ink(False, np.zeros(1, np.uint8), np.zeros(1, np.float32))
 
 
-def edges(face: np.ndarray, distance: np.ndarray, camera: Camera, geometry: Geometry, width: int, height: int):
-    """Ink (H*W,) float32 (1 on an edge, else 0) and each pixel's distance to what it sees (H*W,) float32 (0 on
-    the sky), from what the pixel centres of a ``width x height`` painting see: ``face`` (H*W,) int32 (-1 the
-    sky) and ``distance`` along each unit primary ray. Neighbours in two eyes' images are not compared."""
-    region = Region(width, height)
+def edges(face: np.ndarray, distance: np.ndarray, camera: Camera, geometry: Geometry, region: Region):
+    """Ink (n,) float32 (1 on an edge, else 0) and each pixel's distance to what it sees (n,) float32 (0 on
+    the sky) of ``region`` (full-width rows of a painting, n pixels), from what its pixel centres see: ``face``
+    (n,) int32 (-1 the sky) and ``distance`` along each unit primary ray. Neighbours in two eyes' images are
+    not compared."""
+    width, height = region.width, region.height
     i, j = region.pixel_coords()
     side, ei, ej = eye_pixels(camera, region, i, j)
     directions, *_ = directions_at(camera, region, ei + 0.5, ej + 0.5)
@@ -55,4 +56,4 @@ def edges(face: np.ndarray, distance: np.ndarray, camera: Camera, geometry: Geom
         jump &= eye[a] == eye[b]
         ink[a] |= jump
         ink[b] |= jump
-    return ink.astype(np.float32).ravel(), np.where(hit, distance, 0.0).astype(np.float32)
+    return ink.astype(np.uint8).ravel(), np.where(hit, distance, 0.0).astype(np.float32)

@@ -8,6 +8,7 @@ the plain numpy form of the camera assignment's displacements.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass, field
 
@@ -37,11 +38,15 @@ class TileSetup:
     eta: np.ndarray
     noise: np.ndarray | None  # (n, 3) float32 world-space random vectors, when painting with noise
     image_plane: kernels.ImagePlane = field(init=False)  # the projection and the tile, as the kernels take them
-    pixels: np.ndarray = field(init=False)  # (n,) int64 every pixel of the tile: what an iteration paints
 
     def __post_init__(self):
         self.image_plane = kernels.ImagePlane.of(self.camera, self.region)
-        self.pixels = np.arange(self.region.pixel_count)
+
+    @functools.cached_property
+    def pixels(self) -> np.ndarray:
+        """(n,) int64 every pixel of the tile: what an iteration paints (made when first asked: a traced
+        iteration counts its own)."""
+        return np.arange(self.region.pixel_count)
 
     def frames(self) -> tuple[np.ndarray, ...]:
         """Each pixel's eye and local frame ``r_ij, u_ij, f_ij``: four (n, 3) float64 (``camera.pixel_frames``)."""
@@ -56,12 +61,19 @@ class TileSetup:
         return self.camera.pixel_pitch(self.image_plane.eye_height)
 
 
+@functools.lru_cache(maxsize=4)
+def _centres(capacity: int) -> np.ndarray:
+    """(capacity, 1) float64 0.5: one sample at each pixel's centre, one array that every tile slices (never
+    written: offsets are read)."""
+    return np.full((capacity, 1), 0.5)
+
+
 def setup_tile(camera: Camera, region: Region, params: PaintParams) -> TileSetup:
     """The constants of ``region``'s iterations seen by ``camera``: exactly those of the same pixels of the
     full image (counter-based sampling), so a tile is a crop."""
     noisy = any(look.noise for look in params.looks())
     if params.spp == 1 and not noisy:  # the common case needs no pixel coordinates at all
-        half = np.full((region.pixel_count, 1), 0.5)
+        half = _centres(1 << max(0, region.pixel_count - 1).bit_length())[: region.pixel_count]
         return TileSetup(camera, region, half, half, None)
     i, j = region.pixel_coords()
     xi, eta = stratified_offsets(params.seed, i, j, params.spp)
@@ -101,6 +113,7 @@ class TileBuffers:
 
     scratch: kernels.Scratch
     states: tuple[PaintState, PaintState]
+    anchor: np.ndarray | None  # (capacity, 3) float32 the plain render's points, when the states record them
     capacity: int  # pixels
     spp: int
 
@@ -116,18 +129,19 @@ class TileBuffers:
             origins=np.empty((rays, 3), RAY_DTYPE),
             directions=np.empty((rays, 3), RAY_DTYPE),
             hits=Hits.empty(rays),
-            pending=np.empty(rays, np.int64),
-            changed=np.empty(capacity, np.int64),
             every=np.arange(rays),
             starts=np.empty((cut, 3), RAY_DTYPE),
             todo=np.empty(cut, np.int64),
             next_todo=np.empty(cut, np.int64),
         )
         whole = Region(capacity, 1)
-        return cls(scratch, (PaintState.empty(whole, channels), PaintState.empty(whole, channels)), capacity, spp)
+        states = (PaintState.empty(whole, channels), PaintState.empty(whole, channels))
+        anchor = np.empty((capacity, 3), np.float32) if "position" in channels else None
+        return cls(scratch, states, anchor, capacity, spp)
 
-    def fit(self, region: Region) -> tuple[kernels.Scratch, tuple[PaintState, PaintState]]:
-        """Views of these buffers for ``region``'s pixels (at most ``capacity``)."""
+    def fit(self, region: Region) -> tuple[kernels.Scratch, tuple[PaintState, PaintState], np.ndarray | None]:
+        """Views of these buffers for ``region``'s pixels (at most ``capacity``): the scratch, the two states
+        and the anchor."""
         n = region.pixel_count
         if n > self.capacity:
             raise ValueError(f"a tile of {n} pixels does not fit buffers for {self.capacity}")
@@ -140,14 +154,13 @@ class TileBuffers:
             origins=s.origins[:rays],
             directions=s.directions[:rays],
             hits=Hits(*(a[:rays] for a in s.hits)),
-            pending=s.pending[:rays],
-            changed=s.changed[:n],
             every=s.every[:rays],
             starts=s.starts[cut],
             todo=s.todo[cut],
             next_todo=s.next_todo[cut],
         )
-        return scratch, tuple(state.first(n, region) for state in self.states)  # type: ignore[return-value]
+        states = (self.states[0].first(n, region), self.states[1].first(n, region))
+        return scratch, states, None if self.anchor is None else self.anchor[:n]
 
 
 @dataclass
@@ -232,8 +245,7 @@ def assign_cameras(
 
 def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out: kernels.Seen) -> None:
     """What ``region``'s pixel centres see, into ``out`` (a bundles.Seen of the region): the hits of the
-    plain render's rays at one sample, the very hits of a one-sample painting's first iteration. ``fast``
-    paintings read it for the whole image (``kernels.resolve_seen``)."""
+    plain render's rays at one sample, the very hits of a one-sample painting's first iteration."""
     setup = setup_tile(camera, region, PaintParams(spp=1, noise=0.0))
     rays = Rays.allocate(region.pixel_count, 1)
     assign_cameras(PaintState.canvas(region), setup, PaintParams(), 0.0, rays)
@@ -264,22 +276,6 @@ def pick(scene: Scene, time: float, camera: Camera, width: int, height: int, x: 
         return None
     geometry, _ = scene.geometry(time)
     return geometry.object_names[geometry.face_object[face]], geometry.material_names[geometry.face_material[face]]
-
-
-def thin_parts(scene: Scene, time: float, camera: Camera, rows: Region, out: kernels.Seen) -> None:
-    """Where geometry thinner than the grid lies between the pixel centres of ``rows`` (full-width rows of a
-    seen grid), into ``out.near`` (a bundles.Seen of those rows): ``kernels.cover_thin``."""
-    geometry, tracer = scene.geometry(time)
-    out.near[:] = np.inf
-    if tracer is None:
-        return
-    kernels.cover_thin(
-        triangles=geometry.triangles,
-        eye=np.asarray(camera.eye, np.float64),
-        plane=kernels.ImagePlane.of(camera, rows),
-        rows=rows.height,
-        near=out.near,
-    )
 
 
 @dataclass(frozen=True)
@@ -317,36 +313,22 @@ class Frame:
 
 class TracedTile:
     """The traced iterations of one tile, ``I_{n-1} -> I_n`` (a ``paintstate.TileIteration``): set up once
-    for the painting, each iteration one compiled call (``kernels.paint_iteration``) into one of the tile's
-    two buffers, in turn (the other holds ``I_{n-1}``).
+    for the painting, each iteration one compiled call (``kernels.paint_iteration``) into one of the two
+    states of the buffers it is lent (:meth:`bind`), in turn (the other holds ``I_{n-1}``).
 
-    With ``params.fast`` an iteration paints again only the pixels whose inputs changed since the
-    iteration before (``kernels.changed_pixels``: colors in display levels while the eyes rest, else
-    exact), and, given ``seen`` (:func:`visible_faces` of the full image, for paintings whose eyes rest),
-    intersects without the BVH where ``seen`` decides (``kernels.resolve_seen``). An iteration from the
-    canvas is the plain render, traced exactly, always (at one sample it casts the very rays whose hits
-    ``seen`` holds), so ``fast`` never changes the plain render and a first iteration never depends on where
-    ``seen`` came from (a tile stays a crop). ``record_seen`` (a bundles.Seen of the tile): where such an
-    iteration at one sample writes what its rays hit.
+    ``keeps_anchor``: the tile runs its iterations in several runs, each lent other buffers (the eyes of a
+    stereo painting sharing their smudges), so the points where surface noise is read (the plain render's)
+    are kept by the tile itself rather than in the buffers of one run.
     """
 
-    def __init__(
-        self,
-        frame: Frame,
-        setup: TileSetup,
-        params: PaintParams,
-        seen: kernels.Seen | None = None,
-        record_seen: kernels.Seen | None = None,
-    ):
+    def __init__(self, frame: Frame, setup: TileSetup, params: PaintParams, keeps_anchor: bool = False):
         self.frame, self.setup, self.params = frame, setup, params
-        self.seen = seen if frame.tracer is not None else None
-        self.record_seen = record_seen
         self.z0 = params.focus(setup.camera)
-        self.reads = params.reads()
+        self.keeps_anchor = keeps_anchor
         self.scratch: kernels.Scratch | None = None  # lent by bind(), for the iterations of one run
         self.buffers: tuple[PaintState, PaintState] | None = None
+        self.anchor_store: np.ndarray | None = None
         self.at_eye = False  # every origin in the ray buffers already is the camera's eye
-        self.last: PaintState | None = None  # the state the iteration before started from
         self.source: PaintState | None = None  # what the next iteration's fields read, when not its own state
         self.clock = np.zeros(3, np.int64)
         self.anchor: np.ndarray | None = None  # where the surface noise is read: the plain render's points
@@ -354,55 +336,40 @@ class TracedTile:
     def bind(self, buffers: TileBuffers) -> None:
         """Work in ``buffers`` (lent for one run of this tile's iterations): their ray origins are not yet the
         eye's."""
-        self.scratch, self.buffers = buffers.fit(self.setup.region)
+        self.scratch, self.buffers, self.anchor_store = buffers.fit(self.setup.region)
         self.at_eye = False
 
     def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
         assert self.scratch is not None and self.buffers is not None, "bind() lends a tile its buffers first"
-        params, reads, before = self.params, self.reads, self.last
-        self.last = state
         source = self.source if self.source is not None else state
-        compare = params.fast and before is not None and not (before.blank or state.blank) and before.has(reads)
-        compare = compare and self.source is None  # a shared source changes with other pixels than this one
-        cast = cameras(source, self.setup, params, self.z0, self.frame.looks, anchor=self.anchor)
+        cast = cameras(source, self.setup, self.params, self.z0, self.frame.looks, anchor=self.anchor)
         eyes_rest = cast.eye_field.kind == kernels.FIELD_ZERO
         cast = cast._replace(write_origins=not (eyes_rest and self.at_eye))
-        # with two eyes, ray m is another pixel's, and so another eye's, when the pixels painted change
+        # with two eyes, each ray's origin is its own pixel's eye
         self.at_eye = eyes_rest and self.setup.image_plane.half_ipd == 0.0
         out = self.buffers[1] if state.color is self.buffers[0].color else self.buffers[0]
-        use_seen = self.seen is not None and not state.blank
         self.clock[:] = 0
         clock = time.perf_counter()
         kernels.paint_iteration(
             cast=cast,
-            compare=kernels.Compare(
-                any=compare,
-                color="color" in reads,
-                channels=kernels.records(reads),
-                # colors compare in display levels while the eyes rest; with moving eyes every shortcut is exact
-                color_levels=kernels.REUSE_LEVELS if not self.frame.looks.eyes_move else 0,
-            ),
-            before=kernels.channels(before if compare else state),
-            previous=kernels.channels(state),
             source=kernels.channels(source),
             out=kernels.channels(out),
             trace=self.frame.trace,
-            seen=self.seen if use_seen else _NO_SEEN,
-            use_seen=use_seen,
             shading=self.frame.shading,
             scratch=self.scratch,
             clock=self.clock,
         )
         watch.share(time.perf_counter() - clock, dict(zip(("camera", "intersect", "shade"), self.clock, strict=True)))
         if state.blank and out.position is not None:
-            self.anchor = out.position.copy()
-        if self.record_seen is not None and state.blank and params.spp == 1:
-            self.record_seen.face[:] = self.scratch.hits.face
-            self.record_seen.distance[:] = self.scratch.hits.t
+            if self.keeps_anchor or self.anchor_store is None:
+                self.anchor = out.position.copy()
+            else:
+                self.anchor = self.anchor_store
+                self.anchor[...] = out.position
         return out
 
 
-_NO_SEEN = kernels.Seen.empty(1, 1)
+INK_BAND = 1 << 14  # pixels of the ink's pass at a time: its float64 work costs some 300 bytes a pixel
 
 
 def ink(scene, time: float, camera: Camera, width: int, height: int) -> kernels.Ink:
@@ -411,7 +378,15 @@ def ink(scene, time: float, camera: Camera, width: int, height: int) -> kernels.
     geometry, tracer = scene.geometry(time)
     if tracer is None or not (geometry.material_outline > 0).any():
         return outlines.NO_INK
-    seen = kernels.Seen.empty(width, height)
-    visible_faces(scene, time, camera, Region(width, height), seen)
-    grid, far = outlines.edges(seen.face, seen.distance, camera, geometry, width, height)
+    grid, far = np.zeros(width * height, np.uint8), np.zeros(width * height, np.float32)
+    band = max(1, INK_BAND // width)
+    for y0 in range(0, height, band):
+        # a band and the first row of the next: an edge between the two inks both sides
+        rows = Region(width, height, 0, y0, width, min(band + 1, height - y0))
+        seen = kernels.Seen.empty(rows.width, rows.height)
+        visible_faces(scene, time, camera, rows, seen)
+        ink, distance = outlines.edges(seen.face, seen.distance, camera, geometry, rows)
+        at = slice(y0 * width, (y0 + rows.height) * width)
+        np.maximum(grid[at], ink, out=grid[at])
+        far[at] = distance
     return kernels.Ink(True, grid, far)

@@ -72,13 +72,11 @@ def partners(camera: Camera, region: Region, seen: kernels.Seen) -> np.ndarray:
     return found
 
 
-def shared_sources(scene: Scene, time: float, camera: Camera, region: Region, seen: kernels.Seen | None) -> np.ndarray:
+def shared_sources(scene: Scene, time: float, camera: Camera, region: Region) -> np.ndarray:
     """Which pixel of the painting each pixel reads its displacement from when the eyes share their smudges:
-    a right-eye pixel its left partner (:func:`partners`), every other pixel itself. ``seen``: the plain render's
-    hits of the whole painting when found already (the fast path's), else they are found here."""
-    if seen is None or (seen.width, seen.height) != (region.full_width, region.full_height):
-        seen = kernels.Seen.empty(region.full_width, region.full_height)
-        raytrace.visible_faces(scene, time, camera, region, seen)
+    a right-eye pixel its left partner (:func:`partners`), every other pixel itself."""
+    seen = kernels.Seen.empty(region.full_width, region.full_height)
+    raytrace.visible_faces(scene, time, camera, region, seen)
     source = np.arange(region.pixel_count)
     pair = partners(camera, region, seen)
     side, _, _ = eye_pixels(camera, region, *region.pixel_coords())

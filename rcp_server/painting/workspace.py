@@ -2,9 +2,9 @@
 themselves, kept from one painting to the next when a caller paints many (a walk's frames).
 
 A painting holds per pixel only its result (color and the channels it reads, :meth:`PaintParams.reads`),
-what the fast path's pixel centres see, the ink of outlines and the anchor of surface noise. Everything an
-iteration works in (rays, hits, the two states it alternates between) lives in :class:`TileBuffers`, lent to
-one tile at a time: a painting needs as many as it runs tiles at once, whatever its size.
+the ink of outlines, and the picture. Everything an iteration works in (rays, hits, the two states it
+alternates between, the points where surface noise is read) lives in :class:`TileBuffers`, lent to one tile
+at a time: a painting needs as many as it runs tiles at once, whatever its size.
 """
 
 from __future__ import annotations
@@ -16,7 +16,6 @@ from contextlib import contextmanager
 import numpy as np
 
 from ..camera.camera import Region
-from ..engine import kernels
 from ..engine.paintstate import CHANNELS, PaintState, channel_shape
 from ..settings.params import PaintParams
 from .raytrace import TileBuffers
@@ -34,36 +33,33 @@ def state_bytes(channels: frozenset[str]) -> int:
     return sum(channel_bytes(name) for name in CHANNELS if name == "color" or name in channels)
 
 
-SEEN_BYTES = 4 + 4 + 4  # kernels.Seen: face int32, distance and near float32, per cell of the seen grid
-INK_BYTES = 4 + 4  # kernels.Ink: the edge grid and each pixel's distance, float32
-ANCHOR_BYTES = 3 * FLOAT  # where a tile reads its surface noise: the plain render's points
+INK_BYTES = 1 + 4  # kernels.Ink: the edge grid uint8 and each pixel's distance float32
+ANCHOR_BYTES = 3 * FLOAT  # where surface noise is read, the plain render's points, kept by a tile run in parts
 ENCODED_BYTES = 3  # the picture as 8-bit RGB, before the encoder
 
 
-def pixel_bytes(params: PaintParams, *, seen_cells: int = 0, outlines: bool = False, kept: int = 2) -> dict[str, int]:
+def pixel_bytes(params: PaintParams, *, outlines: bool = False, shared: bool = False, kept: int = 1) -> dict[str, int]:
     """What one painted pixel costs with ``params``, buffer by buffer, bytes: ``kept`` result states (a walk
-    keeps two: the frame before and the one being painted), the seen grid's ``seen_cells`` cells a pixel
-    (0: no fast path, 1 at one sample, 4 at several), the ink when some material draws ``outlines``, the
-    anchor of surface noise, the 8-bit picture. Tile buffers are not counted: their size is the tiles', not
-    the painting's. ``rcp bench memory`` prints these beside the measured slope."""
+    in temporal mode holds two: the frame before and the one being painted), the ink when some material draws
+    ``outlines``, the anchor of surface noise when the eyes of a stereo painting are ``shared`` (its tiles
+    run one iteration at a time), the 8-bit picture. Tile buffers are not counted: their size is the tiles',
+    not the painting's. ``rcp bench memory`` prints these beside the measured slope."""
     reads = params.reads()
-    noise = any(look.surface_noise or look.surface_scale for look in params.looks())
     costs = {
         "result": kept * state_bytes(reads),
-        "seen": seen_cells * SEEN_BYTES,
         "ink": INK_BYTES if outlines else 0,
-        "anchor": ANCHOR_BYTES if noise else 0,
+        "anchor": ANCHOR_BYTES if shared and "position" in reads else 0,
         "picture": ENCODED_BYTES,
     }
     if params.method == "image":
-        costs["plain"] = state_bytes(reads | {"position"} if noise else reads)
+        costs["plain"] = state_bytes(reads)
     return costs
 
 
 class Workspace:
     """Buffers that paintings borrow and give back. A painting of its own makes one and drops it; a walk
     keeps one for its frames, so that a painting after the first allocates nothing of a pixel's size (the
-    same results, seen grid and tile buffers, as long as size and settings stay).
+    same results and tile buffers, as long as size and settings stay).
 
     A result lives until the painting after next on the same workspace: :meth:`result` never gives the
     arrays of the state it is asked to keep (the frame before, in temporal mode), and alternates two.
@@ -73,7 +69,6 @@ class Workspace:
         self._lock = threading.Lock()
         self._free: list[TileBuffers] = []
         self._results: dict[tuple, list[PaintState]] = {}
-        self._seen: dict[tuple[int, int], kernels.Seen] = {}
 
     @contextmanager
     def tile_buffers(self, capacity: int, spp: int, masked: bool, channels: frozenset[str]) -> Iterator[TileBuffers]:
@@ -100,6 +95,11 @@ class Workspace:
             with self._lock:
                 self._free.append(buffers)
 
+    def idle(self) -> list[TileBuffers]:
+        """The tile buffers not lent now."""
+        with self._lock:
+            return list(self._free)
+
     def result(self, region: Region, channels: frozenset[str], keep: PaintState | None = None) -> PaintState:
         """A state of ``region`` recording color and ``channels`` to paint into, whose arrays are not ``keep``'s."""
         key = (region, channels)
@@ -115,13 +115,3 @@ class Workspace:
             pair.append(state)  # the least recently given goes first next time
             state.blank = False
             return state
-
-    def seen(self, width: int, height: int) -> kernels.Seen:
-        """A seen grid of ``width x height`` cells to fill."""
-        with self._lock:
-            grid = self._seen.get((width, height))
-            if grid is None:
-                self._seen.clear()
-                grid = self._seen[(width, height)] = kernels.Seen.empty(width, height)
-            grid.near[:] = np.inf
-            return grid

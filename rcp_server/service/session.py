@@ -21,7 +21,7 @@ from pydantic import ValidationError
 
 from ..camera.camera import Camera, CameraError
 from ..camera.wire import camera_of
-from ..painting.loop import Abandoned, PaintResult, PaintState
+from ..painting.loop import Abandoned, PaintResult, PaintState, Workspace
 from ..painting.raytrace import pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
@@ -71,6 +71,9 @@ class Session:
         settings = self.settings
         self.planner = Planner(settings.frame_ms, settings.settle_ms, settings.max_work, _time.monotonic())
         self.state: PaintState | None = None  # the last frame's per-pixel data, for temporal mode
+        # the buffers every painting of this walk works in, frame after frame (one painting at a time: a result
+        # lives until the painting after next, and only self.state is kept)
+        self.workspace = Workspace()
         self.closed = False
         # ---- the outbox (drained by the sender) ----
         self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
@@ -280,6 +283,7 @@ class Session:
             time=plan.time,
             previous=job.previous,
             should_stop=should_stop,
+            workspace=self.workspace,
         )
         seconds = _time.perf_counter() - clock
         return (result, images.encode(result.image, "JPEG", frame_quality(plan, job.quality))), seconds

@@ -86,11 +86,6 @@ class PaintParams:
         choices=METHODS,
     )
     edge: str = setting("mirror", "how the image method reads off screen", choices=EDGES)
-    fast: bool = setting(
-        True,
-        "shortcuts: skip the BVH where the plain render knows the hit, keep pixels whose inputs did not change "
-        "(off: trace every ray of every iteration)",
-    )
     objects: Overrides = field(default=(), metadata={"per": "object"})
     materials: Overrides = field(default=(), metadata={"per": "material"})
 

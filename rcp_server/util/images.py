@@ -11,12 +11,23 @@ from PIL import Image
 FORMATS = {".png": "PNG", ".jpg": "JPEG", ".jpeg": "JPEG"}
 
 
+ROWS_AT_ONCE = 1 << 16  # numbers of a picture converted at a time by to_uint8
+
+
 def to_uint8(image: np.ndarray) -> np.ndarray:
     """(h, w, 3) float in [0, 1] -> (h, w, 3) uint8, rounding to nearest; uint8 (encoded already, as frames
     from Ray are) passes unchanged."""
     if image.dtype == np.uint8:
         return image
-    return (np.clip(np.nan_to_num(image, nan=0.0), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    out = np.empty(image.shape, np.uint8)
+    rows = max(1, ROWS_AT_ONCE // max(1, image[0].size))
+    for y in range(0, len(image), rows):  # a band at a time: float temporaries of a whole picture cost 12 B a pixel
+        band = np.nan_to_num(image[y : y + rows], nan=0.0)
+        np.clip(band, 0.0, 1.0, out=band)
+        band *= 255.0
+        band += 0.5
+        out[y : y + rows] = band
+    return out
 
 
 def encode(image: np.ndarray, fmt: str = "PNG", quality: int = 90) -> bytes:

@@ -17,7 +17,7 @@ def test_accuracy_report_and_chart(tmp_path):
     sweep = Sweep(32, 18, (1, 2), (1.0, 0.5), 8, 1)
     report = run(tmp_path, scenes=("sky",), sweep=sweep, threads=2)
     saved = json.loads((tmp_path / "accuracy.json").read_text())
-    assert saved["points"] == report["points"] and len(saved["points"]) == 3 * 2 * 2
+    assert saved["points"] == report["points"] and len(saved["points"]) == 2 * 2 * 2  # methods, spps, scales
     for p in saved["points"]:
         assert {"method", "spp", "scale", "ms", "psnr", "ssim", "psnr_edge", "ssim_edge"} <= set(p)
         assert p["ms"] > 0 and 0 < p["psnr"] <= 100 and -1 <= p["ssim"] <= 1

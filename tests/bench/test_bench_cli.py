@@ -18,7 +18,6 @@ FLAGS = {
     "soak": {"--seconds", "--clients", "--rest"},
     "accuracy": {"--out", "--quick", "--threads"},
     "stability": {"--out", "--quick", "--noise-only"},
-    "levels": {"--width", "--height"},
     "cluster": {"--scene", "--width", "--height", "--frames", "--ray", "--gbps", "--cores"},
     "memory": {"--width", "--height", "--threads"},
 }
@@ -100,7 +99,6 @@ def test_the_benchmarks_import_without_the_test_extra(tmp_path):
         "metrics",
         "accuracy",
         "stability",
-        "levels",
         "cluster",
         "memory",
     ]

@@ -1,10 +1,8 @@
 """Every projection (``camera.py``, "Other projections"): the compiled functions against their numpy twins, the
 equirect panorama's conventions on scenes whose answer is known, and the method's guarantees on each: the plain
-render at lambda 0, fast against exact, a tile equal to its crop, each eye of a stereo painting as that eye's
+render at lambda 0, a tile equal to its crop, each eye of a stereo painting as that eye's
 own painting, and the image-space lookup through the inverse map.
 """
-
-from dataclasses import replace
 
 import numba
 import numpy as np
@@ -25,7 +23,7 @@ from rcp_server.engine import kernels
 from rcp_server.engine.kernels.projection import centre_frame, locate, target_offset, to_pixel
 from rcp_server.engine.paintstate import PaintState
 from rcp_server.painting.imagespace import bilinear, lookup_coords
-from rcp_server.painting.loop import paint, see, seen_grid
+from rcp_server.painting.loop import paint
 from rcp_server.painting.raytrace import visible_faces
 from rcp_server.painting.stereo import partners
 from rcp_server.scene.meshes import primitive
@@ -212,31 +210,16 @@ def test_lambda_zero_paints_the_plain_render_on_every_projection(surround, name)
     np.testing.assert_array_equal(still, plain)
 
 
-@pytest.mark.parametrize(("mapping", "spp", "noise"), [("color", 1, 0.0), ("depth", 4, 0.3), ("normal", 1, 0.3)])
-@pytest.mark.parametrize("name", sorted(CAMERAS))
-def test_fast_is_within_two_levels_of_exact_on_every_projection(surround, name, mapping, spp, noise):
-    camera = CAMERAS[name]
-    params = PaintParams(mapping=mapping, lambda_p=LAMBDA[mapping], spp=spp, noise=noise, seed=1, z0=5.0)
-    exact = paint(surround, camera, *_size(camera), replace(params, fast=False), keep_iterations=True)
-    fast = paint(surround, camera, *_size(camera), params, keep_iterations=True)
-    np.testing.assert_array_equal(fast.iterations[0], exact.iterations[0])
-    assert _close_share(fast.image, exact.image) >= 0.99
-    assert np.abs(exact.image - exact.iterations[0]).max() > 0.2  # the painting did move
-
-
 @pytest.mark.parametrize("name", ["equirect", "perspective top-bottom", "equirect top-bottom"])
-def test_temporal_mode_continues_each_eyes_painting_and_fast_stays_within_the_bound(surround, name):
-    """Frames that go on from the one before (each eye from its own), a step apart: fast against exact, and the
-    shared eyes' mode against its own exact painting."""
+def test_temporal_mode_continues_each_eyes_painting(surround, name):
+    """Frames that go on from the one before (each eye from its own, or with the eyes sharing), a step apart."""
     for camera in (CAMERAS[name], CAMERAS[name].moved(eyes="shared")):
         params = PaintParams(lambda_p=12.0, iterations=2)
-        exact = fast = None
+        exact = None
         for k in range(3):
             step = camera.moved(eye=tuple(np.add(camera.eye, (0.05 * k, 0.0, -0.05 * k))))
-            exact = paint(surround, step, *_size(step), replace(params, fast=False), previous=exact and exact.state)
-            fast = paint(surround, step, *_size(step), params, previous=fast and fast.state)
-        assert _close_share(fast.image, exact.image) >= 0.99
-        fresh = paint(surround, step, *_size(step), replace(params, fast=False)).image
+            exact = paint(surround, step, *_size(step), params, previous=exact and exact.state)
+        fresh = paint(surround, step, *_size(step), params).image
         assert np.abs(exact.image - fresh).max() > 0.1  # it did continue, not start again
 
 
@@ -255,7 +238,7 @@ def test_the_image_method_continues_a_panorama_and_a_pair(surround, name):
 def test_a_tile_across_the_eyes_equals_its_crop(surround, name):
     camera = CAMERAS[name]
     width, height = _size(camera)
-    for params in (PaintParams(lambda_p=12.0), PaintParams(lambda_p=12.0, spp=4, noise=0.3, fast=False)):
+    for params in (PaintParams(lambda_p=12.0), PaintParams(lambda_p=12.0, spp=4, noise=0.3)):
         full = paint(surround, camera, width, height, params).state
         tile = Region(width, height, width // 3, height // 3, width // 2, height // 2)  # across both eyes
         part = paint(surround, camera, width, height, params, region=tile).state
@@ -264,28 +247,15 @@ def test_a_tile_across_the_eyes_equals_its_crop(surround, name):
 
 
 @pytest.mark.parametrize("name", ["equirect", "perspective top-bottom"])
-def test_bands_given_what_the_painting_sees_in_parts_are_its_crops(surround, name):
-    """How Ray paints a panorama or a stereo pair in bands: ``see`` a part a band, joined, handed to each band."""
+def test_bands_are_the_crops_of_the_painting(surround, name):
+    """How Ray paints a panorama or a stereo pair: in bands of rows, each painted apart."""
     camera = CAMERAS[name]
     width, height = _size(camera)
     params = PaintParams(lambda_p=12.0)
     full = paint(surround, camera, width, height, params).image
-    grid = seen_grid(surround, 0.0, camera, width, height, params)
-    bands = Region(width, height).tiles(17)
-    parts = [see(surround, 0.0, camera, Region(grid.width, grid.height, 0, b.y0, -1, b.height)) for b in bands]
-    seen = kernels.Seen.joined(parts)
-    for band in bands:
-        image = paint(surround, camera, width, height, params, region=band, seen=seen).image
+    for band in Region(width, height).tiles(17):
+        image = paint(surround, camera, width, height, params, region=band).image
         np.testing.assert_array_equal(image, full[band.y0 : band.y0 + band.height])
-
-
-def test_omnidirectional_stereo_traces_every_ray_and_fast_changes_nothing(surround):
-    """Its eyes go round a circle: no one point for the visible-surface grid (``Camera.one_eye_point``)."""
-    camera = CAMERAS["equirect top-bottom"]
-    params = PaintParams(lambda_p=12.0)
-    assert seen_grid(surround, 0.0, camera, *_size(camera), params) is None
-    exact = paint(surround, camera, *_size(camera), replace(params, fast=False)).image
-    assert _close_share(paint(surround, camera, *_size(camera), params).image, exact) >= 0.99
 
 
 def test_each_eye_of_a_perspective_pair_is_the_painting_of_that_eye(surround):
@@ -294,7 +264,7 @@ def test_each_eye_of_a_perspective_pair_is_the_painting_of_that_eye(surround):
     pair = CAMERAS["perspective side-by-side"]
     width, height = EYE_SIZE["perspective"]
     # the depth of a miss given: the scene's own is measured from the camera's (centre) eye
-    params = PaintParams(mapping="depth", lambda_p=3.0, z0=5.0, z_max=40.0, fast=False)
+    params = PaintParams(mapping="depth", lambda_p=3.0, z0=5.0, z_max=40.0)
     image = paint(surround, pair, 2 * width, height, params).image
     r = pair.basis()[0]
     for side, half in ((-1, image[:, :width]), (1, image[:, width:])):
@@ -385,7 +355,7 @@ def test_shared_eyes_smudge_the_same_point_alike(surround, name):
     own = CAMERAS[name]
     shared = own.moved(eyes="shared")
     width, height = _size(own)
-    params = PaintParams(lambda_p=12.0, fast=False)
+    params = PaintParams(lambda_p=12.0)
     alone = paint(surround, own, width, height, params).image
     both = paint(surround, shared, width, height, params).image
     left = (slice(None), slice(0, width // 2)) if own.stereo == "side-by-side" else (slice(0, height // 2),)

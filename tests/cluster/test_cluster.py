@@ -106,7 +106,7 @@ def long_path(seconds: float) -> dict:
 
 
 def test_one_large_painting_in_bands_is_the_threads_painting(painter, busy_scene):
-    """A REST render on Ray: a band of rows per actor (the image method's whole on one), the fast path on."""
+    """A REST render on Ray: a band of rows per actor (the image method's whole on one)."""
     camera = shots(busy_scene)[2].camera
     for params in (PaintParams(iterations=4, spp=2), PaintParams(iterations=3, method="image", lambda_p=6.0)):
         expected = images.to_uint8(paint(busy_scene, camera, W, H, params, time=0.25, threads=2).image)

@@ -40,7 +40,7 @@ def test_ink_darkens_exactly_the_inked_material_where_the_view_jumps():
 
 
 def test_the_painting_smudges_the_ink():
-    params = PaintParams(mapping="color", lambda_p=10.0, iterations=5, fast=False)
+    params = PaintParams(mapping="color", lambda_p=10.0, iterations=5)
     with_ink = paint(_scene(1.0), CAMERA, W, H, params, keep_iterations=True).iterations
     without = paint(_scene(0.0), CAMERA, W, H, params).image
     first_dark = (with_ink[0] < 0.02).all(axis=2)

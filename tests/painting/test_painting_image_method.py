@@ -33,7 +33,7 @@ def test_image_method_equals_ray_tracing_where_lookups_stay_on_a_facing_plane(gr
     # the plane's albedo is linear in x and y, so a bilinear lookup between pixel centres is what a ray sees;
     # lambda_p 3 (times |z - z0| = 2 for depth) keeps every lookup within 6 pixels of its own
     common = dict(mapping=mapping, iterations=5, lambda_p=3.0, z0=2.0)
-    traced = paint(gradient_scene, CAMERA, W, H, PaintParams(fast=False, **common), keep_iterations=True)
+    traced = paint(gradient_scene, CAMERA, W, H, PaintParams(**common), keep_iterations=True)
     looked = paint(gradient_scene, CAMERA, W, H, PaintParams(method="image", **common), keep_iterations=True)
     inner = (slice(7, H - 7), slice(7, W - 7))
     for a, b in zip(traced.iterations, looked.iterations, strict=True):

@@ -93,8 +93,8 @@ def test_temporal_mode_continues_the_recursion(busy_scene):
 
 
 def test_temporal_mode_one_iteration_at_a_time(busy_scene):
-    # exact (fast off): one iteration at a time and four at once are the same recursion to the bit
-    params = PaintParams(mapping="color", iterations=1, lambda_p=5.0, fast=False)
+    # one iteration at a time and four at once are the same recursion to the bit
+    params = PaintParams(mapping="color", iterations=1, lambda_p=5.0)
     state = None
     for _ in range(4):
         state = paint(busy_scene, CAMERA, W, H, params, previous=state).state

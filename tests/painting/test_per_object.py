@@ -29,9 +29,7 @@ def _object_pixels(scene, name: str) -> np.ndarray:
     return (state.object == index).reshape(H, W)
 
 
-@pytest.mark.parametrize(
-    "how", [{"fast": False}, {"fast": True}, {"method": "image"}, {"spp": 2, "fast": False}], ids=str
-)
+@pytest.mark.parametrize("how", [{}, {"method": "image"}, {"spp": 2}], ids=str)
 def test_a_still_object_stays_exactly_plain_while_the_rest_moves(busy_scene, how):
     params = replace(SMUDGE, objects={"red": {"lambda_p": 0.0}}, **how)
     plain, painted = _plain_and_painted(busy_scene, params)
@@ -50,7 +48,7 @@ def test_a_still_object_stays_exactly_plain_while_the_rest_moves(busy_scene, how
 
 def test_an_object_can_take_a_mapping_and_strength_of_its_own(busy_scene):
     """Only the green sphere's pixels smudge (by its normal mapping); the rest is the plain render."""
-    params = replace(SMUDGE, lambda_p=0.0, objects={"green": {"lambda_p": 14.0, "mapping": "normal"}}, fast=False)
+    params = replace(SMUDGE, lambda_p=0.0, objects={"green": {"lambda_p": 14.0, "mapping": "normal"}})
     plain, painted = _plain_and_painted(busy_scene, params)
     green = _object_pixels(busy_scene, "green")
     moved = np.abs(painted - plain).max(axis=2) > 2 / 255
@@ -70,7 +68,7 @@ def test_material_settings_and_the_objects_over_them():
         obj.part, obj.instances = part, [(obj.instances[0][0], part)]
     scene = make_scene([left, right])
     # the material's lambda_p 0 holds both spheres still; the right one's own setting wins over it
-    params = replace(SMUDGE, materials={"glass": {"lambda_p": 0.0}}, objects={"right": {"lambda_p": 12.0}}, fast=False)
+    params = replace(SMUDGE, materials={"glass": {"lambda_p": 0.0}}, objects={"right": {"lambda_p": 12.0}})
     plain, painted = _plain_and_painted(scene, params)
     moved = np.abs(painted - plain).max(axis=2) > 2 / 255
     lefts, rights = _object_pixels(scene, "left"), _object_pixels(scene, "right")
@@ -78,11 +76,9 @@ def test_material_settings_and_the_objects_over_them():
     assert moved[rights].mean() > 0.05
 
 
-def test_fast_and_image_paint_per_object_settings_as_tracing_every_ray(busy_scene):
+def test_the_image_method_paints_per_object_settings_as_the_traced_one(busy_scene):
     params = replace(SMUDGE, objects={"red": {"lambda_p": 0.0}, "green": {"mapping": "normal", "lambda_p": 14.0}})
-    exact = paint(busy_scene, CAMERA, W, H, replace(params, fast=False)).image
-    fast = paint(busy_scene, CAMERA, W, H, params).image
-    assert (np.abs(fast - exact).max(axis=2) <= 2 / 255).mean() >= 0.99
+    exact = paint(busy_scene, CAMERA, W, H, params).image
     image = paint(busy_scene, CAMERA, W, H, replace(params, method="image")).image
     red = _object_pixels(busy_scene, "red")
     np.testing.assert_array_equal(image[red], exact[red])  # both leave the still sphere as it is

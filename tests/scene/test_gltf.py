@@ -12,7 +12,7 @@ from gltf_helpers import GltfBuilder, quaternion
 from PIL import Image
 
 from rcp_server.camera.camera import Camera
-from rcp_server.painting.loop import paint, uses_seen
+from rcp_server.painting.loop import paint
 from rcp_server.scene import gltf
 from rcp_server.scene.meshes import load_model
 from rcp_server.scene.scenefile import mesh_scene
@@ -81,17 +81,12 @@ def test_a_directional_light_is_the_scenes_light_and_a_point_light_shines_toward
 
 
 @pytest.mark.parametrize("spp", [1, 2])
-def test_a_cut_out_shows_what_is_behind_it_in_the_exact_and_the_fast_path(tmp_path, spp):
+def test_a_cut_out_shows_what_is_behind_it(tmp_path, spp):
     scene = _unlit_scene(_cut_out_quad(tmp_path, alphaCutoff=0.5))
     assert scene.geometry()[0].masked
-    exact = paint(scene, CAMERA, W, H, PaintParams(iterations=3, spp=spp, lambda_p=2.0, fast=False), threads=1).image
-    fast_params = PaintParams(iterations=3, spp=spp, lambda_p=2.0, fast=True)
-    assert uses_seen(fast_params, CAMERA)  # the fast path decides rays by what the pixel centres see
-    fast = paint(scene, CAMERA, W, H, fast_params, threads=1).image
-    for image in (exact, fast):
-        np.testing.assert_allclose(image[ROW, LEFT], [1, 0, 0], atol=1e-6)  # the red wall, through the cut
-        np.testing.assert_allclose(image[ROW, RIGHT], [0, 1, 0], atol=2e-4)  # the quad's green half
-    assert np.abs(fast - exact).max() <= 2 / 255  # fast's own bound (test_fast.py), alpha or not
+    image = paint(scene, CAMERA, W, H, PaintParams(iterations=3, spp=spp, lambda_p=2.0), threads=1).image
+    np.testing.assert_allclose(image[ROW, LEFT], [1, 0, 0], atol=1e-6)  # the red wall, through the cut
+    np.testing.assert_allclose(image[ROW, RIGHT], [0, 1, 0], atol=2e-4)  # the quad's green half
 
 
 def test_an_opaque_material_ignores_its_textures_alpha_and_blend_is_a_mask_at_one_half(tmp_path):
@@ -239,7 +234,7 @@ def test_the_geometry_keeps_a_models_textures_without_copying_them(tmp_path):
 
 def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypatch):
     """The pass is skipped unless a scene has cut-outs: a tile's compiled iteration reads it from its
-    ``Trace``, and the visible-surface pass (fast, 2 spp) never calls it."""
+    ``Trace``, and the pass of what pixel centres see (outlines, picks, shared eyes) never calls it."""
     from rcp_server.painting import raytrace
 
     def refuse(*args):
@@ -248,12 +243,13 @@ def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypa
     monkeypatch.setattr(raytrace, "pass_masked", refuse)
     scene = _unlit_scene(_cut_out_quad(tmp_path, mode="OPAQUE"))
     assert not raytrace.Frame.of(scene, 0.0, CAMERA, PaintParams()).trace.masked
-    for fast, spp in ((False, 1), (True, 1), (True, 2)):
-        paint(scene, CAMERA, W, H, PaintParams(iterations=2, spp=spp, lambda_p=2.0, fast=fast), threads=1)
+    for spp in (1, 2):
+        paint(scene, CAMERA, W, H, PaintParams(iterations=2, spp=spp, lambda_p=2.0), threads=1)
+    raytrace.pick(scene, 0.0, CAMERA, W, H, W // 2, H // 2)
     masked = _unlit_scene(_cut_out_quad(tmp_path, mode="MASK", name="masked.glb"))
     assert raytrace.Frame.of(masked, 0.0, CAMERA, PaintParams()).trace.masked
     with pytest.raises(AssertionError, match="alpha pass ran"):  # the same patch does see a scene with them
-        paint(masked, CAMERA, W, H, PaintParams(iterations=2, spp=2, lambda_p=2.0), threads=1)
+        raytrace.pick(masked, 0.0, CAMERA, W, H, W // 2, H // 2)
 
 
 def test_a_malformed_gltf_json_yields_what_it_can_and_never_raises():

@@ -40,7 +40,7 @@ def scene(live_server):
 
 def test_every_style_sets_every_setting_of_a_look_and_paints():
     for style in STYLES.values():
-        assert set(LOOK) <= set(style.settings) and "fast" not in style.settings
+        assert set(LOOK) <= set(style.settings)
         PaintParams.from_dict(style.settings)
     with pytest.raises(ValueError, match="unknown style 'nope'; styles: smudge, focus, fractured"):
         get_style("nope")

@@ -4,10 +4,8 @@
 ``shade.py``: hits -> per-pixel data (``shade``); ``triangle.py``: where a ray meets the triangle it hits
 (``place_hits``); ``iterate.py``: one traced iteration of a tile, the steps above chained in one call
 (``paint_iteration``); ``alpha.py``: rays through cut-outs (``pass_masked``); ``lookup.py``: the
-image-space method's lookup (``look_up``); ``seen.py`` and
-``reuse.py``: the shortcuts of the ``fast`` setting (``resolve_seen`` finds the hit where the plain render
-already knows it, ``cover_thin`` where it may not; ``changed_pixels`` what must be painted again,
-``carry`` what is kept). Each releases the GIL, so tiles run on threads side by side, and each has a plain
+image-space method's lookup (``look_up``); ``embree.py``: the binding to Embree's C API that the others
+call (``intersect_rays``). Each releases the GIL, so tiles run on threads side by side, and each has a plain
 numpy reference in ``tests/engine`` that it is checked against.
 
 Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same type passed in each
@@ -18,7 +16,6 @@ from .alpha import masked_rays, pass_masked
 from .bundles import (
     Cast,
     Channels,
-    Compare,
     Field,
     ImagePlane,
     Ink,
@@ -35,13 +32,10 @@ from .bundles import (
 from .cast import FIELD_COLOR, FIELD_DEPTH, FIELD_GIVEN, FIELD_NORMAL, FIELD_ZERO, cast_rays, fill_field
 from .iterate import paint_iteration
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
-from .reuse import REUSE_LEVELS, carry, changed_pixels
-from .seen import cover_thin, resolve_seen
 from .shade import record_surfaces, shade
 from .triangle import place_hits
 
 __all__ = [
-    "REUSE_LEVELS",
     "EDGE_CLAMP",
     "EDGE_MIRROR",
     "EDGE_WRAP",
@@ -52,7 +46,6 @@ __all__ = [
     "FIELD_ZERO",
     "Cast",
     "Channels",
-    "Compare",
     "Field",
     "ImagePlane",
     "Ink",
@@ -62,10 +55,7 @@ __all__ = [
     "Shading",
     "Surfaces",
     "Trace",
-    "carry",
     "cast_rays",
-    "cover_thin",
-    "changed_pixels",
     "channels",
     "fill_field",
     "look_up",
@@ -76,6 +66,5 @@ __all__ = [
     "place_hits",
     "record_surfaces",
     "records",
-    "resolve_seen",
     "shade",
 ]

@@ -7,7 +7,6 @@ arguments of the same type cannot swap without an error: positionally, a swap ga
 from __future__ import annotations
 
 from collections import namedtuple
-from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -134,16 +133,6 @@ class Cast(NamedTuple):
     write_origins: bool
 
 
-class Compare(NamedTuple):
-    """Which channels decide whether a pixel is painted again (``reuse.changed_pixels``); ``any``: compare at
-    all (else every pixel is painted)."""
-
-    any: bool
-    color: bool
-    channels: Records  # the other channels, each compared as bits
-    color_levels: int
-
-
 class Trace(NamedTuple):
     """The scene as intersection needs it: Embree's handle (``tracer.Embree``; scene 0 when there are no
     triangles), the triangles (F, 3, 3) float32 where hits are placed, and whether some of them have cut-outs
@@ -161,7 +150,7 @@ class Ink(NamedTuple):
     no material draws outlines (the arrays are dummies)."""
 
     any: bool
-    ink: np.ndarray  # (H*W,) float32 in [0, 1]
+    ink: np.ndarray  # (H*W,) uint8 1 on an edge, else 0 (a byte: the painting keeps it a pixel)
     distance: np.ndarray  # (H*W,) float32 from the pixel's eye to the surface the ink is on
 
 
@@ -187,8 +176,6 @@ class Scratch(NamedTuple):
     origins: np.ndarray  # (n*spp, 3) float32
     directions: np.ndarray  # (n*spp, 3) float32
     hits: Hits  # of n*spp rays
-    pending: np.ndarray  # (n*spp,) int64 rays left to Embree
-    changed: np.ndarray  # (n,) int64 pixels painted again
     every: np.ndarray  # (n*spp,) int64 0, 1, 2, ...
     starts: np.ndarray  # (n*spp, 3) float32 where rays through cut-outs go on (one row when none can)
     todo: np.ndarray  # (n*spp,) int64 rays through cut-outs, two lists in turn (one entry when none can)
@@ -196,33 +183,19 @@ class Scratch(NamedTuple):
 
 
 class Seen(NamedTuple):
-    """What the camera sees at the pixel centres of a ``width x height`` image (the painting's, or a finer
-    one for many samples): the hits of its plain render's rays, row-major (``raytrace.visible_faces``), and
-    where thin geometry lies between the centres (``seen.cover_thin``); ``seen.resolve_seen`` reads it."""
+    """What the camera sees at the pixel centres of a ``width x height`` image: the hits of its plain render's
+    rays, row-major (``raytrace.visible_faces``): where outlines are drawn, which surface point the other eye
+    of a stereo pair sees (``stereo.partners``), what a click picks."""
 
     face: np.ndarray  # (height * width,) int32, -1: the sky
     distance: np.ndarray  # (height * width,) float32 along the unit ray to the hit, meaningless on the sky
-    near: np.ndarray  # (height * width,) float32 least view depth of a thin part in the cell right-below, or inf
     width: int
     height: int
 
     @classmethod
     def empty(cls, width: int, height: int) -> Seen:
         n = width * height
-        return cls(np.empty(n, np.int32), np.empty(n, np.float32), np.full(n, np.inf, np.float32), width, height)
-
-    @classmethod
-    def joined(cls, parts: Sequence[Seen]) -> Seen:
-        """Parts of full-width rows, top to bottom, as one."""
-        face, distance, near = (
-            np.concatenate([getattr(p, name) for p in parts]) for name in ("face", "distance", "near")
-        )
-        return cls(face, distance, near, parts[0].width, sum(p.height for p in parts))
-
-    def rows(self, tile: Region) -> Seen:
-        """The part at ``tile``'s rows (full-width rows of this image), a view to write into."""
-        rows = slice(tile.y0 * self.width, (tile.y0 + tile.height) * self.width)
-        return Seen(self.face[rows], self.distance[rows], self.near[rows], self.width, tile.height)
+        return cls(np.empty(n, np.int32), np.empty(n, np.float32), width, height)
 
 
 def or_dummy(array: np.ndarray | None, ndim: int) -> np.ndarray:

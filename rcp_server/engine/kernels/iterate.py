@@ -1,5 +1,5 @@
-"""One traced iteration of one tile in one compiled call: which pixels to paint, their cameras, their hits
-(the visible-surface grid where it decides, Embree's packets for the rest) and their shading, without
+"""One traced iteration of one tile in one compiled call: every pixel's cameras, their hits (Embree's
+packets) and their shading, without
 returning to Python in between (``raytrace.TracedTile`` calls it once an iteration). Each step is a kernel
 of its own module, tested there against its numpy reference; this one only chains them and times them.
 """
@@ -11,45 +11,26 @@ from .cast import cast_rays
 from .clock import cycles
 from .embree import intersect_rays
 from .jit import jit
-from .reuse import carry, changed_pixels
-from .seen import resolve_seen
 from .shade import record_surfaces, shade
 from .triangle import place_hits
 
 
 @jit
-def paint_iteration(cast, compare, before, previous, source, out, trace, seen, use_seen, shading, scratch, clock):
-    """``I_n`` of a tile into ``out`` from ``previous`` (``I_{n-1}``); returns how many pixels it painted.
+def paint_iteration(cast, source, out, trace, shading, scratch, clock):
+    """``I_n`` of a tile into ``out``, every pixel; returns how many pixels it painted.
 
-    cast : bundles.Cast, the tile's cameras (its ``pixels`` field is ignored: the pixels are decided here)
-    compare : bundles.Compare: with ``compare.any``, a pixel whose inputs in ``previous`` equal those in
-    ``before`` (``I_{n-2}``) is not painted but carried over (``reuse.changed_pixels``, ``reuse.carry``);
-    else every pixel is painted.  before, previous, out : bundles.Channels of the tile (``out`` may be
-    ``before``'s buffer: each pixel of it is read before it is written, never ``previous``'s)
-    source : bundles.Channels the displacement fields read: ``previous``, or what the eyes of a stereo painting
-    share (``stereo.py``; then ``compare.any`` must be off: a pixel's source changes with another pixel)
+    cast : bundles.Cast, the tile's cameras (its ``pixels`` field is ignored: every pixel is painted)
+    source : bundles.Channels the displacement fields read: ``I_{n-1}``, or what the eyes of a stereo painting
+    share (``stereo.py``);  out : bundles.Channels of the tile, never ``source``'s buffers
     trace : bundles.Trace, the scene's Embree handle and triangles (scene 0: no triangles, every ray misses)
-    seen, use_seen : the visible-surface grid and whether it decides rays (``seen.resolve_seen``)
     shading : bundles.Shading;  scratch : bundles.Scratch of the tile
-    clock : (3,) int64, cycles added per stage: camera (including which pixels), intersect, shade
+    clock : (3,) int64, cycles added per stage: camera, intersect, shade
     """
     start = cycles()
     n = out.color.shape[0]
     spp = cast.xi.shape[1]
-    if compare.any:
-        count = changed_pixels(
-            before=before,
-            after=previous,
-            color=compare.color,
-            channels=compare.channels,
-            color_levels=compare.color_levels,
-            out=scratch.changed,
-        )
-        pixels = scratch.changed[:count]
-        carry(previous, out, pixels, shading.records)
-    else:
-        count = n
-        pixels = scratch.every[:n]
+    count = n
+    pixels = scratch.every[:n]
     cast_rays(
         eye=cast.eye,
         plane=cast.plane,
@@ -72,20 +53,6 @@ def paint_iteration(cast, compare, before, previous, source, out, trace, seen, u
     rays = count * spp
     hits = scratch.hits
     traced = scratch.every[:rays]
-    if use_seen:
-        left = resolve_seen(
-            origins=scratch.origins,
-            directions=scratch.directions,
-            count=rays,
-            plane=cast.plane,
-            seen=seen,
-            triangles=trace.triangles,
-            hits=hits,
-            pending=scratch.pending,
-            pixels=pixels,
-            spp=spp,
-        )
-        traced = scratch.pending[:left]
     if trace.embree.scene == 0:
         for s in traced:
             hits.face[s] = -1
@@ -94,7 +61,7 @@ def paint_iteration(cast, compare, before, previous, source, out, trace, seen, u
         place_hits(
             origins=scratch.origins, directions=scratch.directions, rays=traced, triangles=trace.triangles, hits=hits
         )
-        if trace.masked:  # ---- cut-outs let rays through, decided by the grid or by Embree alike ----
+        if trace.masked:  # ---- cut-outs let rays through ----
             pass_masked(
                 embree=trace.embree,
                 triangles=trace.triangles,

@@ -147,7 +147,7 @@ def _ink_at(ink, plane, side, ex, ey, ez, x, y, z):
         return 0.0
     k = row * plane.full_width + col
     distance = math.sqrt(vx * vx + vy * vy + vz * vz)
-    return ink.ink[k] if abs(ink.distance[k] - distance) <= 0.02 * distance else 0.0
+    return float(ink.ink[k]) if abs(ink.distance[k] - distance) <= 0.02 * distance else 0.0
 
 
 @numba.njit(inline="always")

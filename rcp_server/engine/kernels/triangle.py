@@ -1,9 +1,8 @@
 """Where a ray meets a triangle: the one definition of a hit's distance and barycentric weights.
 
 Embree finds which triangle a ray hits first; where on it is computed here, for every hit, whoever found
-the triangle (Embree, or ``seen.resolve_seen`` without the BVH). So two ways of finding the same triangle
-give the same bits, and the ``fast`` setting differs from tracing every ray only where it picks another
-triangle, not by Embree's float rounding, which a painting's recursion would amplify.
+the triangle (a traced iteration, the pass of what pixel centres see, a pick). So two ways of finding the
+same triangle give the same bits, not Embree's float rounding, which a painting's recursion would amplify.
 """
 
 from __future__ import annotations
