@@ -132,7 +132,8 @@ class Settings(BaseSettings):
         2 << 30,
         ge=1,
         description="disk the finished videos may use together; a new job whose estimate (0.25 bytes a pixel a "
-        "frame) does not fit gets 507 with the estimate and the room left",
+        "frame) does not fit beside the kept videos and the jobs in progress gets 507 with the estimate and the room "
+        "left; a video larger than its estimate fails with a message",
     )
     video_keep_s: float = Field(
         3600.0, gt=0, description="a finished video (and its job) is deleted this long after it finished"
@@ -151,7 +152,8 @@ class Settings(BaseSettings):
         1 << 24,
         ge=1,
         description="with ray_address, a REST render of this many rays (pixels x spp x iterations) or more is painted "
-        "on Ray; 503 and Retry-After 30 when Ray fails it, and painted here while Ray backs off",
+        "on Ray; 503 and Retry-After 30 with Ray's one-line fault when Ray fails it, and painted here while Ray backs "
+        "off",
     )
     # ---- walking ----
     frame_ms: float = Field(
