@@ -33,32 +33,29 @@ ENV_PREFIX = Settings.model_config.get("env_prefix", "")
 
 
 def paint_table(settings: Iterable[PaintSetting], per_pixel: Iterable[str] = PER_PIXEL) -> str:
-    """A Markdown table of painting settings: the wire's name, ``rcp render``'s option, default, bounds, help."""
+    """A Markdown table of painting settings: name (``rcp render``'s option is ``--`` and the name with dashes),
+    default, bounds, whether objects and materials may set it, help."""
     per_pixel = set(per_pixel)
-    rows = [
-        "| setting | `rcp render` | default | takes | per object and material | what |",
-        "|---|---|---|---|---|---|",
-    ]
+    rows = ["| setting | default | takes | per object | what |", "|---|---|---|---|---|"]
     for s in settings:
-        flag = f"--{s.name.replace('_', '-')}" + (f", --no-{s.name.replace('_', '-')}" if s.kind is bool else "")
         takes = _names(s.choices) + (" or a registered mapping" if s.lookup is not None else "")
         if not s.choices:
             takes = _bounds(s.kind.__name__, ge=s.ge, gt=s.gt, le=s.le)
         if s.optional:
             takes += ", or null (derived)"
         per = "yes" if s.name in per_pixel else ""
-        rows.append(f"| `{s.name}` | `{flag}` | {_value(s.default)} | {takes} | {per} | {_cell(s.help)} |")
+        rows.append(f"| `{s.name}` | {_value(s.default)} | {takes} | {per} | {cell(s.help)} |")
     return "\n".join(rows)
 
 
 def camera_table(fields: Iterable[CameraField]) -> str:
-    """A Markdown table of camera fields: name, ``rcp render``'s option, default, bounds, help."""
-    rows = ["| field | `rcp render` | default | takes | what |", "|---|---|---|---|---|"]
+    """A Markdown table of camera fields: name, default, bounds, help."""
+    rows = ["| field | default | takes | what |", "|---|---|---|---|"]
     for f in fields:
         kind = "3 numbers" if f.kind == "vec3" else getattr(f.kind, "__name__", str(f.kind))
         takes = _names(f.choices) if f.choices else _bounds(kind, ge=f.ge, gt=f.gt, lt=f.lt)
         default = "required" if f.required else _value(f.default)
-        rows.append(f"| `{f.name}` | `--{f.name.replace('_', '-')}` | {default} | {takes} | {_cell(f.help)} |")
+        rows.append(f"| `{f.name}` | {default} | {takes} | {cell(f.help)} |")
     return "\n".join(rows)
 
 
@@ -77,7 +74,7 @@ def environment_table(fields: Mapping[str, FieldInfo], names: Iterable[str] | No
             default = _value(info.default, name=name)
         bounds = {k: getattr(m, k) for m in info.metadata for k in ("ge", "gt", "le", "lt") if hasattr(m, k)}
         takes = _bounds(_kind(info.annotation), name=name, **bounds)
-        rows.append(f"| `{ENV_PREFIX}{name.upper()}` | {default} | {takes} | {_cell(info.description or '')} |")
+        rows.append(f"| `{ENV_PREFIX}{name.upper()}` | {default} | {takes} | {cell(info.description or '')} |")
     return "\n".join(rows)
 
 
@@ -146,7 +143,7 @@ def _names(choices: Iterable[str]) -> str:
     return ", ".join(f"`{c}`" for c in choices)
 
 
-def _cell(text: str) -> str:
+def cell(text: str) -> str:
     return text.replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
 
 
