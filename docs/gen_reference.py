@@ -101,6 +101,8 @@ def on_page_markdown(markdown: str, **_: Any) -> str:
 
 
 def _value(value: Any, name: str = "") -> str:
+    """A default or a bound as the tables show it: numbers plain (sizes in KiB, MiB, GiB; large powers of two as
+    such), names and switches as code."""
     if value is None:
         return "none"
     if isinstance(value, bool):
@@ -111,10 +113,10 @@ def _value(value: Any, name: str = "") -> str:
                 return f"{value // size} {unit}"
     if isinstance(value, int) and value >= 1 << 16 and value & (value - 1) == 0:
         return f"2^{value.bit_length() - 1} ({value:,})"
-    if isinstance(value, int) and value >= 10_000:
-        return f"{value:,}"
+    if isinstance(value, int):
+        return f"{value:,}" if value >= 10_000 else str(value)
     if isinstance(value, float):
-        return f"`{value:g}`".replace("e+0", "e").replace("e+", "e")
+        return f"{value:g}".replace("e+0", "e").replace("e+", "e")
     if isinstance(value, Path):
         return (
             f"`{value.relative_to(REPOSITORY)}/` (in the repository)"
@@ -128,7 +130,7 @@ def _value(value: Any, name: str = "") -> str:
 
 def _bounds(kind: str, name: str = "", **bounds: float | None) -> str:
     words = {"ge": ">=", "gt": ">", "le": "<=", "lt": "<"}
-    said = [f"{words[k]} {_value(v, name).strip('`')}" for k, v in bounds.items() if v is not None]
+    said = [f"{words[k]} {_value(v, name)}" for k, v in bounds.items() if v is not None]
     return kind + (f" ({', '.join(said)})" if said else "")
 
 

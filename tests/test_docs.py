@@ -51,16 +51,16 @@ def test_a_new_painting_setting_appears_in_the_reference():
     brush = replace(PAINT_SETTINGS["noise"], name="brush_size", help="the width of a brush, in pixels", le=64)
     table = gen.paint_table([*PAINT_SETTINGS.values(), brush])
     assert _first_column(table)[-1] == "brush_size"
-    assert "| `brush_size` | `0` | float (>= 0, <= 64) |  | the width of a brush, in pixels |" in table
+    assert "| `brush_size` | 0 | float (>= 0, <= 64) |  | the width of a brush, in pixels |" in table
 
 
 def test_a_new_camera_field_and_a_new_rcp_variable_appear_in_the_reference():
     roll = replace(CAMERA_FIELDS["fov"], name="roll", help="turn about the view, degrees", default=0.0, gt=-180)
-    assert "| `roll` | `0` | float (> -180, < 180) | turn about the view, degrees |" in gen.camera_table([roll])
+    assert "| `roll` | 0 | float (> -180, < 180) | turn about the view, degrees |" in gen.camera_table([roll])
     wider = create_model("Wider", __base__=Settings, max_brushes=(int, Field(3, ge=1, description="brushes at once")))
     table = gen.environment_table(wider.model_fields)
     assert _first_column(table)[-1] == "RCP_MAX_BRUSHES"
-    assert "| `RCP_MAX_BRUSHES` | `3` | int (>= 1) | brushes at once |" in table
+    assert "| `RCP_MAX_BRUSHES` | 3 | int (>= 1) | brushes at once |" in table
 
 
 def test_a_guide_page_names_only_variables_that_exist():
