@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Regenerates the README gallery: each image is one `rcp` command, the same one README shows.
+# Regenerates the gallery (docs/gallery: the pictures of the site and the README): each image is one `rcp`
+# command, the same one its page shows.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=docs/gallery

@@ -27,58 +27,169 @@ def default_data() -> Path:
 
 
 class Settings(BaseSettings):
+    """Every ``RCP_`` setting, each declared once with its default, bounds and description (the reference page of
+    the documentation is generated from these declarations: ``docs/gen_reference.py``)."""
+
     model_config = SettingsConfigDict(env_prefix="RCP_")
 
-    host: str = "127.0.0.1"  # loopback only unless asked: the container sets 0.0.0.0
-    port: int = Field(8000, ge=0, le=65535)
-    scenes: Path = BUNDLED_SCENES  # the folder scene names resolve in (RCP_SCENES)
-    client: Path = CLIENT_DIR  # the browser client's static files
-    data: Path = Field(default_factory=default_data)  # uploads, videos and their records (store.py)
+    host: str = Field(
+        "127.0.0.1", description="the address to listen on: loopback only unless asked (the container sets 0.0.0.0)"
+    )
+    port: int = Field(8000, ge=0, le=65535, description="the port to listen on")
+    scenes: Path = Field(BUNDLED_SCENES, description="the folder scene names resolve in")
+    client: Path = Field(CLIENT_DIR, description="the browser client's static files")
+    data: Path = Field(
+        default_factory=default_data,
+        description="uploads, videos and their records (store.py); a volume in the container",
+    )
     # ---- access ----
-    token: SecretStr | None = None  # when set, REST and WebSocket callers must present it
-    cors_origins: Annotated[list[str], NoDecode] = []  # origins other pages may call from (comma-separated)
-    # names the server answers to besides loopback's (comma-separated; "*": any); none given, a server bound to
-    # a loopback address answers only to loopback names, one bound elsewhere to any (access.py)
-    allowed_hosts: Annotated[list[str], NoDecode] = []
+    token: SecretStr | None = Field(
+        None,
+        description="when set, every REST route but /api/health, the API's description and the WebSocket need it, "
+        "as Authorization: Bearer <token> or ?token=<token>",
+    )
+    cors_origins: Annotated[list[str], NoDecode] = Field(
+        [], description="origins other pages may call from (comma-separated); CORS is off without them"
+    )
+    allowed_hosts: Annotated[list[str], NoDecode] = Field(
+        [],
+        description="names the server answers to besides loopback's (comma-separated; * for any); none given, a "
+        "server bound to a loopback address answers only to loopback names (others get 403), one bound elsewhere "
+        "to any (access.py)",
+    )
     # ---- capacity ----
-    threads: int = Field(default_factory=default_threads, ge=1, le=256)  # tile workers shared by all renders
-    max_renders: int = Field(4, ge=1)  # paintings in progress at once; more wait their turn
-    max_waiting: int = Field(16, ge=0)  # REST renders that may wait for a turn; more get 503 and Retry-After
-    max_sessions: int = Field(8, ge=1)  # WebSocket walk-throughs at once
+    threads: int = Field(
+        default_factory=default_threads,
+        ge=1,
+        le=256,
+        description="tile workers shared by all paintings (default: the cores this process may use, at most 32)",
+    )
+    max_renders: int = Field(4, ge=1, description="paintings in progress at once; more wait their turn")
+    max_waiting: int = Field(
+        16, ge=0, description="REST renders that may wait for a turn; more get 503 and Retry-After"
+    )
+    max_sessions: int = Field(
+        8,
+        ge=1,
+        description="WebSocket walk-throughs at once; one more gets an error and close 1013 (the client retries)",
+    )
     # ---- one request ----
-    max_pixels: int = Field(4096 * 2160, ge=1)  # width x height of one image
-    max_work: int = Field(1 << 28, ge=1)  # pixels x samples x iterations of one painting (about 30 s here)
-    render_timeout_s: float = Field(60.0, gt=0)  # a REST render not done by then (waiting included) gets 503
-    max_body_bytes: int = Field(64 * 1024, ge=1024)  # an HTTP request body
-    max_message_bytes: int = Field(16 * 1024, ge=256)  # a WebSocket text message; longer ones get an error
-    send_timeout_s: float = Field(30.0, gt=0)  # a client that takes no data for this long is disconnected
+    max_pixels: int = Field(4096 * 2160, ge=1, description="width x height of one image or frame; more is a 422")
+    max_work: int = Field(
+        1 << 28,
+        ge=1,
+        description="pixels x spp x iterations of one painting (about 30 s here); more is a 422; refinements stay "
+        "under it",
+    )
+    render_timeout_s: float = Field(
+        60.0,
+        gt=0,
+        description="a REST render not done by then (waiting included) stops at its next tile: 503 and Retry-After",
+    )
+    max_body_bytes: int = Field(
+        64 * 1024, ge=1024, description="an HTTP request body, by Content-Length or as it streams; more is a 413"
+    )
+    max_message_bytes: int = Field(
+        16 * 1024,
+        ge=256,
+        description="a WebSocket text message; a longer one gets an error and the walk goes on; 64x that closes the "
+        "socket (1009)",
+    )
+    send_timeout_s: float = Field(
+        30.0, gt=0, description="a client that takes no data this long (WebSocket frames, an HTTP response) is let go"
+    )
     # ---- idle and slow connections (guard.py) ----
-    header_timeout_s: float = Field(10.0, gt=0)  # a request's headers and body must arrive within this; else 408
-    hello_timeout_s: float = Field(10.0, gt=0)  # a WebSocket that has not said hello by then is closed (1008)
-    max_connections: int = Field(1024, ge=1)  # open at once; past it the one idle longest is closed
-    max_requests: int = Field(128, ge=1)  # HTTP requests in progress at once; more get 503 and Retry-After
+    header_timeout_s: float = Field(
+        10.0,
+        gt=0,
+        description="a request's headers and body must all be there this long after the connection opened or the "
+        "last response ended; else 408 and closed",
+    )
+    hello_timeout_s: float = Field(
+        10.0, gt=0, description="a WebSocket that has not said hello by then gets an error and close 1008"
+    )
+    max_connections: int = Field(
+        1024, ge=1, description="connections open at once; past it the one idle longest is closed to make room"
+    )
+    max_requests: int = Field(
+        128,
+        ge=1,
+        description="HTTP requests in progress at once (idle connections do not count); more get 503 and Retry-After",
+    )
     # ---- videos (POST /api/videos), and Ray for them and for large REST renders ----
-    max_videos: int = Field(1, ge=1)  # video jobs painting at once (their tiles take turns with the walks')
-    max_videos_waiting: int = Field(4, ge=0)  # video jobs that may wait for a turn; more get 503 and Retry-After
-    max_video_work: int = Field(1 << 34, ge=1)  # pixels x samples x iterations over every frame of one video
-    video_disk_bytes: int = Field(2 << 30, ge=1)  # disk the finished videos may use together
-    video_keep_s: float = Field(3600.0, gt=0)  # a finished video is kept this long, then deleted
-    ray_address: str | None = None  # paint on Ray: "local" (a runtime here), "auto", host:port, ray://... (below)
-    ray_join_s: float = Field(60.0, gt=0)  # with ray_address, start-up fails if Ray has not been joined by then
-    ray_min_work: int = Field(1 << 24, ge=1)  # with ray_address, REST renders of this many rays or more go to Ray
+    max_videos: int = Field(
+        1, ge=1, description="video jobs painting at once (their tiles take the cores walks leave); more wait"
+    )
+    max_videos_waiting: int = Field(
+        4, ge=0, description="video jobs that may wait for a turn; more get 503 and Retry-After"
+    )
+    max_video_work: int = Field(
+        1 << 34,
+        ge=1,
+        description="pixels x spp x iterations over every frame of one video (about half an hour here); more is a 422",
+    )
+    video_disk_bytes: int = Field(
+        2 << 30,
+        ge=1,
+        description="disk the finished videos may use together; a new job whose estimate (0.25 bytes a pixel a "
+        "frame) does not fit beside the kept videos and the jobs in progress gets 507 with the estimate and the room "
+        "left; a video larger than its estimate fails with a message",
+    )
+    video_keep_s: float = Field(
+        3600.0, gt=0, description="a finished video (and its job) is deleted this long after it finished"
+    )
+    ray_address: str | None = Field(
+        None,
+        description="paint videos and large REST renders on Ray: local (a Ray runtime on this machine), auto, "
+        "host:port or ray://host:port",
+    )
+    ray_join_s: float = Field(
+        60.0,
+        gt=0,
+        description="with ray_address, rcp serve fails to start (one line, exit 2) if Ray is not joined by then",
+    )
+    ray_min_work: int = Field(
+        1 << 24,
+        ge=1,
+        description="with ray_address, a REST render of this many rays (pixels x spp x iterations) or more is painted "
+        "on Ray; 503 and Retry-After 30 with Ray's one-line fault when Ray fails it, and painted here while Ray backs "
+        "off",
+    )
     # ---- walking ----
-    frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
-    settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message
+    frame_ms: float = Field(
+        50.0, gt=0, description="while walking, aim for frames at least this fast (20 fps), 80% of it painting"
+    )
+    settle_ms: float = Field(150.0, ge=0, description="the camera is at rest after this long without a message")
     # ---- uploaded scenes (POST /api/scenes) ----
-    uploads: bool = True  # RCP_UPLOADS=0 turns uploads off
-    upload_max_bytes: int = Field(64 << 20, ge=1024)  # one uploaded file (the body's own limit, not max_body_bytes)
-    upload_max_scenes: int = Field(16, ge=1)  # uploaded scenes kept at once
-    upload_total_bytes: int = Field(1 << 30, ge=1 << 20)  # the memory all uploaded scenes take together
-    upload_max_triangles: int = Field(2_000_000, ge=1)  # in one uploaded model
-    upload_max_texture_pixels: int = Field(32 << 20, ge=1)  # all images of one model, width x height
-    upload_idle_s: float = Field(1800.0, gt=0)  # an uploaded scene nobody has used this long is removed
-    upload_read_s: float = Field(60.0, gt=0)  # the reader of one upload: wall-clock seconds
-    upload_memory_bytes: int = Field(2 << 30, ge=64 << 20)  # the reader of one upload: address space it may add
+    uploads: bool = Field(True, description="0 turns uploads off (403)")
+    upload_max_bytes: int = Field(
+        64 << 20,
+        ge=1024,
+        description="one uploaded file (its own body limit, not max_body_bytes); more is a 413; a zip may unpack to "
+        "8x that",
+    )
+    upload_max_scenes: int = Field(16, ge=1, description="uploaded scenes kept at once; more get 503 and Retry-After")
+    upload_total_bytes: int = Field(
+        1 << 30,
+        ge=1 << 20,
+        description="the memory all uploaded scenes take together; more gets 503 and Retry-After (a file that "
+        "declares more triangles than the room left is refused before it is built)",
+    )
+    upload_max_triangles: int = Field(
+        2_000_000, ge=1, description="triangles of one uploaded model, as declared and as read; more is a 422"
+    )
+    upload_max_texture_pixels: int = Field(
+        32 << 20, ge=1, description="the pixels of all images of one model together; more is a 422"
+    )
+    upload_idle_s: float = Field(
+        1800.0, gt=0, description="an uploaded scene nobody has used this long is removed (down time included)"
+    )
+    upload_read_s: float = Field(
+        60.0, gt=0, description="the sandboxed reader of one upload: wall-clock seconds; more is a 422"
+    )
+    upload_memory_bytes: int = Field(
+        2 << 30, ge=64 << 20, description="the sandboxed reader of one upload: address space it may add; more is a 422"
+    )
 
     @field_validator("cors_origins", "allowed_hosts", mode="before")
     @classmethod

@@ -74,7 +74,7 @@ def _painting(scene, **settings) -> np.ndarray:
 
 
 def _exported(name: str):
-    """A JSON constant ``export const NAME = ...;`` of the generated client/protocol.js."""
+    """A JSON constant ``export const NAME = ...;`` of the generated client/protocol.js (``ENGINE_DEFAULTS``)."""
     text = (ROOT / "client" / "protocol.js").read_text()
     found = re.search(rf"^export const {name} = (.*?);$", text, re.MULTILINE | re.DOTALL)
     assert found, f"client/protocol.js exports no {name}"
@@ -143,7 +143,7 @@ def test_a_setting_reaches_the_client(name):
     _, given = _settings(name)
     # the client's defaults, for a setting a scene leaves out, are the engine's
     assert _exported("ENGINE_DEFAULTS")[name] == getattr(PaintParams(), name) == declared.default
-    schemas = _exported("PROTOCOL")
+    schemas = protocol.schemas()  # what protocol.js's PROTOCOL spells out (tests/client: evaluated in Chromium)
     # the panel makes a control per property of the paint schema, with its range and choices ...
     values = schemas["paint"]["properties"][name]["anyOf"][0]
     if declared.choices:

@@ -1,0 +1,88 @@
+"""The documentation: its reference is generated from the declarations (every painting setting, camera field and
+``RCP_`` setting, and a new one as soon as it is declared), and the site builds with ``mkdocs build --strict``."""
+
+import importlib.util
+import re
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from pydantic import Field, create_model
+
+from rcp_server.camera.camera import CAMERA_FIELDS
+from rcp_server.service.settings import Settings
+from rcp_server.settings.params import PAINT_SETTINGS
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location("gen_reference", ROOT / "docs" / "gen_reference.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+gen = _generator()
+
+
+def _first_column(table: str) -> list[str]:
+    """The names in a generated table's first column, in order."""
+    return re.findall(r"^\| `([^`]+)` \|", table, re.MULTILINE)
+
+
+def test_the_reference_page_holds_every_declared_setting_field_and_variable():
+    page = gen.expand((ROOT / "docs" / "reference.md").read_text())
+    assert "<!-- reference:" not in page
+    names = _first_column(page)
+    expected = [*PAINT_SETTINGS, *CAMERA_FIELDS, *(f"RCP_{name.upper()}" for name in Settings.model_fields)]
+    assert names == expected
+    for declared in PAINT_SETTINGS.values():
+        assert gen.cell(declared.help) in page
+    for name, info in Settings.model_fields.items():
+        assert info.description, f"RCP_{name.upper()} has no description to document"
+        assert gen.cell(info.description) in page
+
+
+def test_a_new_painting_setting_appears_in_the_reference():
+    brush = replace(PAINT_SETTINGS["noise"], name="brush_size", help="the width of a brush, in pixels", le=64)
+    table = gen.paint_table([*PAINT_SETTINGS.values(), brush])
+    assert _first_column(table)[-1] == "brush_size"
+    assert "| `brush_size` | 0 | float (>= 0, <= 64) |  | the width of a brush, in pixels |" in table
+
+
+def test_a_new_camera_field_and_a_new_rcp_variable_appear_in_the_reference():
+    roll = replace(CAMERA_FIELDS["fov"], name="roll", help="turn about the view, degrees", default=0.0, gt=-180)
+    assert "| `roll` | 0 | float (> -180, < 180) | turn about the view, degrees |" in gen.camera_table([roll])
+    wider = create_model("Wider", __base__=Settings, max_brushes=(int, Field(3, ge=1, description="brushes at once")))
+    table = gen.environment_table(wider.model_fields)
+    assert _first_column(table)[-1] == "RCP_MAX_BRUSHES"
+    assert "| `RCP_MAX_BRUSHES` | 3 | int (>= 1) | brushes at once |" in table
+
+
+def test_a_guide_page_names_only_variables_that_exist():
+    with pytest.raises(ValueError, match="no RCP_ setting named max_brushes"):
+        gen.expand("<!-- reference: environment max_pixels max_brushes -->")
+    for page in (ROOT / "docs").rglob("*.md"):  # every marker in the pages expands
+        assert "<!-- reference:" not in gen.expand(page.read_text()), page
+
+
+def test_the_site_builds_strictly(tmp_path):
+    """``mkdocs build --strict``: every link, anchor, included file and image resolves, the hook runs."""
+    done = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "NO_MKDOCS_2_WARNING": "1", "HOME": str(tmp_path)},
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    reference = (tmp_path / "site" / "reference" / "index.html").read_text()
+    assert "RCP_MAX_WORK" in reference and "lambda_p" in reference and "look_at" in reference
+    scene_files = (tmp_path / "site" / "guide" / "scene-files" / "index.html").read_text()
+    assert "Still life" in scene_files  # examples/scene.toml, included
+    assert (tmp_path / "site" / "gallery" / "default.jpg").is_file()

@@ -1,0 +1,126 @@
+"""The package's structure, read from its import graph (``ast``: module-level and function-level imports alike):
+no two modules import each other, directly or round a cycle; nobody imports another module's underscore names;
+and the layers below the service (``util``, ``camera``, ``engine``, ``settings``, ``scene``, ``painting``,
+``media``) never import the service, the benchmarks or the command line."""
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent / "rcp_server"
+LOWER = ("util", "camera", "engine", "settings", "scene", "painting", "media")
+ABOVE = ("rcp_server.service", "rcp_server.bench", "rcp_server.cli")
+
+
+def _modules() -> dict[str, Path]:
+    """Every module of the package: dotted name -> file (a package is its ``__init__``)."""
+    found = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+        found[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return found
+
+
+MODULES = _modules()
+
+
+def _imports(name: str, path: Path) -> list[tuple[str, str | None, int]]:
+    """What ``name`` imports, anywhere in its file: (module, imported name or None, line), relative imports
+    resolved; a ``from package import submodule`` counts as importing the submodule."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found += [(alias.name, None, node.lineno) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, *([base] if base else [])])
+            for alias in node.names:
+                if f"{base}.{alias.name}" in MODULES:
+                    found.append((f"{base}.{alias.name}", None, node.lineno))
+                else:
+                    found.append((base, alias.name, node.lineno))
+    return found
+
+
+GRAPH = {name: _imports(name, path) for name, path in MODULES.items()}
+
+
+def _edges() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (a package's ``__init__`` is a module like the others)."""
+    return {
+        name: {target for target, _, _ in imports if target in MODULES and target != name}
+        for name, imports in GRAPH.items()
+    }
+
+
+def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted: the import cycles."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    components = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(edges.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                components.append(sorted(component))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return sorted(components)
+
+
+def test_the_graph_sees_the_whole_package():
+    assert {"rcp_server", "rcp_server.cli", "rcp_server.engine.tracer", "rcp_server.service.app"} <= set(MODULES)
+    assert "rcp_server.engine.tracer" in _edges()["rcp_server.painting.raytrace"]  # relative imports resolved
+
+
+def test_no_module_imports_another_that_imports_it_back():
+    """A package's ``__init__`` counts as the module it is: ``engine.tracer`` importing ``engine.kernels`` imports
+    every kernel module that ``kernels/__init__.py`` imports."""
+    assert _cycles(_edges()) == []
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_underscore_name_is_imported_from_another_module():
+    private = [
+        f"{MODULES[source].relative_to(PACKAGE.parent)}:{line}: {name} from {target}"
+        for source, imports in GRAPH.items()
+        for target, name, line in imports
+        if target.startswith("rcp_server") and name is not None and name.startswith("_") and not name.startswith("__")
+    ]
+    assert private == []
+
+
+def test_the_layers_below_the_service_never_import_it_the_benchmarks_or_the_command():
+    upward = [
+        f"{source} imports {target}"
+        for source, imports in GRAPH.items()
+        if source.split(".")[1:2] and source.split(".")[1] in LOWER
+        for target, _, _ in imports
+        if any(target == above or target.startswith(above + ".") for above in ABOVE)
+    ]
+    assert upward == []
