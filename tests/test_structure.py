@@ -1,7 +1,8 @@
 """The package's structure, read from its import graph (``ast``: module-level and function-level imports alike):
 no two modules import each other, directly or round a cycle; nobody imports another module's underscore names;
 and the layers below the service (``util``, ``camera``, ``engine``, ``settings``, ``scene``, ``painting``,
-``media``) never import the service, the benchmarks or the command line."""
+``media``) never import the service, the benchmarks or the command line; and no function outside the compiled
+kernels runs over a hundred lines."""
 
 import ast
 from pathlib import Path
@@ -91,7 +92,9 @@ def _cycles(edges: dict[str, set[str]]) -> list[list[str]]:
 
 
 def test_the_graph_sees_the_whole_package():
-    assert {"rcp_server", "rcp_server.cli", "rcp_server.engine.kernels.embree", "rcp_server.service.app"} <= set(MODULES)
+    assert {"rcp_server", "rcp_server.cli", "rcp_server.engine.kernels.embree", "rcp_server.service.app"} <= set(
+        MODULES
+    )
     assert "rcp_server.engine.kernels.embree" in _edges()["rcp_server.painting.raytrace"]  # relative imports resolved
 
 
@@ -124,3 +127,17 @@ def test_the_layers_below_the_service_never_import_it_the_benchmarks_or_the_comm
         if any(target == above or target.startswith(above + ".") for above in ABOVE)
     ]
     assert upward == []
+
+
+LONGEST = 100  # lines a function may take, outside the compiled kernels (their loops are fused on purpose)
+
+
+def test_no_function_outside_the_kernels_runs_over_a_hundred_lines():
+    long = [
+        f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)"
+        for name, path in MODULES.items()
+        if not name.startswith("rcp_server.engine.kernels")
+        for node in ast.walk(ast.parse(path.read_text(), str(path)))
+        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.end_lineno - node.lineno + 1 > LONGEST
+    ]
+    assert long == []

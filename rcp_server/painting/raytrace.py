@@ -104,7 +104,7 @@ def displacements(
     return fields.displacements(state, data, looks or Looks.single(params), setup.pitch(), setup.noise, anchor)
 
 
-@dataclass
+@dataclass(eq=False)  # lent and given back by identity: the same arrays, not equal ones
 class TileBuffers:
     """The buffers of one tile's traced iterations, lent to one tile at a time (``workspace.Workspace``): the
     kernels' :class:`kernels.Scratch` and the two states an iteration alternates between, for tiles of up to

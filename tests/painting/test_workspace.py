@@ -81,3 +81,13 @@ def test_a_picture_converted_a_band_at_a_time_rounds_as_the_whole(monkeypatch):
     whole = (np.clip(np.nan_to_num(image, nan=0.0), 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
     monkeypatch.setattr("rcp_server.util.images.ROWS_AT_ONCE", 2 * 29 * 3)
     np.testing.assert_array_equal(to_uint8(image), whole)
+
+
+def test_tile_buffers_are_lent_and_given_back_by_identity():
+    workspace = Workspace()
+    channels = frozenset({"depth"})
+    with workspace.tile_buffers(64, 1, False, channels) as a, workspace.tile_buffers(32, 1, False, channels) as b:
+        assert a is not b
+    with workspace.tile_buffers(48, 1, False, channels) as again:  # the larger fits; the smaller is passed over
+        assert again is a
+    assert {id(x) for x in workspace.idle()} == {id(a), id(b)}
