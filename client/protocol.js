@@ -226,6 +226,90 @@ export const PROTOCOL = {
    "title": "ModeMessage",
    "type": "object"
   },
+  "move": {
+   "additionalProperties": false,
+   "description": "Walking, not flying: move the eye at ``eye`` by ``delta`` (scene units, world axes; gravity is a downward\ndelta) and keep clear of the scene's surfaces (engine/collide.py): the server answers ``moved`` with where\nit ends. ``height``: the eye's height above the floor it stands on, as the last ``moved`` said (null:\nmeasured here, at ``eye``).",
+   "properties": {
+    "delta": {
+     "maxItems": 3,
+     "minItems": 3,
+     "prefixItems": [
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      }
+     ],
+     "title": "Delta",
+     "type": "array"
+    },
+    "eye": {
+     "maxItems": 3,
+     "minItems": 3,
+     "prefixItems": [
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      }
+     ],
+     "title": "Eye",
+     "type": "array"
+    },
+    "height": {
+     "anyOf": [
+      {
+       "exclusiveMinimum": 0,
+       "maximum": 1000000000.0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "title": "Height"
+    },
+    "id": {
+     "minimum": 0,
+     "title": "Id",
+     "type": "integer"
+    },
+    "type": {
+     "const": "move",
+     "title": "Type",
+     "type": "string"
+    }
+   },
+   "required": [
+    "type",
+    "id",
+    "eye",
+    "delta"
+   ],
+   "title": "MoveMessage",
+   "type": "object"
+  },
   "paint": {
    "$defs": {
     "OwnPaintModel": {
@@ -1435,6 +1519,66 @@ export const PROTOCOL = {
     "dropped"
    ],
    "title": "Frame",
+   "type": "object"
+  },
+  "moved": {
+   "description": "The answer to ``move`` ``id``: where the eye ends, and the body that kept it clear: ``radius`` (scene\nunits from any surface), ``height`` above the floor (null: nothing beneath, it flies), ``standing`` on it.",
+   "properties": {
+    "eye": {
+     "maxItems": 3,
+     "minItems": 3,
+     "prefixItems": [
+      {
+       "type": "number"
+      },
+      {
+       "type": "number"
+      },
+      {
+       "type": "number"
+      }
+     ],
+     "title": "Eye",
+     "type": "array"
+    },
+    "height": {
+     "anyOf": [
+      {
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "title": "Height"
+    },
+    "id": {
+     "title": "Id",
+     "type": "integer"
+    },
+    "radius": {
+     "title": "Radius",
+     "type": "number"
+    },
+    "standing": {
+     "title": "Standing",
+     "type": "boolean"
+    },
+    "type": {
+     "const": "moved",
+     "default": "moved",
+     "title": "Type",
+     "type": "string"
+    }
+   },
+   "required": [
+    "id",
+    "eye",
+    "radius",
+    "height",
+    "standing"
+   ],
+   "title": "Moved",
    "type": "object"
   },
   "picked": {

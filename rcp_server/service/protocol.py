@@ -232,8 +232,26 @@ class PickMessage(_Model):
     y: Annotated[int, Field(ge=0, le=4095)]
 
 
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-1e9, le=1e9)]
+Vector = tuple[Coordinate, Coordinate, Coordinate]
+
+
+class MoveMessage(_Model):
+    """Walking, not flying: move the eye at ``eye`` by ``delta`` (scene units, world axes; gravity is a downward
+    delta) and keep clear of the scene's surfaces (engine/collide.py): the server answers ``moved`` with where
+    it ends. ``height``: the eye's height above the floor it stands on, as the last ``moved`` said (null:
+    measured here, at ``eye``)."""
+
+    type: Literal["move"]
+    id: Annotated[int, Field(ge=0)]
+    eye: Vector
+    delta: Vector
+    height: Annotated[float, Field(allow_inf_nan=False, gt=0, le=1e9)] | None = None
+
+
 ClientMessage = Annotated[
-    Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage | PickMessage, Field(discriminator="type")
+    Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage | PickMessage | MoveMessage,
+    Field(discriminator="type"),
 ]
 client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 
@@ -291,12 +309,24 @@ class Picked(BaseModel):
     material: str | None
 
 
+class Moved(BaseModel):
+    """The answer to ``move`` ``id``: where the eye ends, and the body that kept it clear: ``radius`` (scene
+    units from any surface), ``height`` above the floor (null: nothing beneath, it flies), ``standing`` on it."""
+
+    type: Literal["moved"] = "moved"
+    id: int
+    eye: tuple[float, float, float]
+    radius: float
+    height: float | None
+    standing: bool
+
+
 def client_module() -> str:
     """``client/protocol.js``: the JSON schema of every message, for the browser to build and check against,
     and the engine's painting defaults (``null``: derived per view), for the settings a scene leaves out."""
     schemas = {
         "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in _CLIENT},
-        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked)},
+        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked, Moved)},
         "paint": PaintModel.model_json_schema(),
     }
     body = json.dumps(schemas, indent=1, sort_keys=True)
@@ -310,7 +340,7 @@ def client_module() -> str:
     )
 
 
-_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage)
+_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage, MoveMessage)
 
 if __name__ == "__main__":
     print(client_module(), end="")

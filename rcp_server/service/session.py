@@ -25,6 +25,7 @@ from ..painting.loop import Abandoned, PaintResult, PaintState
 from ..painting.raytrace import pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
+from ..scene.walking import walk
 from ..settings.params import PaintParams
 from ..util import images
 from . import protocol
@@ -125,11 +126,16 @@ class Session:
             elif len(text) > limit:
                 self._note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
             else:
-                self._take(text)
+                await self._take(text)
 
-    def _take(self, text: str) -> None:
+    async def _take(self, text: str) -> None:
         try:
-            self._apply(protocol.client_message.validate_json(text))
+            msg = protocol.client_message.validate_json(text)
+            if isinstance(msg, protocol.MoveMessage) and self.scene is not None:
+                # a few milliseconds of rays in a big scene: off the event loop, the next message waits for it
+                self._note(await asyncio.to_thread(self._move, self.scene, self.shown_time, msg))
+            else:
+                self._apply(msg)
         except ValidationError as exc:
             self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
         except (CameraError, ValueError) as exc:
@@ -172,6 +178,14 @@ class Session:
             self._check(self.scene, self.camera, width, height, self.overrides)
             self.width, self.height, self.quality = width, height, msg.quality or self.quality
         self._changed()
+
+    @staticmethod
+    def _move(scene: Scene, time: float, msg: protocol.MoveMessage) -> protocol.Moved:
+        """Blocking: where a walker's move ends in ``scene`` (the camera message that shows it follows)."""
+        step = walk(scene, time, msg.eye, msg.delta, msg.height)
+        x, y, z = (float(v) for v in step.eye)
+        body = step.body
+        return protocol.Moved(id=msg.id, eye=(x, y, z), radius=body.radius, height=body.height, standing=step.standing)
 
     def _hello(self, msg: protocol.Hello) -> None:
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
