@@ -61,6 +61,19 @@ export class Overlay {
     $("overlay").dataset.connection = state;
   }
 
+  /** The walker's rows: the gamepad in use (null: none) and the body that keeps it clear (null: collide off). */
+  walker(pad, body) {
+    for (const row of document.querySelectorAll("#overlay .pad-row")) row.hidden = pad === null;
+    if (pad !== null) $("o-pad").textContent = pad.length > 28 ? `${pad.slice(0, 27)}…` : pad;
+    for (const row of document.querySelectorAll("#overlay .body-row")) row.hidden = !body;
+    if (body) {
+      const size = (x) => Number(x.toPrecision(2));
+      $("o-body").textContent = body.height
+        ? `r ${size(body.radius)} · eye ${size(body.height)}${body.standing ? "" : " · in the air"}`
+        : `r ${size(body.radius)} · flying`;
+    }
+  }
+
   /** Refresh the numbers (a few times a second is enough to read them). */
   update(now) {
     while (this.shownAt.length && this.shownAt[0] < now - 1000) this.shownAt.shift();

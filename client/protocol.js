@@ -1582,8 +1582,45 @@ export const PROTOCOL = {
    "type": "object"
   },
   "picked": {
+   "$defs": {
+    "PickMask": {
+     "description": "The pixels of a view that show the picked object, at ``width x height`` (the view's shape, smaller):\n``bits`` is base64 of the row-major bits, eight pixels a byte, the first the highest bit (numpy packbits).",
+     "properties": {
+      "bits": {
+       "title": "Bits",
+       "type": "string"
+      },
+      "height": {
+       "title": "Height",
+       "type": "integer"
+      },
+      "width": {
+       "title": "Width",
+       "type": "integer"
+      }
+     },
+     "required": [
+      "width",
+      "height",
+      "bits"
+     ],
+     "title": "PickMask",
+     "type": "object"
+    }
+   },
    "description": "The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``\ntake them), null for the sky; a material with no name is \"\".",
    "properties": {
+    "mask": {
+     "anyOf": [
+      {
+       "$ref": "#/$defs/PickMask"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null
+    },
     "material": {
      "anyOf": [
       {

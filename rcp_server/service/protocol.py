@@ -298,6 +298,15 @@ class Error(BaseModel):
     message: str
 
 
+class PickMask(BaseModel):
+    """The pixels of a view that show the picked object, at ``width x height`` (the view's shape, smaller):
+    ``bits`` is base64 of the row-major bits, eight pixels a byte, the first the highest bit (numpy packbits)."""
+
+    width: int
+    height: int
+    bits: str
+
+
 class Picked(BaseModel):
     """The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``
     take them), null for the sky; a material with no name is ""."""
@@ -307,6 +316,7 @@ class Picked(BaseModel):
     y: int
     object: str | None
     material: str | None
+    mask: PickMask | None = None  # where the object shows in the view, for the client to outline it
 
 
 class Moved(BaseModel):
