@@ -616,14 +616,14 @@ async function start() {
       names.push(info.name);
     }
   }
-  const problems = linkNotice(link.problems);
   if (!names.includes(state.sceneName)) {
-    const expired = state.sceneName?.startsWith("u-");
+    const wanted = state.sceneName;
     state.sceneName = names.includes("default") ? "default" : names[0];
-    link.scene = null; // its camera and settings were for the scene that is gone
-    if (expired) notice(`The uploaded scene of this link has expired; showing the ${state.sceneName} scene`);
-    else if (query.get("scene")) notice(`no scene '${query.get("scene")}' here; showing another`);
-  } else if (problems) notice(problems);
+    link.scene = wanted ? null : state.sceneName; // a view of another scene does not fit this one
+    if (wanted?.startsWith("u-")) notice(`The uploaded scene of this link has expired; showing the ${state.sceneName} scene`);
+    else if (wanted) notice(`no scene '${wanted}' here; showing another`);
+  }
+  if (link.scene && link.problems.length) notice(linkNotice(link.problems)); // one notice for all of them
   if (!state.sceneName) return notice("the server has no scenes");
   const styles = await loadStyles();
   state.styles = Object.fromEntries(styles.map((s) => [s.name, s]));
