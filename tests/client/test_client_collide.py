@@ -66,7 +66,8 @@ def hold_w(page, ms: int) -> list[float]:
     page.wait_for_timeout(ms)  # the key is held this long: that is the input
     page.keyboard.up("w")
     page.wait_for_function("rcp.walk.velocity.every((v) => v === 0)", timeout=WAIT_MS)
-    page.wait_for_function("rcp.collider.flight === null && rcp.collider.pending.every((x) => x === 0)", timeout=WAIT_MS)  # fmt: skip
+    settled = "rcp.collider.flight === null && rcp.collider.pending.every((x) => x === 0)"
+    page.wait_for_function(settled, timeout=WAIT_MS)
     return page.evaluate("rcp.walk.walk.eye")
 
 

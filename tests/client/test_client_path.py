@@ -173,7 +173,10 @@ def test_a_360_film_is_saved_as_panoramas_and_rendered(page, tmp_path):
     from rcp_server.cli import main
 
     out = tmp_path / "pano.mp4"
-    assert main(["render", "sky", "--path", str(file), "--out", str(out), "--fps", "4", "--width", "32", "--height", "16"]) == 0  # fmt: skip
+    assert (
+        main(["render", "sky", "--path", str(file), "--out", str(out), "--fps", "4", "--width", "32", "--height", "16"])
+        == 0
+    )
     # and the page renders it: a panorama the view's cost (2:1)
     page.locator("#path-fps").fill("4")
     page.locator("#path [data-path=render]").click()

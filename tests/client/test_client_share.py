@@ -90,7 +90,15 @@ def test_bad_link_values_are_one_notice_and_the_page_works(browser, live_server)
         frame = wait_final(page)
         (notice,) = page.evaluate("rcp.state.errors")
         assert "\n" not in notice and notice.startswith("This link's ")
-        for named in ("spp must be at least 1", "z0 must be more than 0", "mapping must be one of", "eye must be three numbers", "objects must be JSON", "'colour' is no setting", "gravity must be 0 or 1"):  # fmt: skip
+        for named in (
+            "spp must be at least 1",
+            "z0 must be more than 0",
+            "mapping must be one of",
+            "eye must be three numbers",
+            "objects must be JSON",
+            "'colour' is no setting",
+            "gravity must be 0 or 1",
+        ):
             assert named in notice, named
         assert page.evaluate("rcp.state.paint") == {"iterations": 3}  # the good one is kept
         assert frame["iteration"] == 3
@@ -123,7 +131,8 @@ def test_an_expired_upload_link_says_so_and_shows_the_default_scene(browser, liv
     context, page, problems = fresh_page(browser, url)
     try:
         wait_final(page)
-        assert page.evaluate("rcp.state.errors") == ["The uploaded scene of this link has expired; showing the default scene"]  # fmt: skip
+        expired = "The uploaded scene of this link has expired; showing the default scene"
+        assert page.evaluate("rcp.state.errors") == [expired]
         assert page.evaluate("rcp.state.scene.name") == "default"
         assert page.evaluate("rcp.state.paint") == {}  # the link's settings were for the scene that is gone
         assert page.evaluate("rcp.state.lastCamera.eye") == page.evaluate("rcp.state.scene.camera.eye")
@@ -235,7 +244,8 @@ def test_a_phone_gets_the_whole_screen_a_half_sheet_and_touch_to_look_and_walk(b
         touch("touchMove", (cx, cy - 40))
         page.wait_for_timeout(400)  # held: that is the input
         touch("touchEnd")
-        page.wait_for_function("rcp.walk.velocity.every((v) => v === 0) && rcp.collider.flight === null", timeout=WAIT_MS)  # fmt: skip
+        settled = "rcp.walk.velocity.every((v) => v === 0) && rcp.collider.flight === null"
+        page.wait_for_function(settled, timeout=WAIT_MS)
         walked = page.evaluate("rcp.walk.walk.eye")
         assert np.subtract(walked, looked["eye"]) @ np.subtract(looked["look_at"], looked["eye"]) > 0
         # the panel opens as a sheet over the lower half at most
@@ -275,7 +285,8 @@ def test_a_pick_outlines_the_object_and_opens_its_settings_in_view(browser, live
             mask.height,
         ]
         # the Objects section scrolls into view, the houses selected
-        page.wait_for_function(f"{section}.top >= {body}.top - 1 && {section}.top < {body}.bottom - 100", timeout=WAIT_MS)  # fmt: skip
+        in_view = f"{section}.top >= {body}.top - 1 && {section}.top < {body}.bottom - 100"
+        page.wait_for_function(in_view, timeout=WAIT_MS)
         assert page.get_attribute('#own-target [data-per="objects"]', "aria-pressed") == "true"
         # its choices are wide enough to read: "normal", not "norma"
         wide = page.evaluate("""() => { const select = document.querySelector('#own-mapping');

@@ -18,8 +18,27 @@ WALK = Path(__file__).resolve().parents[2] / "examples" / "walk.json"
 
 def test_the_example_path_renders_the_default_scene_to_an_mp4(tmp_path):
     out = tmp_path / "walk.mp4"
-    assert main(["render", "default", "--path", str(WALK), "--out", str(out), "--fps", "2", "--width", "64",
-                 "--height", "36", "--iterations", "2"]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "render",
+                "default",
+                "--path",
+                str(WALK),
+                "--out",
+                str(out),
+                "--fps",
+                "2",
+                "--width",
+                "64",
+                "--height",
+                "36",
+                "--iterations",
+                "2",
+            ]
+        )
+        == 0
+    )
     with av.open(str(out)) as container:
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     last = json.loads(WALK.read_text())["keyframes"][-1]["t"]
