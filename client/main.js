@@ -290,12 +290,17 @@ function picked(msg) {
   objects.picked(msg);
   if (msg.mask) pickMask.show(msg.mask);
   if (msg.object === null) return;
-  if ($("panel").classList.contains("collapsed")) togglePanel();
   const section = $("objects-section");
-  section.scrollIntoView({ block: "start", behavior: "smooth" });
-  section.classList.remove("flash");
-  void section.offsetWidth; // restart the highlight's animation
-  section.classList.add("flash");
+  const open = () => {
+    if ($("panel").classList.contains("collapsed")) togglePanel();
+    section.scrollIntoView({ block: "start", behavior: "smooth" });
+    section.classList.remove("flash");
+    void section.offsetWidth; // restart the highlight's animation
+    section.classList.add("flash");
+  };
+  // a collapsed panel (a phone's sheet) opens once the object has lit up, not over it
+  if ($("panel").classList.contains("collapsed")) setTimeout(open, 700);
+  else open();
 }
 
 let pressed = null; // where and when a press on the view began

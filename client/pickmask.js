@@ -1,8 +1,8 @@
-// A pick answers on the view: the picked object's pixels (the server's `picked` mask) are tinted and outlined
-// in a canvas laid over the painting, which fades out after a moment.
+// A pick answers on the view: the picked object's pixels (the server's `picked` mask) are tinted blue and outlined
+// in white, in a canvas laid over the painting, which fades out after a moment.
 
 const SHOWN_MS = 1400;
-const TINT = [240, 160, 75]; // the accent colour (style.css --accent)
+const TINT = [96, 214, 255]; // a cold light blue: seen on the warm and green colours paintings mostly have
 
 export class PickMask {
   /** @param {HTMLCanvasElement} canvas  laid over the view, the same size on screen */
@@ -25,7 +25,7 @@ export class PickMask {
         count += 1;
         const edge = !inside(x - 1, y) || !inside(x + 1, y) || !inside(x, y - 1) || !inside(x, y + 1);
         const k = 4 * (y * width + x);
-        image.data.set([...TINT, edge ? 255 : 90], k);
+        image.data.set(edge ? [255, 255, 255, 255] : [...TINT, 110], k);
       }
     }
     Object.assign(this.canvas, { width, height });
