@@ -604,7 +604,7 @@ async function start() {
   collider.enabled = $("collide").checked = state.collide;
   collider.gravity = $("gravity").checked = state.gravity;
   $("resolution").value = String(state.resolution);
-  if (matchMedia("(pointer: coarse)").matches) $("hint").textContent = "One finger looks · two fingers move";
+  if (matchMedia("(pointer: coarse)").matches) $("hint").textContent = "One finger looks · two move · the stick walks";
   $("quality").value = state.quality;
   $("quality-value").textContent = state.quality;
   applySize();

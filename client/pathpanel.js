@@ -43,7 +43,12 @@ export function pathPanel(root, hooks) {
   function add(t) {
     const last = path.keyframes.at(-1);
     const when = t ?? (last ? round(last.t + 1) : 0);
-    path.keyframes.push({ t: when, ...snapshot() });
+    const key = { t: when, ...snapshot() };
+    path.keyframes.push(key);
+    if (key.projection === "equirect" && $("film").value !== "equirect") {
+      $("film").value = "equirect"; // taken in the 360° view: a 360° film
+      showSizes();
+    }
     show();
   }
 

@@ -102,6 +102,18 @@ def test_stairs_are_climbed_a_stair_at_a_time(browser, live_server, hall):
         heights = np.array(page.evaluate("heights"))
         assert np.all(np.diff(heights) >= -1e-6) and np.max(np.diff(heights)) <= RISE * 3 + 1e-4  # up, no jumps
         assert len(np.unique(np.round(heights, 4))) >= 4  # stair by stair
+        # E rises off the landing and stays up; with gravity on, the walker falls back onto it
+        page.keyboard.down("e")
+        page.wait_for_timeout(300)
+        page.keyboard.up("e")
+        page.wait_for_function("rcp.walk.velocity.every((v) => v === 0) && rcp.collider.flight === null")
+        risen = page.evaluate("rcp.walk.walk.eye")[1]
+        assert risen > eye[1] + 0.2 and page.evaluate("rcp.collider.body.standing") is False
+        page.wait_for_timeout(300)
+        assert page.evaluate("rcp.walk.walk.eye")[1] == risen
+        page.check("#gravity")
+        page.wait_for_function("rcp.collider.body.standing", timeout=WAIT_MS)
+        assert page.evaluate("rcp.walk.walk.eye")[1] == pytest.approx(HEIGHT + STAIRS * RISE, abs=1e-3)
     finally:
         context.close()
     assert problems == []

@@ -186,3 +186,21 @@ def test_a_360_film_is_saved_as_panoramas_and_rendered(page, tmp_path):
     with av.open(io.BytesIO(Path(video.value.path()).read_bytes())) as container:
         decoded = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     assert len(decoded) == 5 and decoded[0].shape == (40, 80, 3)
+
+
+def test_a_render_in_progress_is_cancelled_from_the_page(page):
+    button = page.locator("#path [data-path=add]")
+    button.click()
+    page.evaluate(f"rcp.walk.place({json.dumps(SIDE)})")
+    button.click()
+    page.fill("#path li[data-index='1'] input", "30")  # a long film: it cannot end before the cancel
+    page.dispatch_event("#path li[data-index='1'] input", "change")
+    page.select_option("#path-size", "1920x1080")
+    page.locator("#path [data-path=render]").click()
+    page.wait_for_function("rcp.path.job !== null", timeout=WAIT_MS)
+    assert page.evaluate("rcp.path.job.frames") == 24 * 30 + 1
+    page.locator("#path [data-path=cancel]").click()
+    page.wait_for_function("rcp.path.job === null", timeout=WAIT_MS)
+    assert page.text_content("#path [data-path=status]").startswith("cancelled")
+    assert page.is_hidden("#path [data-path=download]") and page.is_hidden("#path [data-path=cancel]")
+    assert page.is_enabled("#path [data-path=render]")  # another may start
