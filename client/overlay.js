@@ -68,9 +68,10 @@ export class Overlay {
     for (const row of document.querySelectorAll("#overlay .body-row")) row.hidden = !body;
     if (body) {
       const size = (x) => Number(x.toPrecision(2));
-      $("o-body").textContent = body.height
-        ? `r ${size(body.radius)} · eye ${size(body.height)}${body.standing ? "" : " · in the air"}`
-        : `r ${size(body.radius)} · flying`;
+      if (body.radius === 0) $("o-body").textContent = "nothing to walk into";
+      else if (body.height) {
+        $("o-body").textContent = `r ${size(body.radius)} · eye ${size(body.height)}${body.standing ? "" : " · in the air"}`;
+      } else $("o-body").textContent = `r ${size(body.radius)} · flying`;
     }
   }
 

@@ -41,7 +41,7 @@ def test_a_link_reopens_the_same_view_and_picture_in_a_fresh_browser(browser, li
         page.wait_for_function("rcp.walk.velocity.every((v) => v === 0)", timeout=WAIT_MS)
         page.select_option("#style", "focus")
         page.click('#paint-mapping [data-value="color"]')
-        set_slider(page, "lambda_p", 30)
+        set_slider(page, "lambda_p", 1)  # the style's 0.3, tripled and more
         click_view(page, SIZE[0] // 2, SIZE[1] - 5)  # the ground
         page.wait_for_function("document.querySelector('#picked').textContent.includes('ground')", timeout=WAIT_MS)
         page.fill("#own-lambda_p", "2")
@@ -53,7 +53,7 @@ def test_a_link_reopens_the_same_view_and_picture_in_a_fresh_browser(browser, li
         address = page.url
         assert address == page.evaluate("rcp.shareLink()")
         paint = page.evaluate("rcp.state.paint")
-        assert paint == {"style": "focus", "mapping": "color", "lambda_p": 30, "objects": {"ground": {"lambda_p": 2}}}
+        assert paint == {"style": "focus", "mapping": "color", "lambda_p": 1, "objects": {"ground": {"lambda_p": 2}}}
         camera = page.evaluate("rcp.state.lastCamera")
         assert camera["eye"] != [0.8, 1.7, 38]  # it walked
         picture = canvas(page)
@@ -72,7 +72,7 @@ def test_a_link_reopens_the_same_view_and_picture_in_a_fresh_browser(browser, li
         assert other.evaluate("rcp.state.paint") == paint
         assert {k: other.evaluate("rcp.state.lastCamera")[k] for k in CAMERA_KEYS} == camera
         assert other.evaluate("[rcp.state.gravity, rcp.state.collide]") == [True, True]
-        assert other.is_checked("#gravity") and other.input_value("#paint-lambda_p") == "30"
+        assert other.is_checked("#gravity") and other.input_value("#paint-lambda_p") == "1"
         assert other.input_value("#style") == "focus"
         assert other.locator('[data-override="objects:ground"]').count() == 1
         assert again["paint"] == frame["paint"] and again["spp"] == frame["spp"]
