@@ -30,7 +30,7 @@ from .tracer import Tracer
 
 UP = np.array([0.0, 1.0, 0.0])
 SLIDES = 3  # a move meets at most this many surfaces in turn (a corner: two)
-CLEAR_DIRECTIONS = 8  # horizontal rays around the eye that push it out of surfaces
+CLEAR_DIRECTIONS = 12  # horizontal rays around the eye that push it out of surfaces (a wall between two: 0.97 r)
 STEP_OF_HEIGHT = 0.28  # the highest rise walked up, as a fraction of the eye's height (1.7 m: 0.48 m)
 RADIUS_OF_HEIGHT = 0.15  # the body's radius, as a fraction of the eye's height (1.7 m: 0.26 m)
 RADIUS_OF_SCENE = (1e-4, 0.02)  # ... within these fractions of the scene's diagonal (a ground plane may be vast)
