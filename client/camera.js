@@ -39,12 +39,18 @@ export function right({ yaw }) {
   return [Math.cos(yaw), 0, Math.sin(yaw)];
 }
 
-/** Move by `amount` (scene units) along forward, right and world up: amount = [forward, right, up]. */
-export function moved(walk, [ahead, side, rise]) {
-  const f = forward(walk);
+/** The world vector of a move by `amount` (scene units) = [forward, right, up]; `level`: forward along the
+ * heading only (a walker does not walk into the floor by looking down). */
+export function displacement(walk, [ahead, side, rise], level = false) {
+  const f = forward(level ? { yaw: walk.yaw, pitch: 0 } : walk);
   const r = right(walk);
-  const eye = walk.eye.map((x, k) => x + ahead * f[k] + side * r[k] + rise * UP[k]);
-  return { ...walk, eye };
+  return [0, 1, 2].map((k) => ahead * f[k] + side * r[k] + rise * UP[k]);
+}
+
+/** Move by `amount` (scene units) along forward, right and world up: amount = [forward, right, up]. */
+export function moved(walk, amount) {
+  const delta = displacement(walk, amount);
+  return { ...walk, eye: walk.eye.map((x, k) => x + delta[k]) };
 }
 
 /** Turn by yaw and pitch deltas, in radians. */

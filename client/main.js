@@ -1,7 +1,9 @@
 // The rcp walk-through: wires the connection, the frames, the walk controls, the panel and the overlay.
 // Query parameters: ?scene=NAME, ?width=W&height=H (a fixed painting size instead of the window's; the
-// Resolution setting scales either), ?quality=Q (JPEG quality). A server with a token (RCP_TOKEN) is
-// opened as /#token=TOKEN: the fragment never reaches a server log or a Referer header.
+// Resolution setting scales either), ?quality=Q (JPEG quality), and the rest of the view (link.js): the page
+// keeps its address up to date as the user walks, so it is always a link to what it shows. A server with a
+// token (RCP_TOKEN) is opened as /#token=TOKEN: the fragment never reaches a server log or a Referer header,
+// and the page takes it out of its address (keeping it for this tab only), so a link never carries it.
 //
 // `window.rcp` exposes the state, the messages sent and the overlay's numbers, for the tests.
 
@@ -19,10 +21,18 @@ import { WalkController } from "./walk.js";
 import { Uploader } from "./upload.js";
 import { View360, panoramaSize } from "./view360.js";
 import { VrSession } from "./vr.js";
+import { Collider } from "./collide.js";
+import { PickMask } from "./pickmask.js";
+import { decode as decodeLink, encode as encodeLink, linkNotice } from "./link.js";
 
 const $ = (id) => document.getElementById(id);
 const query = new URLSearchParams(location.search);
-const token = new URLSearchParams(location.hash.slice(1)).get("token");
+const token = new URLSearchParams(location.hash.slice(1)).get("token") ?? sessionStorage.getItem("rcp.token");
+if (token) {
+  sessionStorage.setItem("rcp.token", token); // a reload of this tab still has it; a copied address does not
+  history.replaceState(null, "", location.pathname + location.search);
+}
+const link = decodeLink(location.search); // the view this address carries (applied once its scene is ready)
 const authorization = token ? { authorization: `Bearer ${token}` } : {};
 const canvas = $("view");
 
@@ -36,7 +46,10 @@ const state = {
   temporal: false, // per-frame: every frame is the painting of its camera
   animate: false,
   quality: Number(query.get("quality")) || 80,
-  resolution: 1, // painting size as a fraction of the window's (or of ?width, ?height)
+  resolution: [1, 0.75, 0.5, 0.333].includes(Number(query.get("resolution"))) ? Number(query.get("resolution")) : 1,
+  // painting size as a fraction of the window's (or of ?width, ?height)
+  collide: link.switches.collide ?? true, // walking, not flying (collide.js)
+  gravity: link.switches.gravity ?? false,
   size: [0, 0], // painting size in pixels: what `hello` and `view` ask for, what Save renders
   cameraId: 0,
   lastCamera: null, // the camera last sent (or the scene's, which the server starts from)
@@ -60,7 +73,10 @@ const walk = new WalkController(canvas, {
   reset: resetCamera,
   togglePanel,
   notice,
+  keyframe: () => path.add(),
 });
+const collider = new Collider(send);
+walk.mover = collider;
 const wsUrl = new URL("ws", location.href); // beside the page: works behind a proxy's path prefix too
 wsUrl.protocol = wsUrl.protocol === "https:" ? "wss:" : "ws:";
 if (token) wsUrl.searchParams.set("token", token); // a browser's WebSocket cannot send headers
@@ -107,7 +123,11 @@ function sendHello() {
 function receive(msg) {
   if (msg.type === "ready") ready(msg);
   else if (msg.type === "error") refused(msg.message);
-  else if (msg.type === "picked") objects.picked(msg);
+  else if (msg.type === "picked") picked(msg);
+  else if (msg.type === "moved") {
+    const eye = collider.answer(msg);
+    if (eye && walk.walk) walk.walk = { ...walk.walk, eye };
+  }
 }
 
 function ready(msg) {
@@ -119,6 +139,7 @@ function ready(msg) {
     startScene(msg.scene);
   } else {
     // a reconnection: the server starts afresh, so restore the camera and settings we had
+    collider.flight = null; // its answer was lost with the connection
     state.lastCamera = walkCamera.toCamera(walkCamera.fromCamera(msg.scene.camera));
     if (view360.active) state.lastCamera = null; // the server starts from a flat view: send the panorama's
     sendCamera();
@@ -145,6 +166,23 @@ function startScene(scene) {
   $("animate-row").classList.toggle("disabled", !scene.animated);
   $("scene-info").textContent = `${scene.triangles.toLocaleString()} triangles${scene.animated ? " · animated" : ""}`;
   document.title = `${scene.title} · rcp`;
+  if (link.scene === scene.name) applyLink();
+}
+
+/** The view of the page's address, once, on its scene: camera, 360° view, switches and painting. */
+function applyLink() {
+  link.scene = null; // once: a later visit to this scene starts from its own view
+  if (link.camera) walk.place(link.camera);
+  if (link.switches.temporal !== undefined) state.temporal = $("temporal").checked = link.switches.temporal;
+  if (link.switches.animate !== undefined) state.animate = $("animate").checked = link.switches.animate;
+  if (Object.keys(link.paint).length) {
+    applyPaint({ ...link.paint });
+    stylesUi?.show(link.paint.style ?? null);
+  }
+  if (link.projection === "equirect" && toggle360(true)) {
+    view360.yaw0 = link.heading ?? view360.yaw0;
+    state.lastCamera = null;
+  }
 }
 
 // The server keeps its old settings when it refuses a paint message. Errors do not say which message they
@@ -168,10 +206,14 @@ function refused(text) {
 
 // ---- the painting's size ----
 
-function wantedSize() {
+function wantedFlatSize() {
   const fixed = [Number(query.get("width")), Number(query.get("height"))];
   const base = fixed[0] > 0 && fixed[1] > 0 ? fixed : [innerWidth, innerHeight];
-  const size = base.map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
+  return base.map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
+}
+
+function wantedSize() {
+  const size = wantedFlatSize();
   return view360.active ? panoramaSize(...size) : size; // a panorama costs about what the flat view does
 }
 
@@ -181,6 +223,7 @@ function applySize() {
   if (size[0] === state.size[0] && size[1] === state.size[1]) return false;
   state.size = size;
   frames.resize(...size);
+  path?.showSizes();
   if (state.scene) send(MESSAGES.view(size[0], size[1], state.quality));
   return true;
 }
@@ -203,9 +246,13 @@ function tick(now) {
 
 /** One animation frame's work (a headset's frames call it too, vr.js). */
 function advance(now) {
-  walk.step(Math.min(0.1, Math.max(0, now - lastTick) / 1000));
+  const dt = Math.min(0.1, Math.max(0, now - lastTick) / 1000);
+  walk.step(dt);
   lastTick = Math.max(lastTick, now);
-  if (walk.walk && state.scene && connection.state === "open") sendCamera();
+  if (walk.walk && state.scene && connection.state === "open") {
+    collider.flush(walk.walk.eye, dt);
+    sendCamera();
+  }
   flushPaint();
   view360.draw(walk.walk, state.size[1]);
   const local = vr.session ? "VR" : view360.active ? "360°" : null; // drawn here, at the display's rate
@@ -213,7 +260,9 @@ function advance(now) {
   if (now - lastOverlay > 200) {
     lastOverlay = now;
     overlay.update(now);
+    overlay.walker(walk.pad, collider.enabled ? collider.body : null);
     $("hint").classList.toggle("away", walk.moved);
+    updateAddress();
   }
 }
 
@@ -234,6 +283,26 @@ const objects = objectsPanel($("objects"), (per, table) => {
   else state.paint[per] = table;
   paintChanges[per] = table;
 });
+const pickMask = new PickMask($("pick"));
+
+/** The answer to a click: the object lights up on the view, and the Objects section opens on it. */
+function picked(msg) {
+  objects.picked(msg);
+  if (msg.mask) pickMask.show(msg.mask);
+  if (msg.object === null) return;
+  const section = $("objects-section");
+  const open = () => {
+    if ($("panel").classList.contains("collapsed")) togglePanel();
+    section.scrollIntoView({ block: "start", behavior: "smooth" });
+    section.classList.remove("flash");
+    void section.offsetWidth; // restart the highlight's animation
+    section.classList.add("flash");
+  };
+  // a collapsed panel (a phone's sheet) opens once the object has lit up, not over it
+  if ($("panel").classList.contains("collapsed")) setTimeout(open, 700);
+  else open();
+}
+
 let pressed = null; // where and when a press on the view began
 canvas.addEventListener("pointerdown", (event) => {
   pressed = { x: event.clientX, y: event.clientY, at: performance.now() };
@@ -315,7 +384,7 @@ function switchScene(name) {
   state.sceneName = name;
   state.scene = null; // the `ready` that follows starts the scene afresh
   const url = new URL(location.href);
-  url.searchParams.set("scene", name);
+  url.search = encodeLink({ scene: name, page: pageOptions() });
   history.replaceState(null, "", url);
   sendHello();
 }
@@ -352,6 +421,19 @@ $("resolution").addEventListener("change", (event) => {
   applySize();
 });
 $("save").addEventListener("click", save);
+$("copy-link").addEventListener("click", (event) => {
+  event.target.blur();
+  copyLink();
+});
+$("collide").addEventListener("change", (event) => {
+  event.target.blur();
+  state.collide = collider.enabled = event.target.checked;
+  collider.reset();
+});
+$("gravity").addEventListener("change", (event) => {
+  event.target.blur();
+  state.gravity = collider.gravity = event.target.checked;
+});
 $("view360").addEventListener("click", (event) => {
   event.target.blur(); // keys walk again
   toggle360(!view360.active);
@@ -424,6 +506,63 @@ async function save() {
   }
 }
 
+// ---- share links: the address always carries the view (link.js) ----
+
+/** The page's own options, as its address gave them (Resolution as chosen). */
+function pageOptions() {
+  const page = {};
+  for (const name of ["width", "height"]) if (query.get(name)) page[name] = query.get(name);
+  if (state.quality !== 80) page.quality = state.quality;
+  if (state.resolution !== 1) page.resolution = state.resolution;
+  return page;
+}
+
+/** The address of the view shown: scene, camera, 360° view, switches, painting; never the token. */
+function shareLink() {
+  if (!state.scene || !walk.walk) return location.href;
+  const view = {
+    scene: state.scene.name,
+    camera: walkCamera.toCamera(walk.walk),
+    projection: view360.active ? "equirect" : null,
+    heading: view360.yaw0,
+    switches: {
+      temporal: state.temporal || undefined,
+      animate: state.animate || undefined,
+      collide: state.collide ? undefined : false,
+      gravity: state.gravity || undefined,
+    },
+    paint: state.paint,
+    page: pageOptions(),
+  };
+  return `${location.origin}${location.pathname}?${encodeLink(view)}`;
+}
+
+let shownAddress = "";
+/** Keep the address up to date (called a few times a second: replaceState is not for every frame). */
+function updateAddress() {
+  if (!state.scene || link.scene) return; // the link's own view is not applied yet
+  const address = shareLink();
+  if (address === shownAddress) return;
+  shownAddress = address;
+  history.replaceState(null, "", address);
+}
+
+async function copyLink() {
+  const address = shareLink();
+  try {
+    await navigator.clipboard.writeText(address);
+    notice("Link copied: it opens this view", "info");
+  } catch {
+    // no clipboard (an insecure origin, or refused): the address is selected for the user to copy
+    const box = $("link-box");
+    box.hidden = false;
+    box.value = address;
+    box.select();
+    notice("Copy the selected link", "info");
+  }
+  $("copy-link").dataset.copied = address;
+}
+
 // ---- messages to the user ----
 
 let toastTimer = 0;
@@ -462,7 +601,10 @@ async function loadScenes() {
 
 async function start() {
   if (matchMedia("(max-width: 700px)").matches) togglePanel();
-  if (matchMedia("(pointer: coarse)").matches) $("hint").textContent = "One finger looks · two fingers move";
+  collider.enabled = $("collide").checked = state.collide;
+  collider.gravity = $("gravity").checked = state.gravity;
+  $("resolution").value = String(state.resolution);
+  if (matchMedia("(pointer: coarse)").matches) $("hint").textContent = "One finger looks · two move · the stick walks";
   $("quality").value = state.quality;
   $("quality-value").textContent = state.quality;
   applySize();
@@ -471,10 +613,22 @@ async function start() {
   const names = state.scenes.map((s) => s.name);
   for (const scene of state.scenes) $("scene").append(new Option(`${scene.title} (${scene.name})`, scene.name));
   names.push(...(await uploads.restore())); // this browser's uploads the server still has
-  if (!names.includes(state.sceneName)) {
-    if (state.sceneName) notice(`no scene '${state.sceneName}' here; showing another`);
-    state.sceneName = names.includes("default") ? "default" : names[0];
+  if (state.sceneName && !names.includes(state.sceneName) && state.sceneName.startsWith("u-")) {
+    const shared = await fetch(`api/scenes/${encodeURIComponent(state.sceneName)}`, { headers: authorization }).catch(() => null);
+    if (shared?.ok) {
+      const info = await shared.json(); // someone's upload, shared by its link
+      $("scene").append(new Option(`${info.title} (shared)`, info.name));
+      names.push(info.name);
+    }
   }
+  if (!names.includes(state.sceneName)) {
+    const wanted = state.sceneName;
+    state.sceneName = names.includes("default") ? "default" : names[0];
+    link.scene = wanted ? null : state.sceneName; // a view of another scene does not fit this one
+    if (wanted?.startsWith("u-")) notice(`The uploaded scene of this link has expired; showing the ${state.sceneName} scene`);
+    else if (wanted) notice(`no scene '${wanted}' here; showing another`);
+  }
+  if (link.scene && link.problems.length) notice(linkNotice(link.problems)); // one notice for all of them
   if (!state.sceneName) return notice("the server has no scenes");
   const styles = await loadStyles();
   state.styles = Object.fromEntries(styles.map((s) => [s.name, s]));
@@ -496,6 +650,11 @@ const path = pathPanel($("path"), {
     delete paint.type;
     return { paint, width: state.size[0], height: state.size[1] };
   },
+  /** The view's painting size, as a flat film or a 360° one would take it. */
+  viewSize: (film) => {
+    const flat = view360.active ? wantedFlatSize() : state.size;
+    return film === "equirect" ? panoramaSize(...flat) : flat;
+  },
   authorization,
   notice,
 });
@@ -512,10 +671,11 @@ const vr = new VrSession($("enter-vr"), view360, {
   advance,
   speed: () => walk.speed,
   move: (delta) => {
-    walk.walk = { ...walk.walk, eye: walk.walk.eye.map((x, k) => x + delta[k]) };
+    if (collider.active) collider.push(delta); // the headset walks, not flies, too
+    else walk.walk = { ...walk.walk, eye: walk.walk.eye.map((x, k) => x + delta[k]) };
   },
   notice,
 });
 
-window.rcp = { state, sent, overlay, walk, connection, panel, objects, path, canvas, uploads, view360, vr, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+window.rcp = { state, sent, overlay, walk, connection, panel, objects, path, canvas, uploads, view360, vr, collider, shareLink, pickMask, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

@@ -94,4 +94,6 @@ export const MESSAGES = {
   view: (width, height, quality) => message("view", { width, height, quality }),
   /** What pixel (x, y) of the view shows; the server answers `picked`. */
   pick: (x, y) => message("pick", { x, y }),
+  /** Walk the eye from `eye` by `delta` (world units), kept clear of surfaces; the server answers `moved`. */
+  move: (id, eye, delta, height) => message("move", { id, eye, delta, height }),
 };

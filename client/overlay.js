@@ -61,6 +61,20 @@ export class Overlay {
     $("overlay").dataset.connection = state;
   }
 
+  /** The walker's rows: the gamepad in use (null: none) and the body that keeps it clear (null: collide off). */
+  walker(pad, body) {
+    for (const row of document.querySelectorAll("#overlay .pad-row")) row.hidden = pad === null;
+    if (pad !== null) $("o-pad").textContent = pad.length > 28 ? `${pad.slice(0, 27)}…` : pad;
+    for (const row of document.querySelectorAll("#overlay .body-row")) row.hidden = !body;
+    if (body) {
+      const size = (x) => Number(x.toPrecision(2));
+      if (body.radius === 0) $("o-body").textContent = "nothing to walk into";
+      else if (body.height) {
+        $("o-body").textContent = `r ${size(body.radius)} · eye ${size(body.height)}${body.standing ? "" : " · in the air"}`;
+      } else $("o-body").textContent = `r ${size(body.radius)} · flying`;
+    }
+  }
+
   /** Refresh the numbers (a few times a second is enough to read them). */
   update(now) {
     while (this.shownAt.length && this.shownAt[0] < now - 1000) this.shownAt.shift();

@@ -4,11 +4,20 @@
 //
 // Playback asks the server for the cameras of every frame (POST /api/paths): the spline is declared once,
 // in rcp_server/media/camerapath.py, so what plays here is what the video paints.
+//
+// A film is flat or 360° (equirect: every keyframe's camera becomes a panorama at its eye, as the 360° view
+// shows), at a size chosen from a list (the view's own first); the render's progress bar follows the job's
+// `done_frames`, each value seen kept in `progress` for the tests.
 
 const RECORD_EVERY_S = 0.5; // a keyframe this often while recording: the spline smooths between them
 const POLL_MS = 500;
 
 const round = (x) => Math.round(x * 1e4) / 1e4;
+const SIZES = {
+  perspective: [[640, 360], [1280, 720], [1920, 1080]],
+  equirect: [[1024, 512], [2048, 1024], [3840, 1920]],
+};
+const even = (n) => n - (n % 2); // H.264 in yuv420p takes even sizes
 
 /**
  * The path panel in `root`. `hooks`: camera() -> the current view ({eye, look_at, up, fov}); place(camera)
@@ -21,6 +30,7 @@ export function pathPanel(root, hooks) {
   let recording = null; // {start: ms, timer}
   let playing = null; // {cameras, fps, start, frame}
   let job = null; // {id, frames, timer}
+  const progress = []; // the progress bar's values during the last render
 
   // ---- keyframes ----
 
@@ -33,7 +43,12 @@ export function pathPanel(root, hooks) {
   function add(t) {
     const last = path.keyframes.at(-1);
     const when = t ?? (last ? round(last.t + 1) : 0);
-    path.keyframes.push({ t: when, ...snapshot() });
+    const key = { t: when, ...snapshot() };
+    path.keyframes.push(key);
+    if (key.projection === "equirect" && $("film").value !== "equirect") {
+      $("film").value = "equirect"; // taken in the 360° view: a 360° film
+      showSizes();
+    }
     show();
   }
 
@@ -102,8 +117,31 @@ export function pathPanel(root, hooks) {
 
   // ---- playback ----
 
+  /** The path as the CLI and REST take it: a 360° film's keyframes are panoramas, a flat one's are not. */
   function spec() {
-    return { fps: Number($("fps").value) || 24, loop: $("loop").checked, keyframes: path.keyframes };
+    const film = $("film").value;
+    const keyframes = path.keyframes.map(({ projection, stereo, ...key }) =>
+      film === "equirect" ? { ...key, projection: "equirect", stereo: "mono" } : key,
+    );
+    return { fps: Number($("fps").value) || 24, loop: $("loop").checked, keyframes };
+  }
+
+  // ---- the film's size ----
+
+  function showSizes() {
+    const select = $("size");
+    const chosen = select.value;
+    const film = $("film").value;
+    const [width, height] = hooks.viewSize(film);
+    select.replaceChildren(new Option(`the view's (${even(width)}×${even(height)})`, "view"));
+    for (const [w, h] of SIZES[film]) select.append(new Option(`${w}×${h}`, `${w}x${h}`));
+    select.value = [...select.options].some((o) => o.value === chosen) ? chosen : "view";
+  }
+
+  function size() {
+    const chosen = $("size").value;
+    const [width, height] = chosen === "view" || !chosen ? hooks.viewSize($("film").value) : chosen.split("x").map(Number);
+    return [even(width), even(height)];
   }
 
   async function play() {
@@ -155,6 +193,8 @@ export function pathPanel(root, hooks) {
       const loaded = JSON.parse(await file.text());
       if (!Array.isArray(loaded?.keyframes)) throw new Error("no keyframes in it");
       path.keyframes = loaded.keyframes.map((k) => ({ ...k }));
+      $("film").value = loaded.keyframes.some((k) => k.projection === "equirect") ? "equirect" : "perspective";
+      showSizes();
       $("fps").value = loaded.fps ?? 24;
       $("loop").checked = Boolean(loaded.loop);
       show();
@@ -170,21 +210,16 @@ export function pathPanel(root, hooks) {
     const scene = hooks.scene();
     if (!scene || job) return;
     stopRecording();
-    const { paint, width, height } = hooks.request();
-    const body = {
-      scene: scene.name,
-      path: spec(),
-      width: width - (width % 2), // H.264 in yuv420p takes even sizes
-      height: height - (height % 2),
-      paint,
-      format: "mp4",
-    };
+    const { paint } = hooks.request();
+    const [width, height] = size();
+    const body = { scene: scene.name, path: spec(), width, height, paint, format: "mp4" };
     if ($("temporal").checked) body.temporal = 1;
     try {
       const created = await call("api/videos", "POST", body);
       job = { id: created.id, frames: created.frames };
       $("progress").max = created.frames;
       $("progress").value = 0;
+      progress.splice(0, progress.length, 0);
       $("job").hidden = false;
       $("download").hidden = true;
       $("cancel").hidden = false;
@@ -205,6 +240,7 @@ export function pathPanel(root, hooks) {
       return finish(`failed: ${error.message}`);
     }
     $("progress").value = status.done_frames;
+    if (progress.at(-1) !== status.done_frames) progress.push(status.done_frames);
     $("status").textContent = `${status.state} · ${status.done_frames} / ${status.frames} frames`;
     if (status.state === "done") {
       const response = await fetch(`api/videos/${job.id}/file`, { headers: hooks.authorization });
@@ -270,15 +306,23 @@ export function pathPanel(root, hooks) {
   on("open", () => $("file").click());
   on("render", render);
   on("cancel", cancel);
+  $("film").addEventListener("change", (event) => {
+    event.target.blur();
+    showSizes();
+  });
+  $("size").addEventListener("focus", showSizes); // the view's size may have changed since
   $("file").addEventListener("change", (event) => {
     if (event.target.files[0]) load(event.target.files[0]);
     event.target.value = "";
   });
   show();
+  showSizes();
   return {
     path,
     spec,
     add,
+    progress,
+    showSizes,
     get playing() {
       return playing;
     },

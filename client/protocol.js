@@ -571,6 +571,90 @@ export const PROTOCOL = {
    "title": "ModeMessage",
    "type": "object"
   },
+  "move": {
+   "additionalProperties": false,
+   "description": "Walking, not flying: move the eye at ``eye`` by ``delta`` (scene units, world axes; gravity is a downward\ndelta) and keep clear of the scene's surfaces (engine/collide.py): the server answers ``moved`` with where\nit ends. ``height``: the eye's height above the floor it stands on, as the last ``moved`` said (null:\nmeasured here, at ``eye``).",
+   "properties": {
+    "delta": {
+     "maxItems": 3,
+     "minItems": 3,
+     "prefixItems": [
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      }
+     ],
+     "title": "Delta",
+     "type": "array"
+    },
+    "eye": {
+     "maxItems": 3,
+     "minItems": 3,
+     "prefixItems": [
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      },
+      {
+       "maximum": 1000000000.0,
+       "minimum": -1000000000.0,
+       "type": "number"
+      }
+     ],
+     "title": "Eye",
+     "type": "array"
+    },
+    "height": {
+     "anyOf": [
+      {
+       "exclusiveMinimum": 0,
+       "maximum": 1000000000.0,
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "title": "Height"
+    },
+    "id": {
+     "minimum": 0,
+     "title": "Id",
+     "type": "integer"
+    },
+    "type": {
+     "const": "move",
+     "title": "Type",
+     "type": "string"
+    }
+   },
+   "required": [
+    "type",
+    "id",
+    "eye",
+    "delta"
+   ],
+   "title": "MoveMessage",
+   "type": "object"
+  },
   "paint": {
    ...PAINT,
    "description": "Change painting settings; given fields replace earlier ones, ``null`` restores the scene's default.",
@@ -821,9 +905,106 @@ export const PROTOCOL = {
    "title": "Frame",
    "type": "object"
   },
+  "moved": {
+   "description": "The answer to ``move`` ``id``: where the eye ends, and the body that kept it clear: ``radius`` (scene\nunits from any surface), ``height`` above the floor (null: nothing beneath, it flies), ``standing`` on it.",
+   "properties": {
+    "eye": {
+     "maxItems": 3,
+     "minItems": 3,
+     "prefixItems": [
+      {
+       "type": "number"
+      },
+      {
+       "type": "number"
+      },
+      {
+       "type": "number"
+      }
+     ],
+     "title": "Eye",
+     "type": "array"
+    },
+    "height": {
+     "anyOf": [
+      {
+       "type": "number"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "title": "Height"
+    },
+    "id": {
+     "title": "Id",
+     "type": "integer"
+    },
+    "radius": {
+     "title": "Radius",
+     "type": "number"
+    },
+    "standing": {
+     "title": "Standing",
+     "type": "boolean"
+    },
+    "type": {
+     "const": "moved",
+     "default": "moved",
+     "title": "Type",
+     "type": "string"
+    }
+   },
+   "required": [
+    "id",
+    "eye",
+    "radius",
+    "height",
+    "standing"
+   ],
+   "title": "Moved",
+   "type": "object"
+  },
   "picked": {
+   "$defs": {
+    "PickMask": {
+     "description": "The pixels of a view that show the picked object, at ``width x height`` (the view's shape, smaller):\n``bits`` is base64 of the row-major bits, eight pixels a byte, the first the highest bit (numpy packbits).",
+     "properties": {
+      "bits": {
+       "title": "Bits",
+       "type": "string"
+      },
+      "height": {
+       "title": "Height",
+       "type": "integer"
+      },
+      "width": {
+       "title": "Width",
+       "type": "integer"
+      }
+     },
+     "required": [
+      "width",
+      "height",
+      "bits"
+     ],
+     "title": "PickMask",
+     "type": "object"
+    }
+   },
    "description": "The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``\ntake them), null for the sky; a material with no name is \"\".",
    "properties": {
+    "mask": {
+     "anyOf": [
+      {
+       "$ref": "#/$defs/PickMask"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null
+    },
     "material": {
      "anyOf": [
       {

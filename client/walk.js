@@ -3,9 +3,14 @@
 //
 //   W A S D  move (forward along the view, sideways)    Q E  down, up (world y)    Shift  faster
 //   drag, or a locked pointer (L, double-click)  look   arrows  turn              wheel  fov, Shift+wheel speed
-//   touch: one finger looks, two fingers move           R  reset the camera        P  the panel
+//   touch: one finger looks, two fingers move           R  reset the camera        P  the panel   K  a keyframe
+//   gamepad: left stick walks, right stick looks, triggers down and up, Y resets (gamepad.js)
+//
+// With a `mover` (collide.js) active, moves go through it (to be kept clear of surfaces) instead of moving the
+// eye here, and forward is level: a walker does not walk into the floor by looking down.
 
 import * as walkCamera from "./camera.js";
+import * as gamepad from "./gamepad.js";
 
 const LOOK_PER_PIXEL = 0.0032; // radians per mouse pixel at 60 degrees fov; scaled with fov (zoomed in turns slower)
 const TURN_RATE = [1.6, 1.1]; // arrow keys: yaw, pitch in radians per second
@@ -36,7 +41,49 @@ export class WalkController {
     this.held = new Set();
     this.touches = new Map(); // pointer id -> last position
     this.dragging = false;
+    this.mover = null; // collide.js: {active, push(world delta)}
+    this.pad = null; // the id of the gamepad in use, null when none
+    this.padReset = false; // the reset button was down at the last reading
+    this.stickAt = [0, 0]; // the on-screen stick (touch screens): x right, y down, length up to 1
     this.listen();
+    this.listenStick(document.getElementById("stick"));
+  }
+
+  /** The on-screen stick of a touch screen: held and pushed, it walks as a gamepad's left stick does. */
+  listenStick(stick) {
+    if (!stick) return;
+    const knob = stick.firstElementChild;
+    let pointer = null;
+    const follow = (event) => {
+      const box = stick.getBoundingClientRect();
+      const half = box.width / 2;
+      let [x, y] = [(event.clientX - box.left - half) / half, (event.clientY - box.top - half) / half];
+      const length = Math.hypot(x, y);
+      if (length > 1) [x, y] = [x / length, y / length];
+      this.stickAt = [x, y];
+      knob.style.transform = `translate(${x * half * 0.55}px, ${y * half * 0.55}px)`;
+      this.moved = true;
+    };
+    stick.addEventListener("pointerdown", (event) => {
+      pointer = event.pointerId;
+      stick.setPointerCapture(pointer);
+      follow(event);
+    });
+    stick.addEventListener("pointermove", (event) => event.pointerId === pointer && follow(event));
+    const release = (event) => {
+      if (event.pointerId !== pointer) return;
+      pointer = null;
+      this.stickAt = [0, 0];
+      knob.style.transform = "";
+    };
+    stick.addEventListener("pointerup", release);
+    stick.addEventListener("pointercancel", release);
+  }
+
+  /** Move by `amount` = [forward, right, up] scene units: through the mover when one is active. */
+  go(amount) {
+    if (this.mover?.active) this.mover.push(walkCamera.displacement(this.walk, amount, true));
+    else this.walk = walkCamera.moved(this.walk, amount);
   }
 
   /** Start from a protocol camera ({eye, look_at, up, fov}); the speed fits the scene's look distance. */
@@ -44,6 +91,7 @@ export class WalkController {
     this.walk = walkCamera.fromCamera(camera);
     this.speed = Math.min(50, Math.max(0.5, this.walk.distance * 0.15));
     this.velocity = [0, 0, 0];
+    this.mover?.reset(); // a move in flight started from elsewhere
   }
 
   /** Advance by `dt` seconds: ease the velocity towards the held keys, move, turn. */
@@ -51,16 +99,28 @@ export class WalkController {
     if (!this.walk) return;
     const target = [0, 0, 0];
     for (const code of this.held) MOVES[code]?.forEach((v, k) => (target[k] += v));
+    const [sx, sy] = gamepad.stick(...this.stickAt);
+    target[0] -= sy;
+    target[1] += sx;
+    const pad = gamepad.firstPad();
+    this.pad = pad ? pad.id || "gamepad" : null;
+    let padLook = [0, 0];
+    if (pad) {
+      const input = gamepad.read(pad, this.padReset);
+      this.padReset = input.held;
+      if (input.reset) this.actions.reset();
+      input.move.forEach((v, k) => (target[k] += v));
+      padLook = input.look;
+      if (input.move.some((v) => v !== 0) || padLook.some((v) => v !== 0)) this.moved = true;
+    }
     const speed = this.speed * (this.held.has("ShiftLeft") || this.held.has("ShiftRight") ? FAST : 1);
     const ease = 1 - Math.exp(-EASE * dt);
     this.velocity = this.velocity.map((v, k) => {
       const next = v + (target[k] * speed - v) * ease;
       return target[k] === 0 && Math.abs(next) < 0.02 * this.speed ? 0 : next; // come to a full stop
     });
-    if (this.velocity.some((v) => v !== 0)) {
-      this.walk = walkCamera.moved(this.walk, this.velocity.map((v) => v * dt));
-    }
-    let [yaw, pitch] = [0, 0];
+    if (this.velocity.some((v) => v !== 0)) this.go(this.velocity.map((v) => v * dt));
+    let [yaw, pitch] = padLook;
     for (const code of this.held) {
       const turn = TURNS[code];
       if (turn) [yaw, pitch] = [yaw + turn[0], pitch + turn[1]];
@@ -117,6 +177,7 @@ export class WalkController {
     if (code === "KeyR") this.actions.reset();
     else if (code === "KeyL") this.lockPointer();
     else if (code === "KeyP") this.actions.togglePanel();
+    else if (code === "KeyK" && !event.repeat) this.actions.keyframe?.(); // a keyframe of the camera path here
     else if (!MOVES[code] && !TURNS[code] && !code.startsWith("Shift")) return;
     this.held.add(code);
     this.moved = true;
@@ -133,7 +194,7 @@ export class WalkController {
     } else if (this.touches.size === 2) {
       // two fingers: each finger's move counts half, so the pair moves the camera by their mean motion
       const step = (this.speed / 150) * 0.5;
-      this.walk = walkCamera.moved(this.walk, [-dy * step, -dx * step, 0]);
+      this.go([-dy * step, -dx * step, 0]);
       this.moved = true;
     }
   }

@@ -278,6 +278,20 @@ def pick(scene: Scene, time: float, camera: Camera, width: int, height: int, x: 
     return geometry.object_names[geometry.face_object[face]], geometry.material_names[geometry.face_material[face]]
 
 
+def object_pixels(scene: Scene, time: float, camera: Camera, width: int, height: int, name: str) -> np.ndarray:
+    """Which pixel centres of a ``width x height`` view by ``camera`` show the object called ``name`` (what
+    :func:`pick` answers): (height, width) bool, row-major, top row first."""
+    seen = kernels.Seen.empty(width, height)
+    visible_faces(scene, time, camera, Region(width, height), seen)
+    geometry, _ = scene.geometry(time)
+    if name not in geometry.object_names:
+        return np.zeros((height, width), bool)
+    hit = seen.face >= 0
+    shows = np.zeros(width * height, bool)
+    shows[hit] = geometry.face_object[seen.face[hit]] == geometry.object_names.index(name)
+    return shows.reshape(height, width)
+
+
 @dataclass(frozen=True)
 class Frame:
     """What every tile of one painting shares: the scene at its time as the kernels take it, looked up once."""

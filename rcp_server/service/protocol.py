@@ -232,8 +232,26 @@ class PickMessage(_Model):
     y: Annotated[int, Field(ge=0, le=4095)]
 
 
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-1e9, le=1e9)]
+Vector = tuple[Coordinate, Coordinate, Coordinate]
+
+
+class MoveMessage(_Model):
+    """Walking, not flying: move the eye at ``eye`` by ``delta`` (scene units, world axes; gravity is a downward
+    delta) and keep clear of the scene's surfaces (engine/collide.py): the server answers ``moved`` with where
+    it ends. ``height``: the eye's height above the floor it stands on, as the last ``moved`` said (null:
+    measured here, at ``eye``)."""
+
+    type: Literal["move"]
+    id: Annotated[int, Field(ge=0)]
+    eye: Vector
+    delta: Vector
+    height: Annotated[float, Field(allow_inf_nan=False, gt=0, le=1e9)] | None = None
+
+
 ClientMessage = Annotated[
-    Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage | PickMessage, Field(discriminator="type")
+    Hello | CameraMessage | PaintMessage | ModeMessage | ViewMessage | PickMessage | MoveMessage,
+    Field(discriminator="type"),
 ]
 client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 
@@ -280,6 +298,15 @@ class Error(BaseModel):
     message: str
 
 
+class PickMask(BaseModel):
+    """The pixels of a view that show the picked object, at ``width x height`` (the view's shape, smaller):
+    ``bits`` is base64 of the row-major bits, eight pixels a byte, the first the highest bit (numpy packbits)."""
+
+    width: int
+    height: int
+    bits: str
+
+
 class Picked(BaseModel):
     """The answer to ``pick``: the object and material names there (``paint.objects`` and ``paint.materials``
     take them), null for the sky; a material with no name is ""."""
@@ -289,6 +316,19 @@ class Picked(BaseModel):
     y: int
     object: str | None
     material: str | None
+    mask: PickMask | None = None  # where the object shows in the view, for the client to outline it
+
+
+class Moved(BaseModel):
+    """The answer to ``move`` ``id``: where the eye ends, and the body that kept it clear: ``radius`` (scene
+    units from any surface), ``height`` above the floor (null: nothing beneath, it flies), ``standing`` on it."""
+
+    type: Literal["moved"] = "moved"
+    id: int
+    eye: tuple[float, float, float]
+    radius: float
+    height: float | None
+    standing: bool
 
 
 def schemas() -> dict[str, Any]:
@@ -296,7 +336,7 @@ def schemas() -> dict[str, Any]:
     ``client/protocol.js`` exports as ``PROTOCOL``."""
     return {
         "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in _CLIENT},
-        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked)},
+        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked, Moved)},
         "paint": PaintModel.model_json_schema(),
     }
 
@@ -378,7 +418,7 @@ def client_module() -> str:
     )
 
 
-_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage)
+_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage, MoveMessage)
 
 if __name__ == "__main__":
     print(client_module(), end="")

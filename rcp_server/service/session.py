@@ -11,26 +11,41 @@ queue of stale frames.
 from __future__ import annotations
 
 import asyncio
+import base64
 import collections
+import math
 import time as _time
 from dataclasses import dataclass
 from functools import partial
 
+import numpy as np
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
 from ..camera.camera import Camera, CameraError
 from ..camera.wire import camera_of
 from ..painting.loop import Abandoned, PaintResult, PaintState, Workspace
-from ..painting.raytrace import pick
+from ..painting.raytrace import object_pixels, pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
+from ..scene.walking import walk
 from ..settings.params import PaintParams
 from ..util import images
 from . import protocol
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
 from .state import Service
+
+MASK_PIXELS = 160 * 90 * 4  # a picked object's outline is traced at most this fine (a few ms of rays)
+
+
+def pick_mask(scene: Scene, time: float, camera: Camera, size: tuple[int, int], name: str) -> protocol.PickMask:
+    """Where object ``name`` shows in a view of ``size`` (width, height), at most ``MASK_PIXELS`` fine."""
+    scale = min(1.0, math.sqrt(MASK_PIXELS / (size[0] * size[1])))
+    width, height = max(1, round(size[0] * scale)), max(1, round(size[1] * scale))
+    shows = object_pixels(scene, time, camera, width, height, name)
+    bits = base64.b64encode(np.packbits(shows.reshape(-1)).tobytes()).decode()
+    return protocol.PickMask(width=width, height=height, bits=bits)
 
 
 def busy_message(limit: int) -> str:
@@ -128,11 +143,16 @@ class Session:
             elif len(text) > limit:
                 self._note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
             else:
-                self._take(text)
+                await self._take(text)
 
-    def _take(self, text: str) -> None:
+    async def _take(self, text: str) -> None:
         try:
-            self._apply(protocol.client_message.validate_json(text))
+            msg = protocol.client_message.validate_json(text)
+            if isinstance(msg, protocol.MoveMessage | protocol.PickMessage) and self.scene is not None:
+                # milliseconds of rays in a big scene: off the event loop, the next message waits for the answer
+                self._note(await asyncio.to_thread(self._answer, self.scene, self.camera or self.scene.camera, msg))
+            else:
+                self._apply(msg)
         except ValidationError as exc:
             self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
         except (CameraError, ValueError) as exc:
@@ -163,18 +183,29 @@ class Session:
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
-        elif isinstance(msg, protocol.PickMessage):  # one ray: answered here, nothing to paint again
-            camera = self.camera or self.scene.camera
-            size = camera.image_size(self.width, self.height)  # the painting the client shows: both eyes
-            shown = pick(self.scene, self.shown_time, camera, *size, msg.x, msg.y)
-            names = (None, None) if shown is None else shown
-            self._note(protocol.Picked(x=msg.x, y=msg.y, object=names[0], material=names[1]))
-            return
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
             self._check(self.scene, self.camera, width, height, self.overrides)
             self.width, self.height, self.quality = width, height, msg.quality or self.quality
         self._changed()
+
+    def _answer(
+        self, scene: Scene, camera: Camera, msg: protocol.MoveMessage | protocol.PickMessage
+    ) -> protocol.Moved | protocol.Picked:
+        """Blocking: the answer to a question about the scene, which paints nothing: where a walker's move ends
+        (the camera message that shows it follows), or what a pixel shows, with the object's outline."""
+        if isinstance(msg, protocol.MoveMessage):
+            step = walk(scene, self.shown_time, msg.eye, msg.delta, msg.height)
+            x, y, z = (float(v) for v in step.eye)
+            body = step.body
+            return protocol.Moved(
+                id=msg.id, eye=(x, y, z), radius=body.radius, height=body.height, standing=step.standing
+            )
+        size = camera.image_size(self.width, self.height)  # the painting the client shows: both eyes
+        shown = pick(scene, self.shown_time, camera, *size, msg.x, msg.y)
+        names = (None, None) if shown is None else shown
+        mask = None if shown is None else pick_mask(scene, self.shown_time, camera, size, shown[0])
+        return protocol.Picked(x=msg.x, y=msg.y, object=names[0], material=names[1], mask=mask)
 
     def _hello(self, msg: protocol.Hello) -> None:
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first

@@ -105,7 +105,10 @@ def set_slider(page, field: str, value: float) -> None:
 
 
 def test_page_streams_refined_frames_into_the_canvas(page):
-    assert sent(page) == [{"type": "hello", "scene": "default", "width": SIZE[0], "height": SIZE[1], "quality": 80}]
+    hello, *rest = sent(page)
+    assert hello == {"type": "hello", "scene": "default", "width": SIZE[0], "height": SIZE[1], "quality": 80}
+    # and the walker's first (still) move, which measures its body for the collisions
+    assert rest == [{"type": "move", "id": 1, "eye": [0.8, 1.7, 38], "delta": [0, 0, 0], "height": None}]
     assert page.evaluate("[rcp.canvas.width, rcp.canvas.height]") == list(SIZE)
     image = canvas(page)
     assert image.shape == (SIZE[1], SIZE[0], 3)

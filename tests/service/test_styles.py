@@ -12,7 +12,7 @@ import json
 import httpx
 import numpy as np
 import pytest
-from client.test_client import CHROMIUM, browser, client, sent, set_slider, wait_final  # noqa: F401 - browser is a fixture
+from client.test_client import CHROMIUM, SIZE, browser, client, sent, set_slider, wait_final  # noqa: F401 - browser is a fixture
 from PIL import Image
 
 from rcp_server.cli import main
@@ -116,7 +116,9 @@ def test_the_client_picks_a_style_and_keeps_a_preset(browser, live_server):  # n
         saved = json.loads(page.evaluate("localStorage.getItem('rcp.presets')"))
         assert saved == {"mine": {"style": "fractured", "lambda_p": 20}}
 
-        page.reload()  # a new page of the same browser keeps the preset
+        # a new page of the same browser keeps the preset (the scene's plain address: a reload would reopen the
+        # view the address now carries, the style among it)
+        page.goto(page.url.split("?")[0] + f"?scene={SCENE}&width={SIZE[0]}&height={SIZE[1]}")
         wait_final(page)
         assert page.evaluate("rcp.state.paint") == {}
         page.click('#presets [data-preset="mine"] .preset-apply')
