@@ -6,10 +6,11 @@ next frame's :class:`Plan`, or how long to wait for one. Clocks are monotonic se
 
 While the camera moves, *walk* frames hold the frame budget: one sample per pixel, at the largest of
 :data:`SCALES` that the measured seconds per ray allow, each the painting of its camera (all iterations
-from the canvas); in temporal mode, asked for explicitly, one iteration continuing from the last frame
-instead (the paper's ``I_n = F(I_{n-1}, S(n))``). Once the camera
-has been still for ``settle_ms``, *refine* frames paint the full canvas with all iterations: first at the
-painting's own samples, then at :data:`REFINE_SPP` or more (what the work limit allows), the final one.
+from the canvas) at that size, its smudges as long in the picture as the canvas's (``PaintParams.at_scale``);
+in temporal mode, asked for explicitly, one iteration continuing from the last frame instead (the paper's
+``I_n = F(I_{n-1}, S(n))``). Once the camera has been still for ``settle_ms``, *refine* frames paint the
+full canvas with all iterations: first at the painting's own samples, then at :data:`REFINE_SPP` or more
+(what the work limit allows), the final one.
 """
 
 from __future__ import annotations
@@ -163,6 +164,7 @@ class Planner:
             width = height * (view.width // view.height)
         continues = self._continues(view)
         params = replace(view.params, iterations=1, spp=1) if continues else replace(view.params, spp=1)
+        params = params.at_scale(height / view.height)  # lambda_p counts pixels: a pixel's pitch goes with the height
         return self._plan("walk", width, height, params, continues, scene_time, False)
 
     def _plan(self, phase, width, height, params: PaintParams, continues: bool, scene_time: float, final) -> Plan:

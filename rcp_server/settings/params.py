@@ -140,6 +140,23 @@ class PaintParams:
             self.overridden(None, name) for name, _ in self.materials
         ]
 
+    def at_scale(self, scale: float) -> PaintParams:
+        """The same painting at ``scale`` times the pixels a side (a walk frame of a larger canvas): ``lambda_p``
+        counts pixels, so it scales with them, its overrides' too, and the smudges keep their size in the
+        picture."""
+        if scale == 1.0:
+            return self
+
+        def scaled(table: Overrides) -> dict:
+            return {
+                name: {key: value * scale if key == "lambda_p" else value for key, value in settings.items()}
+                for name, settings in as_dict(table).items()
+            }
+
+        return replace(
+            self, lambda_p=self.lambda_p * scale, objects=scaled(self.objects), materials=scaled(self.materials)
+        )
+
     def focus(self, camera: Camera) -> float:
         """``z0``: the focus depth given, or the view depth of the camera's look-at point."""
         return self.z0 if self.z0 is not None else float(np.linalg.norm(np.subtract(camera.look_at, camera.eye)))

@@ -46,7 +46,9 @@ def first_walk_frame(planner: Planner, seconds_per_ray: float) -> Plan:
 def test_the_first_frame_is_a_walk_frame_at_the_first_scale_from_the_canvas():
     planner = hello()
     width, height = round(WIDTH * FIRST_SCALE), round(HEIGHT * FIRST_SCALE)
-    assert planner.next_frame(START, view()) == Plan("walk", width, height, PARAMS, False, 6, False, 0.0, 1)
+    walk = PARAMS.at_scale(height / HEIGHT)  # lambda_p counts pixels: as long in the picture as on the canvas
+    assert walk.lambda_p == pytest.approx(PARAMS.lambda_p * FIRST_SCALE, rel=0.02)
+    assert planner.next_frame(START, view()) == Plan("walk", width, height, walk, False, 6, False, 0.0, 1)
     assert planner.until_rest(START, view()) is None  # a frame is due, not a rest
 
 
@@ -57,7 +59,8 @@ def test_temporal_walk_frames_continue_the_last_frame_one_iteration_and_sample_e
     for k in range(1, 4):
         move(planner, START + 0.05 * k)
         plan = planner.next_frame(START + 0.05 * k, view())
-        assert (plan.phase, plan.continues, plan.params) == ("walk", True, replace(PARAMS, iterations=1))
+        walk = replace(PARAMS, iterations=1).at_scale(plan.height / HEIGHT)
+        assert (plan.phase, plan.continues, plan.params) == ("walk", True, walk)
         iterations.append(plan.iteration)
         planner.frame_painted(plan, 0.01)
     assert iterations == [7, 8, 9]
@@ -68,7 +71,8 @@ def test_without_temporal_mode_every_walk_frame_paints_all_iterations_from_the_c
     first_walk_frame(planner, 1e-6)
     move(planner, START + 0.05)
     plan = planner.next_frame(START + 0.05, view(temporal=False))
-    assert (plan.phase, plan.continues, plan.params, plan.iteration) == ("walk", False, PARAMS, 6)
+    walk = PARAMS.at_scale(plan.height / HEIGHT)
+    assert (plan.phase, plan.continues, plan.params, plan.iteration) == ("walk", False, walk, 6)
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""PaintParams refuses what cannot be painted, with a message naming the setting."""
+"""PaintParams refuses what cannot be painted, with a message naming the setting; the same painting at another scale."""
 
 import pytest
 
@@ -38,3 +38,11 @@ def test_paint_params_method_and_edge_validation():
     with pytest.raises(ValueError, match="cannot represent eye displacement.*raytrace"):
         PaintParams(method="image", lambda_e=0.1)
     assert PaintParams.from_dict({"method": "image", "edge": "wrap"}) == PaintParams(method="image", edge="wrap")
+
+
+def test_a_painting_at_another_scale_keeps_its_smudges_as_long_in_the_picture():
+    params = PaintParams(lambda_p=8.0, lambda_e=0.3, objects={"tree": {"lambda_p": 2.0, "mapping": "normal"}})
+    half = params.at_scale(0.5)
+    assert half.lambda_p == 4.0 and half.lambda_e == 0.3  # pixels scale, scene units do not
+    assert half.non_defaults()["objects"] == {"tree": {"lambda_p": 1.0, "mapping": "normal"}}
+    assert params.at_scale(1.0) is params
