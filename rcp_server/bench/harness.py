@@ -27,7 +27,7 @@ from ..service.settings import Settings
 from ..service.state import service_of
 
 TIMEOUT = 30.0  # the longest any single wait on a server may take (an answer, a stop)
-START_TIMEOUT = 120.0  # a first start may compile the kernels
+START_TIMEOUT = 600.0  # a first start compiles the kernels: 30 s of one core, minutes on a busy machine
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding the rcp_server package
 LOG_PROBLEM = re.compile(r"\b(WARNING|ERROR|CRITICAL|Traceback)\b")
 

@@ -17,7 +17,7 @@ from collections.abc import Callable
 
 from starlette.types import ASGIApp, Receive, Scope, Send
 
-RETRY_AFTER_S = 2  # what a caller is told to wait while the server starts: the progress moves in that time
+RETRY_AFTER_S = 1  # what a caller is told to wait while the server starts: the page shows progress that often
 
 PHASES = ("loading scenes", "compiling kernels", "loading uploads")
 
