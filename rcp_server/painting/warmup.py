@@ -51,7 +51,9 @@ def warm(scenes: Iterable[Scene]) -> None:
     kernels a visitor's painting calls are compiled (and in numba's cache for the next process)."""
     first = True
     for scene in scenes:
-        paint(scene, scene.camera, SIZE, SIZE, replace(scene.paint, iterations=ITERATIONS), threads=1)
-        if first:
-            paint(scene, scene.camera, SIZE, SIZE, PaintParams(iterations=ITERATIONS, method="image"), threads=1)
+        camera = scene.camera
+        size = camera.image_size(2 * SIZE if camera.projection == "equirect" else SIZE, SIZE)  # one it can take
+        paint(scene, camera, *size, replace(scene.paint, iterations=ITERATIONS), threads=1)
+        if first:  # the other projections, mappings and sample counts compile nothing more (measured)
+            paint(scene, camera, *size, PaintParams(iterations=ITERATIONS, method="image"), threads=1)
             first = False
