@@ -14,8 +14,10 @@
 // The canvas stays a 2D canvas (everything else draws and reads it as one): the upscale renders into a WebGL2
 // canvas of its own, drawn onto it. Without WebGL2 (or once its context is lost) frames are drawn smoothed as
 // before. The choice is the panel's "walk quality", kept in this browser:
-//   auto    EASU for a frame smaller than the canvas, plain drawing otherwise
-//   sharp   EASU whenever the frame's size is not the canvas's
+//   auto    EASU for a frame smaller than the canvas where a GPU draws it; smoothing where WebGL runs on the
+//           CPU (SwiftShader: 0.4 to 0.7 s a 1280x720 frame on a busy 2-core machine, against 20 to 75 ms
+//           smoothed, which would cap the walk near 2 frames a second)
+//   sharp   EASU whenever the frame's size is not the canvas's, on a GPU or not
 //   smooth  the 2D canvas's own smoothing (bilinear)
 
 export const WALK_QUALITIES = ["auto", "sharp", "smooth"];
@@ -146,12 +148,14 @@ export class Upscaler {
     this.canvas = document.createElement("canvas");
     this.problem = null; // why the upscale cannot run here (then frames are drawn smoothed)
     this.draws = 0; // frames drawn with EASU (the tests watch it)
+    this.accelerated = false; // WebGL2 on a GPU, not on the CPU: "auto" upscales only then
     const gl = this.canvas.getContext("webgl2", { alpha: false, antialias: false, depth: false, stencil: false });
     if (!gl) {
       this.problem = "no WebGL2";
       return;
     }
     this.gl = gl;
+    this.accelerated = onGpu();
     this.canvas.addEventListener("webglcontextlost", () => (this.problem = "the WebGL context was lost"));
     try {
       this.program = program(gl, VERTEX, EASU);
@@ -177,7 +181,7 @@ export class Upscaler {
   wanted(frameWidth, frameHeight, width, height) {
     if (this.problem || this.quality === "smooth") return false;
     if (frameWidth === width && frameHeight === height) return false; // nothing to scale
-    return this.quality === "sharp" || (frameWidth <= width && frameHeight <= height);
+    return this.quality === "sharp" || (this.accelerated && frameWidth <= width && frameHeight <= height);
   }
 
   /** Draws `bitmap` scaled to `width x height` onto the 2D `context` with EASU; false if it could not. */
@@ -202,6 +206,16 @@ export class Upscaler {
     this.draws += 1;
     return true;
   }
+}
+
+/** Whether WebGL2 runs on a GPU: a browser refuses a context "with a major performance caveat" (software). */
+function onGpu() {
+  const probe = document.createElement("canvas").getContext("webgl2", { failIfMajorPerformanceCaveat: true });
+  if (!probe) return false;
+  const info = probe.getExtension("WEBGL_debug_renderer_info");
+  const renderer = info ? String(probe.getParameter(info.UNMASKED_RENDERER_WEBGL)) : "";
+  probe.getExtension("WEBGL_lose_context")?.loseContext(); // one context fewer held
+  return !/swiftshader|llvmpipe|softpipe|software/i.test(renderer);
 }
 
 function program(gl, vertexSource, fragmentSource) {
