@@ -332,12 +332,18 @@ def _scenes() -> None:
 
 
 def _compile() -> None:
+    from pydantic import ValidationError
+
     from .painting import warmup
     from .service.settings import Settings
     from .service.state import load_scenes
 
+    try:
+        folder = Settings().scenes  # the scenes `rcp serve` serves (RCP_SCENES): each compiles what it calls
+    except ValidationError as exc:
+        raise UsageError(f"bad setting: {one_line(exc)}") from None
     clock = time.monotonic()
-    scenes = load_scenes(Settings().scenes)  # the scenes `rcp serve` serves, each compiles what it calls
+    scenes = load_scenes(folder)
     warmup.warm(scenes.values())
     print(f"rcp: the kernels of {len(scenes)} scenes are compiled (in {time.monotonic() - clock:.1f} s)")
 

@@ -5,14 +5,13 @@ Until it is ready, every ``/api/`` request (``/api/health`` included) is answere
 with ``Retry-After`` and a JSON body that says what it is doing (``status`` "starting", ``phase``, ``done`` of
 ``total`` kernels, and the ``detail`` sentence). A walk-through is refused with the same sentence
 (``routes/walk.py``, close code 1013, "try again later"). The client's files are served from the first moment:
-the page shows the progress and tries again (``client/connection.js``).
+the page shows the progress and tries again (``client/main.js``, ``loadScenes``).
 """
 
 from __future__ import annotations
 
 import json
 import threading
-import time
 from collections.abc import Callable
 
 from starlette.types import ASGIApp, Receive, Scope, Send
@@ -28,7 +27,6 @@ class Startup:
 
     def __init__(self) -> None:
         self.phase = PHASES[0]
-        self.started = time.monotonic()
         self._ready = threading.Event()
         self._kernels: Callable[[], tuple[int, int]] | None = None
 
@@ -44,17 +42,13 @@ class Startup:
     def ready(self) -> bool:
         return self._ready.is_set()
 
-    def wait(self, timeout: float | None = None) -> bool:
-        """Blocks until the start is over (or ``timeout`` s): whether it is."""
-        return self._ready.wait(timeout)
-
     def progress(self) -> dict:
         """What ``/api/health`` says while starting (JSON)."""
         done, total = self._kernels() if self._kernels is not None else (0, 0)
         return {"status": "starting", "phase": self.phase, "done": done, "total": total, "detail": self.message()}
 
     def message(self) -> str:
-        """One sentence for a caller turned away: ``starting: compiling kernels (3/14); try again in 2 s``."""
+        """One sentence for a caller turned away: ``the server is starting: compiling kernels (3/14); try again in 1 s``."""
         phase = self.phase
         if self._kernels is not None:
             phase += " ({}/{})".format(*self._kernels())
