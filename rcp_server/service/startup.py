@@ -48,7 +48,8 @@ class Startup:
         return {"status": "starting", "phase": self.phase, "done": done, "total": total, "detail": self.message()}
 
     def message(self) -> str:
-        """One sentence for a caller turned away: ``the server is starting: compiling kernels (3/14); try again in 1 s``."""
+        """One sentence for a caller turned away, such as
+        ``the server is starting: compiling kernels (3/14); try again in 1 s``."""
         phase = self.phase
         if self._kernels is not None:
             phase += " ({}/{})".format(*self._kernels())
