@@ -42,10 +42,10 @@ ENV PATH=/opt/venv/bin:$PATH \
     NUMBA_CACHE_DIR=/var/cache/rcp/numba
 USER rcp
 WORKDIR /home/rcp
-# Compile numba's kernels now, as the user that serves, so that start-up and the first request don't wait.
-# (The cache is keyed on the CPU: on a host of another CPU model they compile once more at start-up.)
-RUN rcp scenes && rcp render default --width 32 --height 18 --iterations 2 --out /tmp/warm.png \
- && rcp render default --width 32 --height 18 --iterations 2 --method image --out /tmp/warm.png && rm /tmp/warm.png
+# Compile numba's kernels now, as the user that serves, with the warm-up `rcp serve` runs as it starts (every
+# scene's, painting/warmup.py): a container is then ready within seconds. (The cache is keyed on the CPU: on a
+# host of another CPU model the server answers at once all the same, 503 "starting" while they compile again.)
+RUN rcp scenes && rcp compile
 # uploads, videos and their records (service/store.py): mount a volume here to keep them across containers
 #   docker run -v rcp-data:/var/lib/rcp -p 8000:8000 rcp
 VOLUME ["/var/lib/rcp"]

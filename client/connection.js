@@ -91,7 +91,9 @@ export class Connection {
   retry(event) {
     const wait = this.backoff * (0.8 + 0.4 * Math.random()); // jitter: many clients do not return at once
     this.backoff = Math.min(this.backoff * 2, BACKOFF_MS[1]);
-    const why = CLOSED_BECAUSE[event.code] ?? `closed (${event.code})`;
+    // a server that restarts says how far its start is (rcp_server/service/startup.py): "starting: compiling kernels (3/14)"
+    const starting = event.code === 1013 && /^the server is starting: ([^;]*)/.exec(event.reason);
+    const why = starting ? `starting: ${starting[1]}` : (CLOSED_BECAUSE[event.code] ?? `closed (${event.code})`);
     this.setState("waiting", { why, seconds: wait / 1000 });
     this.timer = setTimeout(() => this.connect(), wait);
   }

@@ -1,6 +1,9 @@
 // Painted frames onto the canvas. Each arrives as a JPEG the size of the painting (smaller than the canvas
 // while walking) and is drawn scaled to the canvas. Only the newest frame is decoded: one that arrives
-// while another decodes replaces any frame still waiting, so a slow browser never falls behind.
+// while another decodes replaces any frame still waiting, so a slow browser never falls behind. A frame smaller
+// than the canvas is scaled up with its edges kept sharp where WebGL2 allows (upscale.js, the walk quality).
+
+import { Upscaler } from "./upscale.js";
 
 export class FrameView {
   /**
@@ -14,6 +17,7 @@ export class FrameView {
     this.newest = null; // {meta, jpeg} not yet decoded
     this.decoding = false;
     this.bitmap = null; // the frame shown, kept to redraw after a resize
+    this.upscaler = new Upscaler();
   }
 
   /** A frame arrived: its `frame` message and the JPEG bytes (ArrayBuffer) that followed. */
@@ -48,6 +52,10 @@ export class FrameView {
 
   draw() {
     if (!this.bitmap) return;
+    const { width, height } = this.canvas;
+    if (this.upscaler.wanted(this.bitmap.width, this.bitmap.height, width, height)) {
+      if (this.upscaler.draw(this.bitmap, this.context, width, height)) return;
+    }
     this.context.imageSmoothingEnabled = true;
     this.context.imageSmoothingQuality = "high";
     this.context.drawImage(this.bitmap, 0, 0, this.canvas.width, this.canvas.height);

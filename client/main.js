@@ -12,6 +12,7 @@ import { MESSAGES } from "./messages.js";
 import * as walkCamera from "./camera.js";
 import { Connection } from "./connection.js";
 import { FrameView } from "./frames.js";
+import { qualityControl } from "./upscale.js";
 import { Overlay } from "./overlay.js";
 import { objectsPanel } from "./objects.js";
 import { paintPanel } from "./panel.js";
@@ -586,6 +587,14 @@ async function loadScenes() {
     try {
       const response = await fetch("api/scenes", { headers: authorization });
       if (response.ok) return await response.json();
+      const starting = await startingFrom(response);
+      if (starting) {
+        // a first start: the kernels compile (rcp_server/service/startup.py); the server says how far, and when to ask again
+        $("o-connection").textContent = starting.text;
+        notice(starting.text, "info");
+        await new Promise((resolve) => setTimeout(resolve, starting.retryMs));
+        continue;
+      }
       if (response.status === 401) {
         $("o-connection").textContent = "needs a token: open /#token=…";
         notice((await response.json()).detail);
@@ -597,6 +606,16 @@ async function loadScenes() {
     $("o-connection").textContent = "waiting for the server…";
     await new Promise((resolve) => setTimeout(resolve, wait));
   }
+}
+
+/** A 503 "starting" answer as {text: "starting: compiling kernels (3/14)", retryMs}, or null for any other. */
+async function startingFrom(response) {
+  if (response.status !== 503) return null;
+  const body = await response.json().catch(() => null);
+  if (body?.status !== "starting") return null;
+  const count = body.total ? ` (${body.done}/${body.total})` : "";
+  const retryMs = 1000 * Math.min(Math.max(Number(response.headers.get("retry-after")) || 1, 0.5), 5);
+  return { text: `starting: ${body.phase}${count}`, retryMs };
 }
 
 async function start() {
@@ -639,6 +658,11 @@ async function start() {
 
 const uploads = new Uploader($("scene"), authorization, { chosen: switchScene, notice });
 
+qualityControl($("walk-quality"), (quality) => {
+  frames.upscaler.quality = quality;
+  frames.draw();
+});
+
 // ---- the camera path: keyframes from the walk, played back, rendered into a video ----
 
 const path = pathPanel($("path"), {
@@ -677,5 +701,5 @@ const vr = new VrSession($("enter-vr"), view360, {
   notice,
 });
 
-window.rcp = { state, sent, overlay, walk, connection, panel, objects, path, canvas, uploads, view360, vr, collider, shareLink, pickMask, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+window.rcp = { state, sent, overlay, walk, connection, frames, panel, objects, path, canvas, uploads, view360, vr, collider, shareLink, pickMask, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
 start();

@@ -8,6 +8,7 @@ import logging
 import math
 import signal
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -149,6 +150,12 @@ def _parser() -> argparse.ArgumentParser:
     )
 
     sub.add_parser("scenes", help="list the shipped scenes")
+
+    sub.add_parser(
+        "compile",
+        help="compile the kernels into numba's cache (NUMBA_CACHE_DIR) as `rcp serve` does as it starts, so that "
+        "the next start is ready at once (a container image does it when it is built)",
+    )
 
     v = sub.add_parser("serve", help="serve the walk-through client, REST renders and the WebSocket")
     v.add_argument("--host", help="address to listen on (default 127.0.0.1, or RCP_HOST)")
@@ -324,6 +331,23 @@ def _scenes() -> None:
             print(f"{name:12s} BROKEN: {exc}")
 
 
+def _compile() -> None:
+    from pydantic import ValidationError
+
+    from .painting import warmup
+    from .service.settings import Settings
+    from .service.state import load_scenes
+
+    try:
+        folder = Settings().scenes  # the scenes `rcp serve` serves (RCP_SCENES): each compiles what it calls
+    except ValidationError as exc:
+        raise UsageError(f"bad setting: {one_line(exc)}") from None
+    clock = time.monotonic()
+    scenes = load_scenes(folder)
+    warmup.warm(scenes.values())
+    print(f"rcp: the kernels of {len(scenes)} scenes are compiled (in {time.monotonic() - clock:.1f} s)")
+
+
 def _serve(args: argparse.Namespace) -> None:
     from pydantic import ValidationError
 
@@ -338,14 +362,17 @@ def _serve(args: argparse.Namespace) -> None:
     logging.getLogger("rcp").setLevel(logging.INFO)
     for handler in logging.getLogger().handlers:
         handler.setFormatter(logging.Formatter("rcp: %(levelname)s: %(message)s"))
-    print(f"rcp: serving on http://{settings.host}:{settings.port}/  (walk-through client; API docs at /docs)")
-    if settings.token is not None:
-        print("rcp: a token is required (RCP_TOKEN): open the client at /#token=<token>")
     # uvicorn stops gracefully on SIGINT or SIGTERM, then raises the signal again for the handler it found:
     # a stop asked for and carried out is exit status 0
     signal.signal(signal.SIGTERM, _stopped)
     signal.signal(signal.SIGINT, _stopped)
-    server = Server(settings, log_level="info")
+
+    def listening() -> None:  # said once the port answers, not before: the kernels may still compile meanwhile
+        print(f"rcp: serving on http://{settings.host}:{settings.port}/  (walk-through client; API docs at /docs)")
+        if settings.token is not None:
+            print("rcp: a token is required (RCP_TOKEN): open the client at /#token=<token>")
+
+    server = Server(settings, listening, log_level="info")
     server.open_service()  # the data folder and Ray first: either failing is one line, before the port is taken
     server.run()
 
@@ -364,6 +391,8 @@ def main(argv: list[str] | None = None) -> int:
             _render(args)
         elif args.command == "scenes":
             _scenes()
+        elif args.command == "compile":
+            _compile()
         elif args.command == "serve":
             _serve(args)
         elif args.command == "bench":

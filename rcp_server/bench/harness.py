@@ -24,9 +24,10 @@ from pathlib import Path
 
 from ..service.server import Server
 from ..service.settings import Settings
+from ..service.state import service_of
 
 TIMEOUT = 30.0  # the longest any single wait on a server may take (an answer, a stop)
-START_TIMEOUT = 120.0  # a first start may compile the kernels
+START_TIMEOUT = 600.0  # a first start compiles the kernels: 30 s of one core, minutes on a busy machine
 PACKAGE_ROOT = Path(__file__).resolve().parents[2]  # the folder holding the rcp_server package
 LOG_PROBLEM = re.compile(r"\b(WARNING|ERROR|CRITICAL|Traceback)\b")
 
@@ -86,11 +87,16 @@ class BackgroundServer:
     def __enter__(self) -> BackgroundServer:
         self._thread.start()
         deadline = time.monotonic() + START_TIMEOUT
-        while not self.server.started:
+        while not (self.server.started and self.ready):  # listening, the scenes loaded, the kernels compiled
             if not self._thread.is_alive() or time.monotonic() > deadline:
                 raise RuntimeError("the server did not start")
             time.sleep(0.05)
         return self
+
+    @property
+    def ready(self) -> bool:
+        service = service_of(self.app)
+        return service is not None and service.startup.ready
 
     def __exit__(self, *exc) -> None:
         self.server.should_exit = True

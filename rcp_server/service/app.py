@@ -19,6 +19,7 @@ from .faults import InternalErrors
 from .guard import BodyLimit, Capacity
 from .routes import docs, rest, scenes, styles, videos, walk
 from .settings import Settings
+from .startup import Starting, Startup
 from .state import Service, service_of
 
 
@@ -29,6 +30,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def lifespan(app: FastAPI):
         service = service_of(app) or Service.open(settings)  # opened already by `rcp serve`, or now
         app.state.service = service  # read back through state.get_service
+        service.start()  # the scenes and the kernels, in a thread: the server answers meanwhile (startup.py)
         try:
             yield
         finally:
@@ -47,6 +49,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_middleware(BodyLimit, limit=settings.max_body_bytes, larger={"/api/scenes": uploads})
     app.add_middleware(InternalErrors)  # outside the body limit: a 413 is an answer, not a fault
     app.add_middleware(Capacity, limit=settings.max_requests)  # inside CORS: a 503 keeps its CORS headers
+    app.add_middleware(Starting, startup_of=lambda: startup_of(app))  # until ready, /api/ answers 503 starting
     if settings.cors_origins:  # off unless configured: only the client served here calls the API
         app.add_middleware(
             CORSMiddleware,
@@ -64,6 +67,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     if settings.client.is_dir():
         app.router.routes.append(_ClientFiles("/", StaticFiles(directory=settings.client, html=True), name="client"))
     return app
+
+
+def startup_of(app: FastAPI) -> Startup | None:
+    service = service_of(app)
+    return None if service is None else service.startup
 
 
 class _ClientFiles(Mount):

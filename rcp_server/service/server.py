@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import socket
+from collections.abc import Callable
 
 import uvicorn
 from uvicorn.protocols.websockets.websockets_sansio_impl import WebSocketsSansIOProtocol
@@ -47,7 +48,7 @@ class Server(uvicorn.Server):
     PAINTING_GRACE_S = 8
     GRACE_S = PAINTING_GRACE_S + 4  # uvicorn's: time for the stopped paintings to answer
 
-    def __init__(self, settings: Settings, **options):
+    def __init__(self, settings: Settings, listening: Callable[[], None] | None = None, **options):
         self.app = create_app(settings)
         config = uvicorn.Config(
             self.app,
@@ -63,12 +64,18 @@ class Server(uvicorn.Server):
         for name in ("uvicorn.error", "uvicorn.access"):
             logging.getLogger(name).addFilter(HideTokens())
         self.settings = settings
+        self.listening = listening  # called once the port answers (``rcp serve`` says where)
         super().__init__(config)
 
     def open_service(self) -> None:
         """Open the service now, before listening (else the app's lifespan opens it): a data folder in use or a
         Ray that does not answer is then an error before any port is taken, and nothing reports healthy first."""
         self.app.state.service = Service.open(self.settings)
+
+    async def startup(self, sockets=None) -> None:
+        await super().startup(sockets)
+        if self.started and self.listening is not None:  # bound and listening: a connection is answered now
+            self.listening()
 
     def handle_exit(self, sig, stack) -> None:  # stack: where the signal interrupted the program
         if self.should_exit and self._stop_paintings():

@@ -4,6 +4,7 @@ walk-throughs; and the dependency that hands it to a route, typed (``service: Se
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -14,12 +15,13 @@ from starlette.applications import Starlette
 from starlette.requests import HTTPConnection
 
 from ..camera.wire import spec_of
-from ..painting.loop import paint
+from ..painting import warmup
 from ..scene.scene import Scene, material_names, object_names
 from ..scene.scenefile import SceneError, load_scene, scene_names
 from ..settings.params import PaintParams
 from . import protocol
 from .settings import Settings
+from .startup import Startup
 from .store import Store
 from .uploads import Upload, Uploads, stored_scene
 from .videos import Videos
@@ -58,39 +60,71 @@ class Service:
     cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
+    startup: Startup = field(default_factory=Startup)  # ready once the scenes are loaded and the kernels compiled
+    closed: bool = False
+    _closing: threading.Lock = field(default_factory=threading.Lock)  # the start's last steps, or the close
 
     @classmethod
     def open(cls, settings: Settings) -> Service:
-        """Blocking: take the data folder (:class:`~.store.DataFolderError` if another server has it), join Ray
-        when told to (:class:`~rcp_server.cluster.painter.ClusterError` if it does not answer in bounded time), load the
-        scenes of ``settings.scenes``, compile the kernels, open the workshop, load the stored uploads and
-        resume the stored video jobs."""
+        """Blocking, and quick: take the data folder (:class:`~.store.DataFolderError` if another server has it),
+        join Ray when told to (:class:`~rcp_server.cluster.painter.ClusterError` if it does not answer in bounded
+        time) and open the workshop. The rest, slow on a first start, is :meth:`start`'s."""
         store = Store(settings.data)
-        cluster = workshop = videos = None
+        cluster = workshop = None
         try:
             if settings.ray_address is not None:  # joined before serving: healthy means Ray is there
                 from ..cluster.painter import RayPainter
 
                 cluster = RayPainter(settings.ray_address)
                 cluster.start(settings.ray_join_s)
-            scenes = load_scenes(settings.scenes)
-            for scene in list(scenes.values())[:1]:  # load the compiled kernels before a visitor waits for them
-                paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
-            log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
-            infos = {name: scene_info(scene) for name, scene in scenes.items()}
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
-            store.remove_strays()
-            service = cls(
-                settings, scenes, infos, workshop, videos, store, cluster, uploads=load_uploads(settings, store)
-            )
-            videos.resume(service.scene)
-            return service
+            return cls(settings, {}, {}, workshop, videos, store, cluster)
         except BaseException:
-            for opened in (videos, workshop, cluster, store):
+            for opened in (workshop, cluster, store):
                 if opened is not None:
                     opened.close()
             raise
+
+    def start(self) -> threading.Thread:
+        """In a thread, while the server already answers (``startup.py``): load the scenes of ``settings.scenes``,
+        compile the kernels, load the stored uploads and resume the stored video jobs; then the service is
+        ready. A fault there is logged, and the service serves what did load."""
+        thread = threading.Thread(target=self._start, name="rcp-start", daemon=True)  # a compile cannot be stopped
+        thread.start()
+        return thread
+
+    def _start(self) -> None:
+        startup, clock = self.startup, time.monotonic()
+        try:
+            scenes = load_scenes(self.settings.scenes)
+            self.infos.update({name: scene_info(scene) for name, scene in scenes.items()})
+            self.scenes.update(scenes)
+            log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
+            loaded, entries = time.monotonic(), warmup.kernels()
+            startup.enter("compiling kernels", lambda: (warmup.compiled(entries), len(entries)))
+            try:
+                warmup.warm(scenes.values())
+            except Exception:  # the kernels compile at the first painting instead: slower, not broken
+                log.exception("the kernels could not be compiled ahead")
+            compiled = time.monotonic()
+            startup.enter("loading uploads")
+            with self._closing:
+                if self.closed:
+                    return
+                self.store.remove_strays()
+                self.uploads = load_uploads(self.settings, self.store)
+                self.videos.resume(self.scene)
+            log.info(
+                "ready in %.1f s (scenes %.1f s, kernels %.1f s)",
+                time.monotonic() - clock,
+                loaded - clock,
+                compiled - loaded,
+            )
+        except Exception:
+            log.exception("the start did not finish: serving what it loaded")
+        finally:
+            startup.finish()
 
     def walking(self) -> int:
         """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
@@ -128,6 +162,8 @@ class Service:
 
     def close(self) -> None:
         """Close every walk-through (their paintings stop at the next iteration), then the workshop."""
+        with self._closing:  # a start still under way loads no uploads nor resumes videos after this
+            self.closed = True
         for session in list(self.sessions):
             session.close()
         self.workshop.stop()  # the video jobs' paintings stop at their next tile

@@ -147,11 +147,11 @@ class PaintParams:
         if scale == 1.0:
             return self
 
-        def scaled(table: Overrides) -> dict:
-            return {
-                name: {key: value * scale if key == "lambda_p" else value for key, value in settings.items()}
-                for name, settings in as_dict(table).items()
-            }
+        def scaled(table: Overrides) -> Overrides:
+            return tuple(
+                (name, tuple((key, value * scale if key == "lambda_p" else value) for key, value in settings))
+                for name, settings in table
+            )
 
         return replace(
             self, lambda_p=self.lambda_p * scale, objects=scaled(self.objects), materials=scaled(self.materials)

@@ -29,9 +29,16 @@ CLUSTER_RETRY_S = 30  # Ray that does not answer is mended by its operator, in m
 log = logging.getLogger("rcp.service")
 
 
-@public.get("/health")
+STARTING = {
+    "description": "the server is starting (the scenes load, the kernels compile): the body says how far, in "
+    "`phase`, `done` of `total` kernels and `detail`; see Retry-After. Every /api/ path answers so meanwhile."
+}
+
+
+@public.get("/health", responses={503: STARTING})
 async def health(request: Request, service: ServiceDep) -> dict:
-    """Open to all (for container health checks); the figures only for callers with the token."""
+    """Open to all (for container health checks); the figures only for callers with the token. While the server
+    starts, a 503 "starting" (service/startup.py answers it)."""
     if not admits(service.settings, request.headers, request.query_params):
         return {"status": "ok"}
     return {

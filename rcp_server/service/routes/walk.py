@@ -32,6 +32,8 @@ async def walk_through(ws: WebSocket, service: ServiceDep):
 def _refusal(ws: WebSocket, service: Service) -> tuple[int, str] | None:
     """Why a new walk-through may not start (a close code and a sentence), or None."""
     settings = service.settings
+    if not service.startup.ready:  # the scenes load and the kernels compile (startup.py): the client tries again
+        return 1013, service.startup.message()
     if not origin_allowed(settings, ws.headers):
         return 1008, f"pages from {ws.headers['origin']} may not open walk-throughs here (see RCP_CORS_ORIGINS)"
     if not admits(settings, ws.headers, ws.query_params):

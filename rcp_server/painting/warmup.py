@@ -1,0 +1,59 @@
+"""Compiling the kernels before anyone waits for them: the server does it in a thread while it already answers
+(``service/startup.py``), ``rcp compile`` when a container image is built.
+
+numba compiles a kernel at its first call (``engine/kernels/jit.py``, ``cache=True``): about 30 s of one core
+for all of them on a cold cache, a second or two to load them from a warm one. Painting a tiny image of each
+scene calls every kernel a visitor's painting would, with the argument types that scene gives them (a new
+type is a new compilation).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterable
+from dataclasses import replace
+
+from numba.core.registry import CPUDispatcher
+
+from ..scene.scene import Scene
+from ..settings.params import PaintParams
+from .loop import paint
+
+SIZE = 16  # pixels a side: enough to reach every kernel, nothing more
+ITERATIONS = 2  # the second iteration is the first that displaces cameras
+
+
+def kernels() -> list[CPUDispatcher]:
+    """The engine's compiled entry points as loaded: every numba kernel a module of ``rcp_server.engine`` defines,
+    except those inlined into their callers (``inline="always"``), which are never compiled on their own. (The
+    scene's own kernels compile as scenes load, before these.)"""
+    found = {}
+    for name, module in list(sys.modules.items()):
+        if name.startswith("rcp_server.engine.") and module is not None:
+            for value in list(vars(module).values()):
+                if (
+                    isinstance(value, CPUDispatcher)
+                    and value.py_func.__module__ == name
+                    and value.targetoptions.get("inline") != "always"
+                ):
+                    found[id(value)] = value
+    return list(found.values())
+
+
+def compiled(entries: Iterable[CPUDispatcher]) -> int:
+    """How many of ``entries`` have a compiled version in this process (compiled, or loaded from the cache;
+    a kernel called only from inside another one counts when it was compiled for it, on a cold cache)."""
+    return sum(len(kernel.overloads) > 0 for kernel in entries)  # len: safe while another thread compiles
+
+
+def warm(scenes: Iterable[Scene]) -> None:
+    """Paints a tiny image of every scene with its own settings, and the image-space method once: after this the
+    kernels a visitor's painting calls are compiled (and in numba's cache for the next process)."""
+    first = True
+    for scene in scenes:
+        camera = scene.camera
+        size = camera.image_size(2 * SIZE if camera.projection == "equirect" else SIZE, SIZE)  # one it can take
+        paint(scene, camera, *size, replace(scene.paint, iterations=ITERATIONS), threads=1)
+        if first:  # the other projections, mappings and sample counts compile nothing more (measured)
+            paint(scene, camera, *size, PaintParams(iterations=ITERATIONS, method="image"), threads=1)
+            first = False
