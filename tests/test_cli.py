@@ -1,5 +1,6 @@
 """The ``rcp`` command line: stills, iterations, sequences, scene listing, and one-line errors."""
 
+import re
 import subprocess
 import sys
 
@@ -195,16 +196,21 @@ def test_bench_speed_prints_the_stage_split_and_the_ratios_to_embreex_and_to_emb
     out = capsys.readouterr().out
     for needle in (
         "triangles",
-        "camera",
-        "intersect",
-        "shade",
-        "bookkeeping",
+        "nanoseconds a pixel an iteration",
+        "cameras",
+        "ray (Embree",
+        "shading",
+        "carrying pixels",
         "embreex alone",
         "ratio iteration / embreex",
         "packets alone",
         "ratio iteration / packets",
+        "a whole painting (2 iterations) / one embreex pass",
+        "the scene's own painting",
     ):
         assert needle in out, needle
+    stages = re.findall(r"^  (cameras|ray|shading|carrying).*?(\d+\.\d) ns", out, re.M)
+    assert len(stages) == 4 and all(float(ns) >= 0 for _, ns in stages)
 
 
 def test_compile_warms_every_kernel_the_server_warms_and_says_so(capsys):
