@@ -150,6 +150,16 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def _worker_failure(exc) -> str:
+    """What failed on a Ray worker, in one line: the worker's exception type and the first line of its message
+    (a ``RayTaskError``'s own first line names only the remote call, ``ray::Painter.band()``)."""
+    cause = getattr(exc, "cause", None)
+    if not isinstance(cause, BaseException):
+        return _first_line(exc)
+    text = str(cause).strip()
+    return f"{type(cause).__name__}: {text.splitlines()[0]}" if text else type(cause).__name__
+
+
 # ---- the scene as it travels ----
 
 
@@ -571,7 +581,7 @@ class RayPainter:
         except ray.exceptions.RayTaskError as exc:
             if isinstance(exc.cause, LostState):
                 raise _Lost(str(exc.cause)) from None
-            raise PaintingFailed(f"a painting failed on Ray: {_first_line(exc)}") from None
+            raise PaintingFailed(f"a painting failed on Ray: {_worker_failure(exc)}") from None
         self.backoff.succeeded()
         return values
 

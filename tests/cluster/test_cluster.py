@@ -383,6 +383,30 @@ def _swirl(data):
     return np.cross(data.forward, data.color_field()).astype(np.float32)
 
 
+def _broken_field(data):
+    """A mapping that fails wherever it runs: its exception is what the user must read."""
+    raise ArithmeticError(f"no field for {len(data.forward)} samples here")
+
+
+def test_a_painting_that_fails_on_ray_says_the_workers_exception_in_one_line(painter, busy_scene):
+    """The worker's exception type and message reach the one line the caller sees, not Ray's
+    ``ray::Painter.band()``."""
+    from rcp_server.cluster.painter import PaintingFailed
+    from rcp_server.settings.mappings import register_mapping, unregister_mapping
+
+    register_mapping("test-broken", {"color"}, _broken_field)
+    try:
+        params = PaintParams(iterations=2, mapping="test-broken", lambda_p=4.0)
+        with pytest.raises(PaintingFailed) as failed:
+            painter.render(busy_scene, busy_scene.camera, W, H, params)
+        message = str(failed.value)
+        assert "\n" not in message
+        assert message.startswith("a painting failed on Ray: ArithmeticError: no field for "), message
+        assert message.endswith(" samples here"), message
+    finally:
+        unregister_mapping("test-broken")
+
+
 def test_a_registered_mapping_paints_on_ray_as_on_threads(painter, busy_scene):
     from rcp_server.settings.mappings import register_mapping, unregister_mapping
 
