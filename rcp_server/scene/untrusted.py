@@ -88,12 +88,20 @@ def read_model(work: Path, filename: str, limits: Limits) -> Model:
 
 
 def parts_from_arrays(path: Path, limits: Limits) -> Model:
-    """The child's ``.npz`` (:func:`unpack.write_parts`) as a model, every array checked: dtypes, shapes,
-    face indices within the vertices, finite numbers, colors in [0, 1], and the limits."""
+    """The child's ``.npz`` (:func:`unpack.write_parts`) as a model (:func:`model_of_arrays`)."""
     try:
         with np.load(path, allow_pickle=False) as arrays:
             found = dict(arrays.items())
-            return Model(packed(_parts(found, limits)), *_cameras_and_lights(found))
+    except (OSError, ValueError, KeyError) as exc:
+        raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
+    return model_of_arrays(found, limits)
+
+
+def model_of_arrays(found: dict[str, np.ndarray], limits: Limits) -> Model:
+    """The arrays of :func:`unpack.write_parts` as a model, every array checked: dtypes, shapes, face indices
+    within the vertices, finite numbers, colors in [0, 1], and the limits."""
+    try:
+        return Model(packed(_parts(found, limits)), *_cameras_and_lights(found))
     except (OSError, ValueError, KeyError) as exc:
         raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
 
