@@ -166,6 +166,7 @@ class Store:
             self._lock_file.close()
             raise DataFolderError(f"cannot use the records in {self.folder / 'rcp.sqlite'}: {exc}") from None
         self._mutex = threading.Lock()
+        self._skipped: set[tuple[str, int]] = set()  # the rows said to be skipped
 
     def __enter__(self) -> Store:
         return self
@@ -192,10 +193,11 @@ class Store:
         for rowid, *values in cursor:
             try:
                 records.append(read(dict(zip(names, values, strict=True))))
-            except ValidationError as exc:
-                log.warning("data folder %s: %s row %d skipped: %s", self.folder, table, rowid, one_line(exc))
-            except ValueError as exc:  # settings that are not JSON
-                log.warning("data folder %s: %s row %d skipped: %s", self.folder, table, rowid, exc)
+            except ValueError as exc:  # ValidationError among them; settings that are not JSON
+                if (table, rowid) not in self._skipped:  # said once, however often the records are read
+                    self._skipped.add((table, rowid))
+                    reason = one_line(exc) if isinstance(exc, ValidationError) else str(exc)
+                    log.warning("data folder %s: %s row %d skipped: %s", self.folder, table, rowid, reason)
         return records
 
     # ---- uploads ----

@@ -22,6 +22,7 @@ last run count at the door as this run's do: its kept videos by their size, its 
 
 from __future__ import annotations
 
+import errno
 import itertools
 import logging
 import math
@@ -336,7 +337,9 @@ class Videos:
             size = regular_size(job.file) or 0
             if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
                 job.file.unlink(missing_ok=True)
-                raise OSError(f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed")
+                raise OSError(
+                    errno.ENOSPC, f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed"
+                )
             self._finish(job, "done", f"{job.frames} frames, {size:,} bytes")
         except Exception as exc:
             if self._closing or self.workshop.stopping:  # recorded as it was: the next start goes on from here

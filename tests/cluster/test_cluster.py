@@ -258,16 +258,21 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
 
 def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_path, caplog):
     """A server painting on Ray stops mid-film; started again on the same data folder, it goes on from the last
-    frame written (a temporal job paints up to there again on the actors), and the film is the threads' one."""
+    frame written (a temporal job paints up to there again on the actors), and the film is the threads' one.
+
+    The film is long (181 frames of 32x24) so that it is stopped mid-way: between the moment two frames are
+    seen written and the moment the stopping server cancels the job, Ray paints on, and a 31-frame film was
+    seen painted whole in that time (then finished and assembled, nothing was left to resume)."""
     import av
     import httpx
 
     from rcp_server.bench.harness import BackgroundServer
+    from rcp_server.service.store import Store
 
     caplog.set_level("INFO", "rcp.service")
     (tmp_path / "tiny.toml").write_text(TINY)
     data = tmp_path / "data"
-    path = long_path(1.0)
+    path = long_path(6.0)
     painter.close()  # the server's actors need the runtime's CPUs
     films = {}
     for temporal in (None, 1):
@@ -275,11 +280,14 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
         with BackgroundServer(scenes=tmp_path, data=data, ray_address="local") as live:
             with httpx.Client(base_url=live.url, timeout=60) as client:
                 job = client.post("/api/videos", json=body).json()
-                deadline = time.monotonic() + 60
+                deadline = time.monotonic() + 180  # a fresh clone's actors load the kernels first
                 while (status := client.get(f"/api/videos/{job['id']}").json())["done_frames"] < 2:
-                    assert time.monotonic() < deadline
+                    assert time.monotonic() < deadline and status["state"] in ("queued", "running"), status
                     time.sleep(0.02)
-        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 31
+        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 181
+        with Store(data) as store:  # as the stopped server left it: mid-way, to be resumed
+            (left,) = [r for r in store.videos() if r.id == job["id"]]
+        assert left.state == "running" and left.done_frames < left.frames, left
         for where in ({"ray_address": "local"}, {}):  # resumed on Ray; then the same film on threads
             with BackgroundServer(scenes=tmp_path, data=data, **where) as live:
                 with httpx.Client(base_url=live.url, timeout=60) as client:
