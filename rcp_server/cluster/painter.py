@@ -571,10 +571,13 @@ class RayPainter:
         :class:`_Lost`; any other fault of Ray's a :class:`ClusterError`."""
         ray = _ray()
         try:
-            while ray.wait(refs, num_returns=len(refs), timeout=STOP_POLL_S)[1]:
+            while True:  # asked before every wait, the first among them: frames quicker than STOP_POLL_S never
+                # wait, and a job stopped (cancelled, or its server stopping) would paint on to its last frame
                 if should_stop is not None and should_stop():
                     _cancel(refs)
                     raise Abandoned
+                if not ray.wait(refs, num_returns=len(refs), timeout=STOP_POLL_S)[1]:
+                    break
             values = ray.get(refs)
         except (ray.exceptions.RayActorError, ray.exceptions.ObjectLostError) as exc:
             raise _Lost(f"a Ray worker was lost mid-job: {_first_line(exc)}") from None

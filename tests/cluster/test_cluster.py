@@ -256,13 +256,25 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
     assert ray_png == here_png
 
 
+def test_a_film_on_ray_stops_at_the_next_frame_once_it_is_no_longer_wanted(painter, busy_scene):
+    """Frames quicker than a wait's poll: the film stops at the next frame all the same, not at its end."""
+    frames = []
+    film = painter.images(
+        busy_scene, shots(busy_scene, long_path(3.0)), W, H, PaintParams(iterations=1), None, lambda: len(frames) >= 2
+    )
+    with pytest.raises(Abandoned):
+        for image in film:
+            frames.append(image)
+    assert len(frames) == 2
+
+
 def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_path, caplog):
     """A server painting on Ray stops mid-film; started again on the same data folder, it goes on from the last
     frame written (a temporal job paints up to there again on the actors), and the film is the threads' one.
 
-    The film is long (181 frames of 32x24) so that it is stopped mid-way: between the moment two frames are
-    seen written and the moment the stopping server cancels the job, Ray paints on, and a 31-frame film was
-    seen painted whole in that time (then finished and assembled, nothing was left to resume)."""
+    The film is long (91 frames of 32x24) so that it is stopped mid-way: Ray paints on between the moment two
+    frames are seen written and the moment the stopping server cancels the job (a 31-frame film was seen
+    painted whole meanwhile, when a cancelled job stopped only at a frame that made it wait)."""
     import av
     import httpx
 
@@ -272,7 +284,7 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
     caplog.set_level("INFO", "rcp.service")
     (tmp_path / "tiny.toml").write_text(TINY)
     data = tmp_path / "data"
-    path = long_path(6.0)
+    path = long_path(3.0)
     painter.close()  # the server's actors need the runtime's CPUs
     films = {}
     for temporal in (None, 1):
@@ -284,7 +296,7 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
                 while (status := client.get(f"/api/videos/{job['id']}").json())["done_frames"] < 2:
                     assert time.monotonic() < deadline and status["state"] in ("queued", "running"), status
                     time.sleep(0.02)
-        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 181
+        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 91
         with Store(data) as store:  # as the stopped server left it: mid-way, to be resumed
             (left,) = [r for r in store.videos() if r.id == job["id"]]
         assert left.state == "running" and left.done_frames < left.frames, left
