@@ -157,6 +157,14 @@ class Store:
         except OSError as exc:
             raise DataFolderError(f"cannot use the data folder {self.folder}: {exc.strerror or exc}") from None
         self._lock_file = _lock(self.folder / "lock")
+        for name in ("rcp.sqlite", "rcp.sqlite-wal", "rcp.sqlite-shm", "rcp.sqlite-journal"):
+            try:  # SQLite opens them by name: a link would be written through, a FIFO would block its first read
+                mode = os.lstat(self.folder / name).st_mode
+            except FileNotFoundError:
+                continue
+            if not stat.S_ISREG(mode):
+                self._lock_file.close()
+                raise DataFolderError(f"cannot use the records in {self.folder}: {name} is not a regular file")
         try:
             self._db = sqlite3.connect(self.folder / "rcp.sqlite", check_same_thread=False, isolation_level=None)
             self._db.execute("PRAGMA journal_mode=WAL")

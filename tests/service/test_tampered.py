@@ -20,7 +20,7 @@ from conftest import SPINNING_BOX
 from rcp_server.bench.harness import PACKAGE_ROOT, BackgroundServer, free_port
 from rcp_server.camera.camera import Camera
 from rcp_server.media.camerapath import parse_path
-from rcp_server.service.store import Store, UploadRecord, VideoRecord, VideoSettings, new_video_id
+from rcp_server.service.store import DataFolderError, Store, UploadRecord, VideoRecord, VideoSettings, new_video_id
 from rcp_server.service.videos import path_spec
 from rcp_server.settings.params import PaintParams
 
@@ -220,3 +220,18 @@ def test_fifos_in_place_of_stored_arrays_and_frames_do_not_hang_start_up(tmp_pat
     assert f"upload {name} removed: it no longer loads (parts.npz in the data folder is not a regular file)" in (
         caplog.messages
     )
+
+
+@pytest.mark.parametrize("name", ["rcp.sqlite", "rcp.sqlite-wal"])
+def test_records_that_are_a_link_or_a_fifo_stop_the_server_in_one_line(tmp_path, outside, name):
+    """SQLite opens its files by name: a link in their place would be written through, a FIFO would block."""
+    data = tmp_path / "data"
+    Store(data).close()
+    before = intact(outside)
+    for make in (lambda p: os.symlink(outside / "secret.txt", p), os.mkfifo):
+        (data / name).unlink(missing_ok=True)
+        make(data / name)
+        with pytest.raises(DataFolderError) as refused:
+            Store(data)
+        assert str(refused.value) == f"cannot use the records in {data}: {name} is not a regular file"
+        assert intact(outside) == before
