@@ -149,6 +149,16 @@ def _first_line(exc: BaseException) -> str:
     return text.splitlines()[0] if text else type(exc).__name__
 
 
+def _worker_failure(exc) -> str:
+    """What failed on a Ray worker, in one line: the worker's exception type and the first line of its message
+    (a ``RayTaskError``'s own first line names only the remote call, ``ray::Painter.band()``)."""
+    cause = getattr(exc, "cause", None)
+    if not isinstance(cause, BaseException):
+        return _first_line(exc)
+    text = str(cause).strip()
+    return f"{type(cause).__name__}: {text.splitlines()[0]}" if text else type(cause).__name__
+
+
 # ---- the scene as it travels ----
 
 
@@ -542,17 +552,20 @@ class RayPainter:
         :class:`_Lost`; any other fault of Ray's a :class:`ClusterError`."""
         ray = _ray()
         try:
-            while ray.wait(refs, num_returns=len(refs), timeout=STOP_POLL_S)[1]:
+            while True:  # asked before every wait, the first among them: frames quicker than STOP_POLL_S never
+                # wait, and a job stopped (cancelled, or its server stopping) would paint on to its last frame
                 if should_stop is not None and should_stop():
                     _cancel(refs)
                     raise Abandoned
+                if not ray.wait(refs, num_returns=len(refs), timeout=STOP_POLL_S)[1]:
+                    break
             values = ray.get(refs)
         except (ray.exceptions.RayActorError, ray.exceptions.ObjectLostError) as exc:
             raise _Lost(f"a Ray worker was lost mid-job: {_first_line(exc)}") from None
         except ray.exceptions.RayTaskError as exc:
             if isinstance(exc.cause, LostState):
                 raise _Lost(str(exc.cause)) from None
-            raise PaintingFailed(f"a painting failed on Ray: {_first_line(exc)}") from None
+            raise PaintingFailed(f"a painting failed on Ray: {_worker_failure(exc)}") from None
         self.backoff.succeeded()
         return values
 

@@ -64,6 +64,7 @@ class Mp4Writer:
         self.out.parent.mkdir(parents=True, exist_ok=True)
         self._partial = self.out.with_name(f".{self.out.name}.part")
         self._av = av
+        self._partial.unlink(missing_ok=True)  # whatever had its name (a link among them): written anew, not through
         try:
             self._container = av.open(str(self._partial), "w", format="mp4", options={"movflags": "faststart"})
             self._stream = self._container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))

@@ -21,6 +21,8 @@ import numpy as np
 
 GLB_MAGIC, GLB_JSON, GLB_BIN = b"glTF", 0x4E4F534A, 0x004E4942
 MATERIAL_PREFIX = "rcp-material-"
+MAX_VIEWPOINTS = 256  # a file's cameras kept, the first in its order: each is offered to every walker in `ready`
+MAX_LIGHTS = 256  # a file's lights kept, the first in its order (the scene lights with one of them)
 
 
 class GltfError(ValueError):
@@ -218,7 +220,8 @@ def triple(v) -> tuple[float, float, float]:
 
 def extras(gltf: dict) -> GltfExtras:
     """The cameras, lights and materials of a glTF's JSON, in the file's order (a camera or light that
-    no node of the scene places is left out; so is an orthographic camera)."""
+    no node of the scene places is left out; so is an orthographic camera); at most :data:`MAX_VIEWPOINTS`
+    cameras and :data:`MAX_LIGHTS` lights, the first ones."""
     out = GltfExtras(materials=[_material(m) for m in _list(gltf, "materials")])
     nodes = _list(gltf, "nodes")
     cameras = _list(gltf, "cameras")
@@ -234,6 +237,8 @@ def extras(gltf: dict) -> GltfExtras:
         if forward is None or up is None or not np.all(np.isfinite(eye)):
             continue
         cam = node.get("camera")
+        if len(out.viewpoints) >= MAX_VIEWPOINTS:
+            cam = None  # a bound: a small file can place a camera on each of 60,000 nodes
         if isinstance(cam, int) and 0 <= cam < len(cameras) and cameras[cam].get("type") == "perspective":
             perspective = cameras[cam].get("perspective")
             yfov = perspective.get("yfov") if isinstance(perspective, dict) else None
@@ -247,7 +252,7 @@ def extras(gltf: dict) -> GltfExtras:
             if isinstance(node.get("extensions"), dict)
             else {}
         )
-        index = light.get("light") if isinstance(light, dict) else None
+        index = light.get("light") if isinstance(light, dict) and len(out.lights) < MAX_LIGHTS else None
         if isinstance(index, int) and 0 <= index < len(lights):
             spec = lights[index]
             kind = spec.get("type") if spec.get("type") in ("directional", "point", "spot") else "point"

@@ -455,11 +455,22 @@ def model_scene(model: Model, name: str, title: str) -> Scene:
     geometry, tracer = scene.geometry(0.0)
     release_freed_memory()  # building the tree freed as much again as it keeps
     scene.light = framing.light_of(model.lights, geometry) if model.lights else framing.default_light(geometry)
-    names = _unique([v.name for v in model.viewpoints])
-    cameras = [framing.viewpoint_camera(v, geometry, tracer) for v in model.viewpoints]
-    scene.camera = cameras[0] if cameras else framing.default_camera(geometry, tracer)
-    scene.viewpoints = dict(zip(names[1:], cameras[1:], strict=True))  # the others, offered by name
+    cameras = framed_viewpoints(model.viewpoints, geometry, tracer, title)
+    scene.camera = cameras.pop(next(iter(cameras))) if cameras else framing.default_camera(geometry, tracer)
+    scene.viewpoints = cameras  # the others, offered by name
     return scene
+
+
+def framed_viewpoints(viewpoints, geometry, tracer, title: str) -> dict[str, Camera]:
+    """A model's cameras by (unique) name, in its order; a camera that cannot frame the scene (far away, scaled
+    huge, its up along its view) is left out, said in one line, and the scene falls back on its framed view."""
+    cameras = {}
+    for name, viewpoint in zip(_unique([v.name for v in viewpoints]), viewpoints, strict=True):
+        try:
+            cameras[name] = framing.viewpoint_camera(viewpoint, geometry, tracer)
+        except (CameraError, ValueError, FloatingPointError) as exc:
+            log.info("%s: camera %r skipped: %s", title, name[:80], str(exc).splitlines()[0] if str(exc) else exc)
+    return cameras
 
 
 def scene_names(folder: Path = SCENES_DIR) -> list[str]:

@@ -71,6 +71,7 @@ class Limits:
     max_unpacked_bytes: int = 512 << 20  # a zip's files together, as unpacked
     max_files: int = 1000  # in a zip
     max_meshes: int = 4096  # separate meshes in one model (the staircase has 348)
+    max_nodes: int = 16384  # nodes a glTF's scene reaches, cameras and lights among them (each is built)
     memory_bytes: int = 2 << 30
     seconds: float = 60.0
     room_bytes: int | None = None  # memory the server's uploaded scenes have left (None: no such budget)
@@ -318,11 +319,11 @@ def gltf_images(gltf: dict, binary: bytes, model: Path, folder: Path, name: str)
     return embedded
 
 
-def gltf_declared(gltf: dict, name: str) -> tuple[int, int]:
+def gltf_declared(gltf: dict, name: str) -> tuple[int, int, int]:
     """Triangles and mesh instances a glTF declares, as its default scene's nodes place its meshes (a mesh
-    that a thousand nodes place counts a thousand times): counted from the accessors' counts and the node
-    tree alone, before a byte of geometry is read. Broken references count nothing (the reader refuses them
-    later)."""
+    that a thousand nodes place counts a thousand times), and the nodes its scene reaches: counted from the
+    accessors' counts and the node tree alone, before a byte of geometry is read. Broken references count
+    nothing (the reader refuses them later)."""
     accessors, meshes = _items(gltf, "accessors", name), _items(gltf, "meshes", name)
     nodes = _items(gltf, "nodes", name)
 
@@ -372,7 +373,7 @@ def gltf_declared(gltf: dict, name: str) -> tuple[int, int]:
             copies = max([count(a) for a in instancing["attributes"].values()] or [1])
         triangles += copies * mesh_triangles(node["mesh"])
         instances += copies
-    return triangles, instances
+    return triangles, instances, len(reached)
 
 
 def _node_list(value, length: int) -> list[int]:
@@ -446,13 +447,14 @@ def check_model(model: Path, folder: Path, limits: Limits) -> None:
     embedded: list[tuple[str, bytes]] = []
     suffix = model.suffix.lower()
     instances: int | None = None
+    nodes = 0
     triangles: int | None
     if suffix in (".glb", ".gltf"):
         gltf, binary = (
             glb_chunks(model.read_bytes(), name) if suffix == ".glb" else (_json(model.read_bytes(), name), b"")
         )
         embedded = gltf_images(gltf, binary, model, folder, name)
-        triangles, instances = gltf_declared(gltf, name)
+        triangles, instances, nodes = gltf_declared(gltf, name)
     else:
         triangles = declared_triangles(model)
     if suffix == ".obj":
@@ -464,6 +466,8 @@ def check_model(model: Path, folder: Path, limits: Limits) -> None:
         )
     if instances is not None and instances > limits.max_meshes:
         raise Refused(f"{name} places meshes {instances:,} times; at most {limits.max_meshes:,} are taken")
+    if nodes > limits.max_nodes:  # 60,000 camera nodes in 300 KB took the reader seconds, for nothing drawn
+        raise Refused(f"{name}'s scene has {nodes:,} nodes; at most {limits.max_nodes:,} are taken")
     if triangles is not None and limits.room_bytes is not None and triangles * BYTES_PER_TRIANGLE > limits.room_bytes:
         raise NoRoom(
             f"{name} declares {triangles:,} triangles, {triangles * BYTES_PER_TRIANGLE >> 20} MiB or more once built, "

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import unpack
-from .gltf import PunctualLight, Viewpoint, triple
+from .gltf import MAX_LIGHTS, MAX_VIEWPOINTS, PunctualLight, Viewpoint, triple
 from .meshes import PLAIN, Material, Model, Part, packed
 from .unpack import READER_ENVIRONMENT, UPLOAD_SUFFIXES, Limits, NoRoom, Refused, check_kind
 
@@ -88,12 +88,20 @@ def read_model(work: Path, filename: str, limits: Limits) -> Model:
 
 
 def parts_from_arrays(path: Path, limits: Limits) -> Model:
-    """The child's ``.npz`` (:func:`unpack.write_parts`) as a model, every array checked: dtypes, shapes,
-    face indices within the vertices, finite numbers, colors in [0, 1], and the limits."""
+    """The child's ``.npz`` (:func:`unpack.write_parts`) as a model (:func:`model_of_arrays`)."""
     try:
         with np.load(path, allow_pickle=False) as arrays:
             found = dict(arrays.items())
-            return Model(packed(_parts(found, limits)), *_cameras_and_lights(found))
+    except (OSError, ValueError, KeyError) as exc:
+        raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
+    return model_of_arrays(found, limits)
+
+
+def model_of_arrays(found: dict[str, np.ndarray], limits: Limits) -> Model:
+    """The arrays of :func:`unpack.write_parts` as a model, every array checked: dtypes, shapes, face indices
+    within the vertices, finite numbers, colors in [0, 1], and the limits."""
+    try:
+        return Model(packed(_parts(found, limits)), *_cameras_and_lights(found))
     except (OSError, ValueError, KeyError) as exc:
         raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
 
@@ -181,11 +189,13 @@ def _parts(arrays: dict, limits: Limits) -> list[Part]:
 
 def _cameras_and_lights(arrays: dict) -> tuple[list[Viewpoint], list[PunctualLight]]:
     """The glTF's cameras and lights of the child's arrays, each checked (finite, unit directions, a fov)."""
-    views = _array(arrays, "viewpoints", np.float64, (None, 10))
-    names = _array(arrays, "viewpoint_names", arrays["viewpoint_names"].dtype, (len(views),))
-    lights = _array(arrays, "lights", np.float64, (None, 6))
-    kinds = _array(arrays, "light_kinds", arrays["light_kinds"].dtype, (len(lights),))
-    light_names = _array(arrays, "light_names", arrays["light_names"].dtype, (len(lights),))
+    views = _array(arrays, "viewpoints", np.float64, (None, 10))[:MAX_VIEWPOINTS]  # the reader's bound, again
+    names = _array(arrays, "viewpoint_names", arrays["viewpoint_names"].dtype, (None,))[:MAX_VIEWPOINTS]
+    lights = _array(arrays, "lights", np.float64, (None, 6))[:MAX_LIGHTS]
+    kinds = _array(arrays, "light_kinds", arrays["light_kinds"].dtype, (None,))[:MAX_LIGHTS]
+    light_names = _array(arrays, "light_names", arrays["light_names"].dtype, (None,))[:MAX_LIGHTS]
+    if not (len(names) == len(views) and len(kinds) == len(light_names) == len(lights)):
+        raise ValueError("cameras or lights without their names")
     if names.dtype.kind != "U" or kinds.dtype.kind != "U" or light_names.dtype.kind != "U":
         raise ValueError("names are not text")
     if not (np.isfinite(views).all() and np.isfinite(lights).all()):

@@ -33,20 +33,23 @@ SOON = 0.005  # seconds: the shortest wait for rest, so a wait that is due still
 class View:
     """What the walk-through shows, as far as the policy cares.
 
-    width, height : the canvas in pixels; params : the scene's painting settings with the client's changes;
-    temporal : walk frames continue the last frame; moving : the scene is animated and the client animates
-    it, so it never rests."""
+    width, height : the canvas in pixels (one eye's image); params : the scene's painting settings with the
+    client's changes; temporal : walk frames continue the last frame; moving : the scene is animated and the
+    client animates it, so it never rests; eyes : the images a painting holds (2 for a stereo camera: both are
+    painted, and both count in the work)."""
 
     width: int
     height: int
     params: PaintParams
     temporal: bool
     moving: bool
+    eyes: int = 1
 
 
 @dataclass(frozen=True)
 class Plan:
-    """One frame to paint: ``width`` x ``height`` pixels with ``params``, at scene ``time`` (seconds).
+    """One frame to paint: ``width`` x ``height`` pixels per eye (``eyes`` of them) with ``params``, at scene
+    ``time`` (seconds).
 
     continues : start from the last frame's state (resized to this size), not from the canvas;
     iteration : the recursion's iterations behind this frame once painted; final : the last refinement
@@ -61,6 +64,7 @@ class Plan:
     final: bool
     time: float
     version: int
+    eyes: int = 1
 
 
 @dataclass
@@ -98,7 +102,7 @@ class Planner:
     def frame_painted(self, plan: Plan, seconds: float) -> None:
         """``plan`` was painted in ``seconds`` (and sent): time it, and count it."""
         params = plan.params
-        measured = seconds / (plan.width * plan.height * params.spp * params.iterations)
+        measured = seconds / (plan.width * plan.height * plan.eyes * params.spp * params.iterations)
         previous = self.seconds_per_ray  # a running mean: one slow frame does not halve the next one's size
         self.seconds_per_ray = measured if previous is None else 0.7 * previous + 0.3 * measured
         self.iteration = plan.iteration
@@ -121,7 +125,7 @@ class Planner:
         steps = self.refine_spp(view)
         params = replace(view.params, spp=steps[self.refinements])
         final = self.refinements == len(steps) - 1
-        return self._plan("refine", view.width, view.height, params, False, scene_time, final)
+        return self._plan("refine", view, view.width, view.height, params, False, scene_time, final)
 
     def until_rest(self, now: float, view: View) -> float | None:
         """Seconds until the camera counts as resting and refinement starts; None when nothing is due."""
@@ -134,9 +138,10 @@ class Planner:
         return self.last_move + self.settle_ms / 1000 - now
 
     def refine_spp(self, view: View) -> list[int]:
-        """The samples per pixel of each refinement: the painting's own, then more if the work limit allows."""
+        """The samples per pixel of each refinement: the painting's own, then more if the work limit allows
+        (the pixels of both eyes of a stereo pair count)."""
         params = view.params
-        affordable = self.max_work // (view.width * view.height * params.iterations)
+        affordable = self.max_work // (view.width * view.height * view.eyes * params.iterations)
         more = max(params.spp, min(MAX_REFINE_SPP, max(REFINE_SPP, 2 * params.spp), affordable))
         return [params.spp] if more == params.spp else [params.spp, more]
 
@@ -146,7 +151,7 @@ class Planner:
             return FIRST_SCALE
         iterations = 1 if self._continues(view) else view.params.iterations
         budget = WALK_SHARE * self.frame_ms / 1000
-        affordable = budget / (self.seconds_per_ray * iterations * view.width * view.height)
+        affordable = budget / (self.seconds_per_ray * iterations * view.width * view.height * view.eyes)
         return next((s for s in SCALES if s * s <= affordable), SCALES[-1])
 
     # ---- inside ----
@@ -165,11 +170,13 @@ class Planner:
         continues = self._continues(view)
         params = replace(view.params, iterations=1, spp=1) if continues else replace(view.params, spp=1)
         params = params.at_scale(height / view.height)  # lambda_p counts pixels: a pixel's pitch goes with the height
-        return self._plan("walk", width, height, params, continues, scene_time, False)
+        return self._plan("walk", view, width, height, params, continues, scene_time, False)
 
-    def _plan(self, phase, width, height, params: PaintParams, continues: bool, scene_time: float, final) -> Plan:
+    def _plan(
+        self, phase, view: View, width, height, params: PaintParams, continues: bool, scene_time: float, final
+    ) -> Plan:
         iteration = self.iteration + params.iterations if continues else params.iterations
-        return Plan(phase, width, height, params, continues, iteration, final, scene_time, self.version)
+        return Plan(phase, width, height, params, continues, iteration, final, scene_time, self.version, view.eyes)
 
 
 def frame_quality(plan: Plan, quality: int) -> int:

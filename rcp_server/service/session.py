@@ -32,6 +32,7 @@ from ..scene.walking import walk
 from ..settings.params import PaintParams
 from ..util import images
 from . import protocol
+from .asked import asked, check
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
 from .state import Service
@@ -167,7 +168,8 @@ class Session:
             raise ValueError(f"say hello first: a '{msg.type}' message needs a scene")
         elif isinstance(msg, protocol.CameraMessage):
             camera = camera_of(msg)
-            camera.image_size(self.width, self.height)  # a size this projection takes, or refused here
+            # another projection or stereo layout is another painting: checked as the hello was (both eyes)
+            self.params = check(self.settings, self.scene, camera, self.width, self.height, self.overrides).params
             kind = (camera.projection, camera.stereo)
             if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
                 self.state = None  # another kind of picture: the recursion starts again
@@ -178,14 +180,14 @@ class Session:
             overrides = {**self.overrides, **msg.changes()}
             overrides = {k: v for k, v in overrides.items() if v is not None}
             # refuse now, keep the old settings
-            self.params = self._check(self.scene, self.camera, self.width, self.height, overrides)
+            self.params = check(self.settings, self.scene, self.camera, self.width, self.height, overrides).params
             self.overrides = overrides
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
-            self._check(self.scene, self.camera, width, height, self.overrides)
+            self.params = check(self.settings, self.scene, self.camera, width, height, self.overrides).params
             self.width, self.height, self.quality = width, height, msg.quality or self.quality
         self._changed()
 
@@ -210,11 +212,8 @@ class Session:
     def _hello(self, msg: protocol.Hello) -> None:
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
             raise ValueError(busy_message(self.settings.max_sessions))
-        scene = self.service.scene(msg.scene)
-        if scene is None:
-            raise ValueError(self.service.unknown_scene(msg.scene))
-        self.params = self._check(scene, scene.camera, msg.width, msg.height, {})
-        self.scene = scene
+        painting = asked(self.service, msg.scene, None, msg.width, msg.height, {})
+        self.params, self.scene = painting.params, painting.scene
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
         self.overrides, self.state = {}, None
@@ -231,14 +230,6 @@ class Session:
                 animate=self.animate,
             )
         )
-
-    def _check(self, scene: Scene, camera: Camera | None, width: int, height: int, overrides: dict) -> PaintParams:
-        """The view's painting settings, validated once here; refuses a view whose paintings could not be made:
-        a bad setting, a size the camera's projection does not take (``width x height`` is one eye's image),
-        or more work than one may take."""
-        params = scene.painting(overrides)
-        self.settings.check_painting(*(camera or scene.camera).image_size(width, height), params)
-        return params
 
     def _changed(self) -> None:
         self.planner.view_changed()
@@ -278,7 +269,9 @@ class Session:
         # hello sets the scene and its settings together
         assert self.scene is not None and self.params is not None, "a view is asked for only after hello"
         moving = self.animate and self.scene.animated
-        return View(self.width, self.height, self.params, self.temporal, moving)
+        camera = self.camera or self.scene.camera
+        eyes = 1 if camera.stereo == "mono" else 2
+        return View(self.width, self.height, self.params, self.temporal, moving, eyes)
 
     def _until_rest(self) -> float | None:
         """Seconds until refinement starts, None when nothing is due (the planner's, once there is a scene)."""

@@ -12,6 +12,7 @@ from typing import Annotated
 from pydantic import Field, SecretStr, field_validator
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
+from ..camera.camera import Camera
 from ..painting.loop import default_threads
 from ..scene.untrusted import Limits
 from ..settings.params import PaintParams
@@ -207,13 +208,20 @@ class Settings(BaseSettings):
             room_bytes=room_bytes,
         )
 
-    def check_painting(self, width: int, height: int, params: PaintParams) -> None:
-        """Refuses (``ValueError``, said to the caller) a painting larger than one request may ask for."""
-        if width * height > self.max_pixels:
-            raise ValueError(f"{width}x{height} is more than the {self.max_pixels} pixels an image may have")
-        work = width * height * params.spp * params.iterations
+    def painting_size(self, camera: Camera, width: int, height: int, params: PaintParams) -> tuple[int, int]:
+        """The one decision of every door (REST renders, the walk's ``hello`` and every later camera, view and
+        paint message, video jobs): the size of the painting ``camera`` makes of an eye's image of
+        ``width x height`` (both eyes of a stereo pair), or a one-line refusal: ``CameraError`` for a size its
+        projection does not take, ``ValueError`` for more pixels (both eyes) or more work (all samples, all
+        iterations) than one painting may take."""
+        size = camera.image_size(width, height)
+        pixels = size[0] * size[1]
+        if pixels > self.max_pixels:
+            raise ValueError(f"{size[0]}x{size[1]} is more than the {self.max_pixels} pixels an image may have")
+        work = pixels * params.spp * params.iterations
         if work > self.max_work:
             raise ValueError(
-                f"{width}x{height} pixels x {params.spp} spp x {params.iterations} iterations is {work:,} rays, more "
-                f"than the {self.max_work:,} one painting may take: ask for fewer pixels, samples or iterations"
+                f"{size[0]}x{size[1]} pixels x {params.spp} spp x {params.iterations} iterations is {work:,} rays, "
+                f"more than the {self.max_work:,} one painting may take: ask for fewer pixels, samples or iterations"
             )
+        return size

@@ -6,7 +6,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Protocol
 
@@ -204,14 +204,15 @@ def load_uploads(settings: Settings, store: Store) -> Uploads:
     filming = {r.scene for r in store.videos() if r.state in ("queued", "running")}  # in use: a film goes on
     for record in sorted(store.uploads(), key=lambda r: (r.name in filming, r.used), reverse=True):
         if record.name in filming:
-            record = replace(record, used=now)
+            record = record.model_copy(update={"used": now})
         over = len(uploads.scenes) >= settings.upload_max_scenes or weight + record.weight > settings.upload_total_bytes
         if now - record.used > settings.upload_idle_s or over:
             log.info("upload %s removed: %s", record.name, "over a budget" if over else "idle")
             store.remove_upload(record.name)
             continue
         try:
-            scene = stored_scene(store.upload_dir(record.name), record.name, record.title, settings.upload_limits())
+            folder, limits = store.upload_dir(record.name), settings.upload_limits()
+            scene = stored_scene(folder, record.name, record.title, limits, settings.upload_total_bytes)
         except Exception as exc:
             log.error("upload %s removed: it no longer loads (%s)", record.name, exc)
             store.remove_upload(record.name)

@@ -12,7 +12,6 @@ import asyncio
 import hashlib
 import os
 import re
-import secrets
 import shutil
 import tempfile
 import time
@@ -26,11 +25,10 @@ import numpy as np
 from ..scene.meshes import Model
 from ..scene.scene import Scene
 from ..scene.scenefile import SceneError, model_scene
-from ..scene.untrusted import Limits, NoRoom, Refused, parts_from_arrays, read_model
+from ..scene.untrusted import Limits, NoRoom, Refused, model_of_arrays, read_model
 from . import protocol
-from .store import Store, UploadRecord
+from .store import Store, UnsafeFile, UploadRecord, load_npz, new_upload_name, real_dir, regular_size
 
-NAME_PREFIX = "u-"  # then 22 characters of a 128-bit random token: a valid scene name, never a guessable one
 RECORD_USE_S = 60.0  # an upload's last use is written to the store at most this often (idle expiry is in minutes)
 BVH_BYTES_PER_TRIANGLE = 160  # Embree: its copy of the triangles and its tree (163 B measured on the staircase)
 MEMORY_RETRY_S = 60  # a caller turned away for the uploads' memory: scenes expire, or are deleted, in minutes
@@ -139,9 +137,12 @@ class Uploads:
         now = time.time()
         if self.store is not None:
             folder = self.store.upload_dir(scene.name)
-            size = sum(f.stat().st_size for f in folder.iterdir()) if folder.is_dir() else 0
+            size = sum(regular_size(f) or 0 for f in folder.iterdir()) if folder.is_dir() else 0
             owned = None if owner is None else hashlib.sha256(owner.encode()).hexdigest()
-            self.store.add_upload(UploadRecord(scene.name, scene.title, owned, size, weight, now, now))
+            record = UploadRecord(
+                name=scene.name, title=scene.title, owner=owned, file_bytes=size, weight=weight, created=now, used=now
+            )
+            self.store.add_upload(record)
         self.scenes[scene.name] = Upload(scene, info, weight, now, now)
 
     def keep(self, scene: Scene, info: protocol.SceneInfo, record: UploadRecord) -> None:
@@ -150,7 +151,8 @@ class Uploads:
 
 
 def new_name() -> str:
-    return NAME_PREFIX + secrets.token_urlsafe(16)
+    """A new upload's name: a valid scene name, never a guessable one (``store.UPLOAD_NAME``)."""
+    return new_upload_name()
 
 
 def title_of(filename: str) -> str:
@@ -209,10 +211,18 @@ def read_scene(body: BinaryIO, filename: str, limits: Limits, keep: Path | None 
     return scene, weight_of(scene)
 
 
-def stored_scene(folder: Path, name: str, title: str, limits: Limits) -> Scene:
+def stored_scene(folder: Path, name: str, title: str, limits: Limits, max_bytes: int) -> Scene:
     """The scene of the parsed arrays in ``folder/parts.npz``, its tree built: the one path of a first upload
-    and of a reload after a restart, so that both paint the same. Raises :class:`Refused`."""
-    return scene_of(parts_from_arrays(folder / "parts.npz", limits), name, title)
+    and of a reload after a restart, so that both paint the same. The folder is the data folder's: read only
+    if it and the file are what they should be (no link, no FIFO) and the arrays at most ``max_bytes``.
+    Raises :class:`Refused`."""
+    try:
+        arrays = load_npz(real_dir(folder, make=False) / "parts.npz", max_bytes)
+    except UnsafeFile as exc:
+        raise Refused(str(exc)) from None
+    except (OSError, ValueError) as exc:
+        raise Refused(f"its arrays cannot be read ({type(exc).__name__})") from None
+    return scene_of(model_of_arrays(arrays, limits), name, title)
 
 
 def scene_of(model: Model, name: str, title: str) -> Scene:

@@ -22,10 +22,10 @@ last run count at the door as this run's do: its kept videos by their size, its 
 
 from __future__ import annotations
 
+import errno
 import itertools
 import logging
 import math
-import secrets
 import shutil
 import threading
 import time
@@ -34,14 +34,14 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Literal
+from typing import BinaryIO, Literal
 
 import numpy as np
 from PIL import Image
 
 from ..camera.camera import Camera
 from ..cluster.painter import ClusterError, PaintingFailed
-from ..media.camerapath import CameraPath, PathSpec
+from ..media.camerapath import CameraPath
 from ..media.video import Mp4Writer
 from ..painting.loop import Abandoned, PaintState
 from ..painting.sequence import frame_params, paint_results
@@ -50,7 +50,19 @@ from ..settings.params import PaintParams
 from ..util import images
 from .faults import fault_message, report_fault
 from .settings import Settings
-from .store import Store, VideoRecord, load_state, save_state, write_whole
+from .store import (
+    Store,
+    UnsafeFile,
+    VideoRecord,
+    VideoSettings,
+    load_state,
+    new_video_id,
+    open_regular,
+    real_dir,
+    regular_size,
+    save_state,
+    write_whole,
+)
 from .workshop import Busy, Workshop
 
 log = logging.getLogger("rcp.service")
@@ -140,22 +152,34 @@ def path_spec(path: CameraPath) -> dict:
     return {"fps": path.fps, "keyframes": keyframes, "loop": path.loop}
 
 
-def job_of(record: VideoRecord, scene: Scene | None, store: Store) -> VideoJob:
-    """The job a stored record describes."""
+def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Settings) -> VideoJob:
+    """The job a stored record describes, checked as a new one is at the door (the same limits: a record is
+    untrusted input); ``ValueError`` in one line for one that cannot be painted as it says."""
     given = record.settings
-    temporal = given["temporal"]
+    temporal = given.temporal
+    path = given.path.resolve(ANY_CAMERA)  # every keyframe gives its up and fov
+    try:
+        params = PaintParams(**given.params)
+    except TypeError as exc:
+        raise ValueError(f"its painting settings: {exc}") from None
+    camera = path.cameras[0]
+    eye = camera.eye_size(given.width, given.height)
+    if settings.painting_size(camera, *eye, params) != (given.width, given.height):
+        raise ValueError(f"{given.width}x{given.height} is no {camera.stereo} painting")
+    if job_work(given.width, given.height, params, temporal, path.frame_count) > settings.max_video_work:
+        raise ValueError(f"its work is more than the {settings.max_video_work:,} rays one video may take")
     return VideoJob(
         record.id,
         record.scene,
         scene,
-        PathSpec.model_validate(given["path"]).resolve(ANY_CAMERA),  # every keyframe gives its up and fov
-        given["width"],
-        given["height"],
-        PaintParams(**given["params"]),
+        path,
+        given.width,
+        given.height,
+        params,
         temporal,
         store.video_file(record.id),
         store.frames_dir(record.id),
-        record.state,  # type: ignore[arg-type]
+        record.state,
         record.done_frames,
         record.message,
         record.created,
@@ -183,14 +207,14 @@ class Videos:
         for record in self.store.videos():
             scene = scene_of(record.scene) if record.state not in FINISHED else None
             try:
-                job = job_of(record, scene, self.store)
-            except Exception:  # a record this version cannot read: dropped with its files, said in the log
-                log.exception("video %s dropped: its record cannot be read", record.id)
+                job = job_of(record, scene, self.store, self.settings)
+            except ValueError as exc:  # a record that cannot be painted as it says: dropped with its files
+                log.warning("data folder %s: video %s dropped: %s", self.store.folder, record.id, exc)
                 self.store.remove_video(record.id)
                 continue
             self._jobs[job.id] = job
             if job.state in FINISHED:
-                if job.state == "done" and not job.file.is_file():
+                if job.state == "done" and regular_size(job.file) is None:
                     self._finish(job, "failed", "its file was lost while the server was down")
                 continue
             if scene is None:
@@ -206,10 +230,11 @@ class Videos:
     def submit(
         self, scene: Scene, path: CameraPath, width: int, height: int, params: PaintParams, temporal: int | None
     ) -> VideoJob:
-        """Queue a job, or refuse it: :class:`VideoRefused` (over a limit, the disk budget used up) or
-        :class:`~.workshop.Busy` (every place in the queue taken)."""
+        """Queue a job of ``width x height`` eye images (a stereo film's frames hold two), or refuse it:
+        ``ValueError`` (a frame over the limits of one painting), :class:`VideoRefused` (the film over a limit,
+        the disk budget used up) or :class:`~.workshop.Busy` (every place in the queue taken)."""
         settings = self.settings
-        settings.check_painting(width, height, params)
+        width, height = settings.painting_size(path.cameras[0], width, height, params)
         work = job_work(width, height, params, temporal, path.frame_count)
         if work > settings.max_video_work:
             raise VideoRefused(
@@ -218,7 +243,7 @@ class Videos:
                 "frames, pixels, samples or iterations"
             )
         self.sweep()
-        job_id = secrets.token_hex(8)
+        job_id = new_video_id()
         store = self.store
         job = VideoJob(
             job_id, scene.name, scene, path, width, height, params, temporal, store.video_file(job_id),
@@ -239,7 +264,18 @@ class Videos:
                 raise Busy(RETRY_AFTER_S)
             self._jobs[job_id] = job
         store.add_video(
-            VideoRecord(job.id, job.scene_name, job.settings(), job.frames, job.state, 0, "", job.created, None, 0)
+            VideoRecord(
+                id=job.id,
+                scene=job.scene_name,
+                settings=VideoSettings.model_validate(job.settings()),
+                frames=job.frames,
+                state=job.state,
+                done_frames=0,
+                message="",
+                created=job.created,
+                finished=None,
+                bytes=0,
+            )
         )
         self._runners.submit(self._run, job)
         return job
@@ -283,7 +319,7 @@ class Videos:
             job.state = "running"
         self.store.update_video(job.id, state="running")
         try:
-            job.frames_dir.mkdir(parents=True, exist_ok=True)
+            real_dir(job.frames_dir)  # a link in its place is refused: nothing is written through it
             for attempt in itertools.count(1):
                 try:
                     self._paint_frames(job)
@@ -298,18 +334,25 @@ class Videos:
                         raise Abandoned from None
                     job.message = ""
             self._assemble(job)
-            size = job.file.stat().st_size
+            size = regular_size(job.file) or 0
             if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
                 job.file.unlink(missing_ok=True)
-                raise OSError(f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed")
+                raise OSError(
+                    errno.ENOSPC, f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed"
+                )
             self._finish(job, "done", f"{job.frames} frames, {size:,} bytes")
         except Exception as exc:
             if self._closing or self.workshop.stopping:  # recorded as it was: the next start goes on from here
                 return
             if isinstance(exc, Abandoned) or job.cancelled.is_set():
                 self._finish(job, "cancelled", "cancelled")
-            elif isinstance(exc, OSError):  # the disk: full, or over the budget
-                self._finish(job, "failed", f"cannot write the video: {exc.strerror or exc}")
+            elif isinstance(exc, UnsafeFile):  # its files in the data folder were tampered with
+                self._finish(job, "failed", str(exc))
+            elif isinstance(exc, OSError):  # the disk: full, or over the budget; said without the server's paths
+                log.warning("video %s: cannot write the video: %s", job.id, exc)
+                self._finish(job, "failed", f"cannot write the video: {exc.strerror or 'see the server log'}")
+            elif isinstance(exc, DamagedFrame):
+                self._finish(job, "failed", str(exc))
             elif isinstance(exc, ClusterError):  # Ray: no answer at its address, a worker lost
                 self._finish(job, "failed", str(exc))
             else:
@@ -332,11 +375,11 @@ class Videos:
         """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
         here the state it continues from. A frame written without its state is painted again."""
         written = 0
-        while frame_file(job, written).is_file():
+        while written < job.frames and regular_size(frame_file(job, written)) is not None:
             written += 1
         if not job.temporal or self.painter is not None or written == 0:
             return written, None  # Ray's temporal bands keep their state on the actors: they paint up to here again
-        saved = load_state(job.frames_dir / "state.npz")
+        saved = load_state(job.frames_dir / "state.npz", state_bytes(job.width, job.height))
         if saved is not None and saved[0] in (written - 1, written - 2):
             index, state = saved
             if index == written - 2:  # stopped between the frame and its state: that frame is painted again
@@ -399,8 +442,7 @@ class Videos:
             for k in range(job.frames):
                 if job.cancelled.is_set():
                     raise Abandoned
-                with Image.open(frame_file(job, k)) as frame:
-                    writer.write(np.asarray(frame.convert("RGB")))
+                writer.write(kept_frame(job, k))
             writer.close()
         except BaseException:
             writer.abort()
@@ -443,8 +485,32 @@ class Videos:
         self._runners.shutdown(wait=True, cancel_futures=True)
 
 
-def _save_png(image: np.ndarray, path: Path) -> None:
-    Image.fromarray(image).save(path, "PNG", compress_level=1)  # lossless, and fast: a frame waits for it
+class DamagedFrame(ValueError):
+    """A frame kept in the data folder that is not the image it should be; the message gives its number only."""
+
+
+def _save_png(image: np.ndarray, sink: BinaryIO) -> None:
+    Image.fromarray(image).save(sink, "PNG", compress_level=1)  # lossless, and fast: a frame waits for it
+
+
+def state_bytes(width: int, height: int) -> int:
+    """The most a temporal job's kept state may take: every channel of every pixel, with room to spare."""
+    return 1024 * width * height + (1 << 20)
+
+
+def kept_frame(job: VideoJob, index: int) -> np.ndarray:
+    """Frame ``index`` as kept on disk, (height, width, 3) uint8; :class:`DamagedFrame` (or ``UnsafeFile``) for
+    one that is not a PNG of the job's size."""
+    try:
+        with open_regular(frame_file(job, index), 4 * job.width * job.height + (1 << 20)) as source:
+            with Image.open(source) as frame:
+                if frame.size != (job.width, job.height):
+                    raise ValueError
+                return np.asarray(frame.convert("RGB"))
+    except UnsafeFile:
+        raise
+    except (OSError, ValueError, Image.DecompressionBombError):
+        raise DamagedFrame(f"frame {index} kept in the data folder is damaged; ask for the video again") from None
 
 
 def frame_file(job: VideoJob, index: int) -> Path:
@@ -452,7 +518,4 @@ def frame_file(job: VideoJob, index: int) -> Path:
 
 
 def _size(file: Path) -> int:
-    try:
-        return file.stat().st_size
-    except OSError:  # deleted meanwhile
-        return 0
+    return regular_size(file) or 0  # 0: deleted meanwhile (or not a file of its own)

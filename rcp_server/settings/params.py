@@ -175,11 +175,12 @@ class PaintParams:
 
 
 def _by_value(mapping) -> bytes:
-    """A registered mapping pickled with its function's code (cloudpickle, which Ray brings), not a reference
-    to the module that defined it: a Ray worker need not be able to import a script's or a test's module."""
+    """A registered mapping pickled with its function's code (``ray.cloudpickle``, the cloudpickle that Ray ships
+    inside itself: the ``cluster`` extra declares Ray, not cloudpickle), not a reference to the module that
+    defined it: a Ray worker need not be able to import a script's or a test's module."""
     try:
-        import cloudpickle
-    except ImportError:  # no Ray either: a process of ours, by reference
+        from ray import cloudpickle
+    except ImportError:  # no Ray: nothing sends this to a Ray worker, and a process of ours imports it by reference
         return pickle.dumps(mapping)
     module = sys.modules.get(mapping.field.__module__)
     if module is None or module.__name__ == "__main__":  # cloudpickle sends those by value anyway

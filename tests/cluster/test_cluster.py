@@ -256,18 +256,35 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
     assert ray_png == here_png
 
 
+def test_a_film_on_ray_stops_at_the_next_frame_once_it_is_no_longer_wanted(painter, busy_scene):
+    """Frames quicker than a wait's poll: the film stops at the next frame all the same, not at its end."""
+    frames = []
+    film = painter.images(
+        busy_scene, shots(busy_scene, long_path(3.0)), W, H, PaintParams(iterations=1), None, lambda: len(frames) >= 2
+    )
+    with pytest.raises(Abandoned):
+        for image in film:
+            frames.append(image)
+    assert len(frames) == 2
+
+
 def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_path, caplog):
     """A server painting on Ray stops mid-film; started again on the same data folder, it goes on from the last
-    frame written (a temporal job paints up to there again on the actors), and the film is the threads' one."""
+    frame written (a temporal job paints up to there again on the actors), and the film is the threads' one.
+
+    The film is long (91 frames of 32x24) so that it is stopped mid-way: Ray paints on between the moment two
+    frames are seen written and the moment the stopping server cancels the job (a 31-frame film was seen
+    painted whole meanwhile, when a cancelled job stopped only at a frame that made it wait)."""
     import av
     import httpx
 
     from rcp_server.bench.harness import BackgroundServer
+    from rcp_server.service.store import Store
 
     caplog.set_level("INFO", "rcp.service")
     (tmp_path / "tiny.toml").write_text(TINY)
     data = tmp_path / "data"
-    path = long_path(1.0)
+    path = long_path(3.0)
     painter.close()  # the server's actors need the runtime's CPUs
     films = {}
     for temporal in (None, 1):
@@ -275,11 +292,14 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
         with BackgroundServer(scenes=tmp_path, data=data, ray_address="local") as live:
             with httpx.Client(base_url=live.url, timeout=60) as client:
                 job = client.post("/api/videos", json=body).json()
-                deadline = time.monotonic() + 60
+                deadline = time.monotonic() + 180  # a fresh clone's actors load the kernels first
                 while (status := client.get(f"/api/videos/{job['id']}").json())["done_frames"] < 2:
-                    assert time.monotonic() < deadline
+                    assert time.monotonic() < deadline and status["state"] in ("queued", "running"), status
                     time.sleep(0.02)
-        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 31
+        assert status["state"] == "running" and status["done_frames"] < job["frames"] == 91
+        with Store(data) as store:  # as the stopped server left it: mid-way, to be resumed
+            (left,) = [r for r in store.videos() if r.id == job["id"]]
+        assert left.state == "running" and left.done_frames < left.frames, left
         for where in ({"ray_address": "local"}, {}):  # resumed on Ray; then the same film on threads
             with BackgroundServer(scenes=tmp_path, data=data, **where) as live:
                 with httpx.Client(base_url=live.url, timeout=60) as client:
@@ -381,6 +401,30 @@ def test_a_server_whose_ray_failed_paints_here_meanwhile_and_says_so_at_once(pai
 def _swirl(data):
     """A mapping registered in this process only: the color field turned about the view axis."""
     return np.cross(data.forward, data.color_field()).astype(np.float32)
+
+
+def _broken_field(data):
+    """A mapping that fails wherever it runs: its exception is what the user must read."""
+    raise ArithmeticError(f"no field for {len(data.forward)} samples here")
+
+
+def test_a_painting_that_fails_on_ray_says_the_workers_exception_in_one_line(painter, busy_scene):
+    """The worker's exception type and message reach the one line the caller sees, not Ray's
+    ``ray::Painter.band()``."""
+    from rcp_server.cluster.painter import PaintingFailed
+    from rcp_server.settings.mappings import register_mapping, unregister_mapping
+
+    register_mapping("test-broken", {"color"}, _broken_field)
+    try:
+        params = PaintParams(iterations=2, mapping="test-broken", lambda_p=4.0)
+        with pytest.raises(PaintingFailed) as failed:
+            painter.render(busy_scene, busy_scene.camera, W, H, params)
+        message = str(failed.value)
+        assert "\n" not in message
+        assert message.startswith("a painting failed on Ray: ArithmeticError: no field for "), message
+        assert message.endswith(" samples here"), message
+    finally:
+        unregister_mapping("test-broken")
 
 
 def test_a_registered_mapping_paints_on_ray_as_on_threads(painter, busy_scene):

@@ -266,3 +266,49 @@ def test_a_malformed_gltf_json_yields_what_it_can_and_never_raises():
     found = gltf.extras(document)
     assert found.viewpoints == [] and [light.kind for light in found.lights] == ["spot"]
     assert len(found.materials) == 2 and found.materials[0].alpha_cutoff == 0.5
+
+
+def test_cameras_that_cannot_frame_the_scene_are_skipped_and_the_scene_falls_back_on_its_framed_view(tmp_path, caplog):
+    """A camera far away, under a parent scaled huge, or whose up lies along its view is left out in one line
+    each; with none left the scene's camera is the framed one (as for a file with no camera)."""
+    caplog.set_level("INFO", "rcp")
+    b = GltfBuilder()
+    b.quad(FRONT, material=b.material())
+    b.camera("Far", (5e9, 0, 5))
+    b.camera("Inside", (1, 0, 5))
+    b.gltf["nodes"].append({"scale": [1e12, 1e12, 1e12], "children": [len(b.gltf["nodes"]) - 1]})
+    b.gltf["scenes"][0]["nodes"] = [0, 1, len(b.gltf["nodes"]) - 1]  # the camera "Inside" under the huge parent
+    b.camera("Edge", (0, 0, 5))
+    b.gltf["nodes"][-1] = {"camera": 2, "matrix": [1, 0, 0, 0, 0, 0, 1, 0, 0, 0, -1, 0, 0, 0, 5, 1]}  # up = -view
+    scene = mesh_scene(_write(tmp_path, b))
+    plain = mesh_scene(_write(tmp_path, _with_quad_only(), "plain.glb"))
+    assert scene.camera == plain.camera and scene.viewpoints == {}
+    notes = [m for m in caplog.messages if " skipped: " in m]
+    assert [n.split(" skipped: ")[0] for n in notes] == [
+        "model.glb: camera 'Far'",
+        "model.glb: camera 'Inside'",
+        "model.glb: camera 'Edge'",
+    ]
+    assert "within +-" in notes[0] and "within +-" in notes[1] and "up is parallel to the view direction" in notes[2]
+
+
+def _with_quad_only() -> GltfBuilder:
+    b = GltfBuilder()
+    b.quad(FRONT, material=b.material())
+    return b
+
+
+def test_a_files_cameras_and_lights_are_bounded(tmp_path):
+    """A thousand camera nodes (and as many lights) in a file: the first 256 of each are kept."""
+    b = GltfBuilder()
+    b.quad(FRONT, material=b.material())
+    b.camera("c", (0, 0, 5))
+    b.light("l", "point", (0, 0, 3))
+    camera, light = b.gltf["nodes"][-2], b.gltf["nodes"][-1]
+    b.gltf["nodes"] += [dict(camera, translation=[0, 0, 5 + k * 1e-3]) for k in range(1000)]
+    b.gltf["nodes"] += [dict(light) for _ in range(1000)]
+    b.gltf["scenes"][0]["nodes"] = list(range(len(b.gltf["nodes"])))
+    found = gltf.extras(b.gltf)
+    assert len(found.viewpoints) == gltf.MAX_VIEWPOINTS == 256 and len(found.lights) == gltf.MAX_LIGHTS == 256
+    scene = mesh_scene(_write(tmp_path, b))
+    assert len(scene.viewpoints) == 255  # the first is the scene's camera

@@ -208,3 +208,23 @@ def test_an_animated_scene_never_rests_and_its_frames_run_on_the_walk_throughs_c
         planner.frame_painted(plan, 0.01)
     still = planner.next_frame(START + 14.0, view())
     assert (still.phase, still.time) == ("refine", 0.0)  # a still scene rests, at time 0
+
+
+def test_a_stereo_pair_counts_both_eyes_in_the_samples_and_the_timing():
+    """Refinement samples are sized from the pixels of both eyes (the work limit holds for the pair), and walk
+    frames from the measured time of both eyes' rays: at the same speed per ray a pair's frames are smaller."""
+    mono, pair = view(temporal=False), view(temporal=False, eyes=2)
+    limit = WIDTH * HEIGHT * PARAMS.iterations * 6  # one eye affords 6 samples, a pair 3
+    planner = hello(max_work=limit)
+    assert planner.refine_spp(mono) == [1, REFINE_SPP] and planner.refine_spp(pair) == [1, 3]
+    for v in (mono, pair):
+        assert max(planner.refine_spp(v)) * WIDTH * HEIGHT * v.eyes * PARAMS.iterations <= limit
+    scales = []
+    for v in (mono, pair):
+        planner = hello()
+        plan = planner.next_frame(START, v)
+        assert plan.eyes == v.eyes
+        per_ray = BUDGET_S / (0.6 * WIDTH * HEIGHT * PARAMS.iterations)  # one eye affords 0.6 of the canvas
+        planner.frame_painted(plan, per_ray * plan.width * plan.height * plan.eyes * plan.params.iterations)
+        scales.append(planner.walk_scale(v))
+    assert scales == [0.75, 0.5]  # 0.75^2 <= 0.6 for one eye; a pair paints twice the pixels: 0.5^2 <= 0.3

@@ -54,7 +54,7 @@ def test_the_state_a_temporal_video_continues_from_comes_back_exactly(tmp_path, 
     params = PaintParams(iterations=2, mapping="normal", eye_mapping="test-probe", lambda_e=0.01)
     state = paint(busy_scene, CAMERA, 24, 18, params, threads=1).state
     save_state(tmp_path / "state.npz", 7, state)
-    index, loaded = load_state(tmp_path / "state.npz")
+    index, loaded = load_state(tmp_path / "state.npz", 1 << 24)
     assert index == 7 and loaded.region == state.region and loaded.blank == state.blank
     for field in fields(state):
         if isinstance(getattr(state, field.name), np.ndarray):
@@ -64,7 +64,7 @@ def test_the_state_a_temporal_video_continues_from_comes_back_exactly(tmp_path, 
     step = replace(params, iterations=1)
     again = paint(busy_scene, CAMERA, 24, 18, step, previous=loaded, threads=1).image
     np.testing.assert_array_equal(again, paint(busy_scene, CAMERA, 24, 18, step, previous=state, threads=1).image)
-    assert load_state(tmp_path / "nothing.npz") is None
+    assert load_state(tmp_path / "nothing.npz", 1 << 24) is None
 
 
 def test_a_resolved_path_written_out_resolves_to_itself():

@@ -4,7 +4,10 @@ while another visitor's walk-through goes on."""
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -18,7 +21,7 @@ from rcp_server.scene.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
 from rcp_server.scene.untrusted import Limits, NoRoom, read_model
 
 from . import upload_files as files
-from .conftest import decode
+from .conftest import Walk, decode
 
 LIMITS = dict(upload_max_bytes=1 << 20, upload_max_texture_pixels=1 << 20, upload_max_scenes=4)
 
@@ -158,6 +161,8 @@ HOSTILE = [
     # a small file placing one mesh many times: refused from what it declares, before anything is built
     ("many.glb", lambda: files.glb_placed_many_times(5000), "many.glb places meshes 5,000 times; at most 4,096"),
     ("more.glb", lambda: files.glb_placed_many_times(2000, 10), "declares 2,400,000 triangles (as placed)"),
+    # a small file with a camera on each of 20,000 nodes: refused from what it declares
+    ("cameras.glb", lambda: files.glb_with_cameras(20_000), "cameras.glb's scene has 20,001 nodes; at most 16,384"),
 ]
 
 
@@ -167,6 +172,97 @@ def test_a_hostile_file_gets_422_with_one_line_saying_what_is_wrong(server, file
     detail = response.json()["detail"]
     assert response.status_code == 422 and says in detail and "\n" not in detail, detail
     assert "/tmp" not in detail and "rcp-upload" not in detail, detail  # no folder of the server's
+
+
+UNFRAMING = [  # cameras that cannot frame the box: each left out, and the scene is the box as framed without them
+    ("far.glb", lambda: files.glb_with_cameras(1, translation=[5e9, 0, 3])),
+    ("huge.glb", lambda: files.glb_with_a_camera_under({"scale": [1e12, 1e12, 1e12]}, translation=[0, 0, 3])),
+    ("edge.glb", lambda: files.glb_with_cameras(1, matrix=[1, 0, 0, 0, 0, 0, 1, 0, 0, 0, -1, 0, 0, 0, 3, 1])),
+]
+
+
+@pytest.mark.parametrize(("filename", "make"), UNFRAMING, ids=[u[0] for u in UNFRAMING])
+def test_a_gltf_whose_cameras_cannot_frame_it_uploads_with_its_framed_view(server, filename, make):
+    framed = uploaded(server, "box.glb", files.glb())
+    info = uploaded(server, filename, make())
+    assert info["camera"] == framed["camera"] and info["viewpoints"] == []
+    for name in (framed["name"], info["name"]):
+        delete(server, name)
+
+
+def test_a_camera_under_a_nan_matrix_is_where_its_own_node_puts_it(server):
+    """A parent's matrix that is not numbers places nothing (it is read as the identity): the camera stands
+    where its own node says, and frames the box from there."""
+    nan = files.glb_with_a_camera_under({"matrix": [float("nan")] * 16}, translation=[0, 0, 3])
+    info = uploaded(server, "nan.glb", nan)
+    assert info["camera"]["eye"] == [0, 0, 3] and info["camera"]["look_at"] == [0, 0, 0.5]  # the box's face
+    delete(server, info["name"])
+
+
+def test_a_gltfs_cameras_are_capped_and_its_description_stays_small(server):
+    info = uploaded(server, "many.glb", files.glb_with_cameras(1000, translation=[0, 0, 3]))
+    assert len(info["viewpoints"]) == 255  # and the first is the scene's camera: 256 in all
+    walk = Walk(server)
+    try:
+        walk.send(type="hello", scene=info["name"], width=64, height=48)
+        ready = walk.ws.recv(30)
+        assert json.loads(ready)["type"] == "ready" and len(ready) < 64 * 1024
+    finally:
+        walk.close()
+        delete(server, info["name"])
+
+
+UPLOADER = """
+import sys, httpx
+url, path, count = sys.argv[1], sys.argv[2], int(sys.argv[3])
+data = open(path, "rb").read()
+for _ in range(count):
+    answer = httpx.post(url, files={"file": ("cameras.glb", data)}, timeout=60)
+    print(answer.status_code, answer.json()["detail"], flush=True)
+"""
+
+
+def test_a_walker_keeps_its_frame_rate_while_a_glb_with_60000_cameras_is_refused(walk_to, tmp_path):
+    """The nodes are counted before anything is built: the file is refused in one line, in the sandbox, while
+    another walk-through keeps at least 80% of its frames per second. The uploads come from a process of their
+    own, as a visitor's would (a client in this process would take the server's interpreter lock); bounded
+    to twenty uploads and a few seconds."""
+    (tmp_path / "cameras.glb").write_bytes(files.glb_with_cameras(60_000))
+    with BackgroundServer(settle_ms=50, upload_max_bytes=4 << 20, threads=1) as live:
+        walk = walk_to(live)
+        walk.send(type="hello", scene="default", width=160, height=90)
+        assert walk.next()["type"] == "ready"
+        walk.frame()
+        moved = 0
+
+        def fps(seconds: float) -> float:
+            nonlocal moved
+            clock, frames = time.monotonic(), 0
+            while time.monotonic() - clock < seconds:
+                moved += 1
+                walk.send(type="camera", eye=[0.01 * (moved % 100), 2, 12], look_at=[0, 2, 0], id=moved)
+                walk.frame()
+                frames += 1
+            return frames / (time.monotonic() - clock)
+
+        fps(3.0)  # the planner settles on its walk-frame size
+        alone, during, answers = [], [], []
+        for _ in range(3):  # windows alone and while uploading, in turn: the machine's own load drifts meanwhile
+            alone.append(fps(2.0))
+            uploader = subprocess.Popen(
+                [sys.executable, "-c", UPLOADER, f"{live.url}/api/scenes", str(tmp_path / "cameras.glb"), "20"],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            assert uploader.stdout is not None
+            answers.append(uploader.stdout.readline())  # it is uploading: the first file has been answered
+            during.append(fps(2.0))
+            assert uploader.poll() is None  # still at it: it uploaded through the whole window
+            uploader.kill()
+            answers += uploader.communicate(timeout=60)[0].splitlines(keepends=True)
+    said = "422 cameras.glb's scene has 60,001 nodes; at most 16,384 are taken\n"
+    assert set(answers) == {said}, answers
+    assert sum(during) >= 0.8 * sum(alone), (during, alone)
 
 
 def test_another_walk_through_keeps_getting_frames_while_hostile_files_are_read(server, walk_to):

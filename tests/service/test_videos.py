@@ -20,7 +20,7 @@ from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene
 from rcp_server.service.settings import Settings
-from rcp_server.service.store import Store, VideoRecord
+from rcp_server.service.store import Store, VideoRecord, VideoSettings
 from rcp_server.service.videos import VideoRefused, Videos, path_spec, video_bytes
 from rcp_server.service.workshop import Workshop
 from rcp_server.settings.params import PaintParams
@@ -228,7 +228,20 @@ def test_a_job_resumed_from_the_last_run_reserves_its_estimate_at_submission(tmp
     workshop = Workshop(1, 1)
     scene = make_scene()
     with Store(tmp_path) as store:
-        store.add_video(VideoRecord("0123456789abcdef", "tiny", given, path.frame_count, "queued", 0, "", 0.0, None, 0))
+        store.add_video(
+            VideoRecord(
+                id="0123456789abcdef",
+                scene="tiny",
+                settings=VideoSettings.model_validate(given),
+                frames=path.frame_count,
+                state="queued",
+                done_frames=0,
+                message="",
+                created=0.0,
+                finished=None,
+                bytes=0,
+            )
+        )
         videos = Videos(settings, workshop, store, StillPainting())
         try:
             videos.resume(lambda name: scene if name == "tiny" else None)

@@ -179,3 +179,27 @@ def glb_placed_many_times(count: int, size: int = 1) -> bytes:
 def far_obj() -> bytes:
     """One triangle a trillion units wide."""
     return b"v -5e11 0 0\nv 5e11 0 0\nv 0 1 0\nf 1 2 3\n"
+
+
+def glb_with_cameras(count: int, **node) -> bytes:
+    """The box with ``count`` camera nodes (each ``{"camera": 0, **node}``), a few bytes each: the cameras are
+    many where the file is small."""
+
+    def edit(gltf):
+        gltf["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}]
+        first = len(gltf["nodes"])
+        gltf["nodes"] += [{"camera": 0, **node} for _ in range(count)]
+        gltf["scenes"][0]["nodes"] += list(range(first, first + count))
+
+    return glb_edited(edit)
+
+
+def glb_with_a_camera_under(parent: dict, **node) -> bytes:
+    """The box and one camera node under a ``parent`` node (its ``scale``, ``matrix``...)."""
+
+    def edit(gltf):
+        gltf["cameras"] = [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.01}}]
+        gltf["nodes"] += [{"camera": 0, **node}, {**parent, "children": [len(gltf["nodes"])]}]
+        gltf["scenes"][0]["nodes"].append(len(gltf["nodes"]) - 1)
+
+    return glb_edited(edit)

@@ -9,13 +9,12 @@ import time
 
 from fastapi import APIRouter, HTTPException, Request, Response
 
-from ...camera.camera import CameraError
-from ...camera.wire import camera_of
 from ...cluster.painter import ClusterError
 from ...painting.loop import Abandoned
 from ...util import images
 from .. import protocol
 from ..access import admits
+from ..asked import RenderAsked
 from ..state import ServiceDep
 from ..workshop import Busy
 from . import SCENE_BODY
@@ -61,18 +60,9 @@ async def health(request: Request, service: ServiceDep) -> dict:
         503: BUSY,
     },
 )
-async def render(body: protocol.RenderRequest, request: Request, service: ServiceDep) -> Response:
+async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Request, service: ServiceDep) -> Response:
     settings = service.settings
-    scene = service.scene(body.scene)
-    if scene is None:
-        raise HTTPException(404, service.unknown_scene(body.scene))
-    try:
-        camera = scene.camera if body.camera is None else camera_of(body.camera)
-        params = scene.painting(body.paint.given())
-        size = camera.image_size(body.width, body.height)  # width x height is one eye's image
-        settings.check_painting(*size, params)
-    except (CameraError, ValueError) as exc:
-        raise HTTPException(422, str(exc)) from None
+    scene, camera, params, size = asked.scene, asked.camera, asked.params, (asked.width, asked.height)
     fmt, media_type = MEDIA_TYPES[body.format]
     workshop = service.workshop
     deadline = time.monotonic() + settings.render_timeout_s  # waiting for a turn counts too

@@ -62,7 +62,8 @@ async def upload(file: UploadFile, request: Request, response: Response, service
                 )
         finally:
             uploads.queued -= 1
-        info = scene_info(scene).model_copy(update={"uploaded": True})
+        # its description is built off the event loop too: a model's cameras make it (bounded, gltf.MAX_VIEWPOINTS)
+        info = (await run_in_threadpool(scene_info, scene)).model_copy(update={"uploaded": True})
         owner = presented(request.headers, request.query_params) if settings.token is not None else None
         try:
             uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes, owner)

@@ -2,15 +2,18 @@
 
 from __future__ import annotations
 
+import os
+
 from fastapi import APIRouter, HTTPException, Response
 from fastapi.responses import FileResponse
 from starlette.concurrency import run_in_threadpool
 
-from ...camera.camera import CameraError
 from ...camera.wire import spec_of
 from ...media.camerapath import PathError
 from .. import protocol
+from ..asked import SceneDep, VideoAskedDep
 from ..state import ServiceDep
+from ..store import open_regular
 from ..videos import VideoJob, VideoRefused
 from ..workshop import Busy
 from . import SCENE_BODY, Responses
@@ -43,11 +46,8 @@ PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 f
         422: {"description": "a path the painting cannot take"},
     },
 )
-async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> protocol.PathCameras:
+async def path_cameras(body: protocol.PathRequest, scene: SceneDep) -> protocol.PathCameras:
     """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path)."""
-    scene = service.scene(body.scene)  # the operator's, or an uploaded one
-    if scene is None:
-        raise HTTPException(404, service.unknown_scene(body.scene))
     try:
         path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
     except PathError as exc:
@@ -75,21 +75,18 @@ async def path_cameras(body: protocol.PathRequest, service: ServiceDep) -> proto
         },
     },
 )
-async def create(body: protocol.VideoRequest, service: ServiceDep) -> protocol.VideoCreated:
+async def create(body: protocol.VideoRequest, asked: VideoAskedDep, service: ServiceDep) -> protocol.VideoCreated:
     """Queue a video of ``path``; watch it at ``GET /api/videos/{id}``, fetch it from ``.../file``."""
-    scene = service.scene(body.scene)  # the operator's, or an uploaded one
-    if scene is None:
-        raise HTTPException(404, service.unknown_scene(body.scene))
+    frame = asked.frame
     try:
-        path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
-        params = scene.painting(body.paint.given())
-        width, height = path.cameras[0].image_size(body.width, body.height)  # one eye's size -> the video's
-        if width % 2 or height % 2:
-            raise ValueError(f"an MP4 (H.264, yuv420p) needs an even width and height, got {width}x{height}")
-        job = service.videos.submit(scene, path, width, height, params, body.temporal)
+        if frame.width % 2 or frame.height % 2:
+            raise ValueError(
+                f"an MP4 (H.264, yuv420p) needs an even width and height, got {frame.width}x{frame.height}"
+            )
+        job = service.videos.submit(frame.scene, asked.path, body.width, body.height, frame.params, body.temporal)
     except VideoRefused as exc:
         raise HTTPException(exc.status, str(exc)) from None
-    except (PathError, CameraError, ValueError) as exc:
+    except ValueError as exc:
         raise HTTPException(422, str(exc)) from None
     except Busy as busy:
         raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
@@ -124,4 +121,9 @@ async def file(video_id: str, service: ServiceDep) -> Response:
     job = _job(service, video_id)
     if job.state != "done":
         raise HTTPException(409, f"video {video_id} is {job.state}, not done: {job.message or 'wait for it'}")
-    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene_name}-{job.id}.mp4")
+    try:  # only a regular file of the data folder is served: never a link, wherever it points, nor a FIFO
+        with open_regular(job.file, service.settings.video_disk_bytes) as source:
+            info = os.fstat(source.fileno())
+    except OSError:
+        raise HTTPException(409, f"video {video_id} is done but its file is lost; ask for it again") from None
+    return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene_name}-{job.id}.mp4", stat_result=info)

@@ -1,0 +1,137 @@
+"""What a request asks to have painted, decided in one place for every door: the scene its name stands for, the
+painting settings built from the scene's and the caller's, and their cost checked against the limits
+(:meth:`~.settings.Settings.painting_size`: both eyes of a stereo pair, every sample, every iteration).
+
+REST renders and video jobs take it as a FastAPI dependency (``asked: RenderAsked``, ``asked: VideoAsked``, as
+FastAPI's "bigger applications" declare theirs); the walk-through calls :func:`asked` for its ``hello`` and
+:func:`check` for every later message that changes the camera, the size or the settings. So one request is
+refused alike, in the same line, whichever door it comes through.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Any
+
+from fastapi import Depends, HTTPException
+from starlette.concurrency import run_in_threadpool
+
+from ..camera.camera import Camera
+from ..camera.wire import camera_of
+from ..media.camerapath import CameraPath, PathError
+from ..scene.scene import Scene
+from ..settings.params import PaintParams
+from . import protocol
+from .settings import Settings
+from .state import Service, ServiceDep
+
+
+class Refusal(ValueError):
+    """A request that cannot be painted as asked, in one line; ``status``: 404 for an unknown scene, else 422."""
+
+    def __init__(self, message: str, status: int = 422):
+        super().__init__(message)
+        self.status = status
+
+
+@dataclass(frozen=True)
+class Asked:
+    """A painting that a door let through: its scene, camera and settings, and its size in pixels (both eyes
+    of a stereo pair: ``width x height`` as painted, not the eye's image the caller gave)."""
+
+    scene: Scene
+    camera: Camera
+    params: PaintParams
+    width: int
+    height: int
+
+
+def find_scene(service: Service, name: str) -> Scene:
+    """The scene ``name`` stands for (the operator's or an uploaded one), or :class:`Refusal` 404."""
+    scene = service.scene(name)
+    if scene is None:
+        raise Refusal(service.unknown_scene(name), 404)
+    return scene
+
+
+def check(
+    settings: Settings, scene: Scene, camera: Camera | None, width: int, height: int, overrides: dict[str, Any]
+) -> Asked:
+    """The painting of ``scene`` by ``camera`` (None: the scene's) of an eye's image of ``width x height`` with
+    the caller's ``overrides`` of the scene's settings, or :class:`Refusal` (a setting the scene cannot take, a
+    size the projection does not take, more pixels or work than one painting may take)."""
+    camera = scene.camera if camera is None else camera
+    try:
+        params = scene.painting(overrides)
+        size = settings.painting_size(camera, width, height, params)
+    except ValueError as exc:  # CameraError among them
+        raise Refusal(str(exc)) from None
+    return Asked(scene, camera, params, *size)
+
+
+def asked(
+    service: Service,
+    name: str,
+    camera: protocol.CameraModel | None,
+    width: int,
+    height: int,
+    overrides: dict[str, Any],
+) -> Asked:
+    """:func:`check` of the scene ``name`` stands for, with the camera as the wire gives it."""
+    scene = find_scene(service, name)
+    try:
+        chosen = None if camera is None else camera_of(camera)
+    except ValueError as exc:
+        raise Refusal(str(exc)) from None
+    return check(service.settings, scene, chosen, width, height, overrides)
+
+
+def http_error(refusal: Refusal) -> HTTPException:
+    return HTTPException(refusal.status, str(refusal))
+
+
+# ---- the dependencies of the REST routes ----
+
+
+async def render_asked(body: protocol.RenderRequest, service: ServiceDep) -> Asked:
+    """``POST /api/render``'s painting (the route reads the same ``body``: FastAPI parses it once)."""
+    try:
+        return asked(service, body.scene, body.camera, body.width, body.height, body.paint.given())
+    except Refusal as refusal:
+        raise http_error(refusal) from None
+
+
+@dataclass(frozen=True)
+class VideoAsked:
+    """A video's painting as its door checked it: every frame's (a path holds one projection and one stereo
+    layout, so its first camera stands for all), and the path resolved."""
+
+    frame: Asked
+    path: CameraPath
+
+
+async def video_asked(body: protocol.VideoRequest, service: ServiceDep) -> VideoAsked:
+    """``POST /api/videos``' path and painting; the whole film's work is the video queue's to check."""
+    try:
+        scene = find_scene(service, body.scene)
+        try:
+            path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
+        except PathError as exc:
+            raise Refusal(str(exc)) from None
+        frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
+        return VideoAsked(frame, path)
+    except Refusal as refusal:
+        raise http_error(refusal) from None
+
+
+async def scene_named(body: protocol.PathRequest, service: ServiceDep) -> Scene:
+    """The scene of a request that paints nothing itself (``POST /api/paths``)."""
+    try:
+        return find_scene(service, body.scene)
+    except Refusal as refusal:
+        raise http_error(refusal) from None
+
+
+RenderAsked = Annotated[Asked, Depends(render_asked)]
+VideoAskedDep = Annotated[VideoAsked, Depends(video_asked)]
+SceneDep = Annotated[Scene, Depends(scene_named)]

@@ -1,0 +1,125 @@
+"""The same limits on every door: one request over the pixel or the work limit is refused alike, in the same one
+line, by a REST render, the walk's ``hello``, every later camera, view and paint message of a walk, and a video
+job; a stereo camera counts both eyes and all samples (a real server on loopback)."""
+
+from __future__ import annotations
+
+import httpx
+import pytest
+from conftest import SPINNING_BOX
+
+from rcp_server.bench.harness import BackgroundServer
+
+from .conftest import Walk
+
+SIDE = 540  # the limit is one eye of SIDE x SIDE: a stereo pair of it is twice over
+PIXELS = SIDE * SIDE
+WORK = PIXELS * 6 * 2  # the default 6 iterations at 2 samples: a third sample is over
+CAMERA = {"eye": [0, 1, 4], "look_at": [0, 0.5, 0]}
+STEREO = {**CAMERA, "stereo": "top-bottom"}
+PATH = {"fps": 2, "keyframes": [{"t": 0, **CAMERA}, {"t": 1, **CAMERA, "eye": [0.5, 1, 4]}]}
+STEREO_PATH = {**PATH, "keyframes": [{**k, "stereo": "top-bottom"} for k in PATH["keyframes"]]}
+
+STEREO_REFUSAL = f"{SIDE}x{2 * SIDE} is more than the {PIXELS} pixels an image may have"
+SIZE_REFUSAL = f"{SIDE + 2}x{SIDE} is more than the {PIXELS} pixels an image may have"
+WORK_REFUSAL = (
+    f"{SIDE}x{SIDE} pixels x 3 spp x 6 iterations is {PIXELS * 18:,} rays, more than the {WORK:,} one painting may "
+    "take: ask for fewer pixels, samples or iterations"
+)
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    scenes = tmp_path_factory.mktemp("scenes")
+    (scenes / "tiny.toml").write_text(SPINNING_BOX)
+    data = tmp_path_factory.mktemp("data")
+    with BackgroundServer(scenes=scenes, data=data, max_pixels=PIXELS, max_work=WORK, settle_ms=20) as live:
+        yield live
+
+
+def rest(server, **body) -> str:
+    answer = httpx.post(f"{server.url}/api/render", json={"scene": "tiny", **body}, timeout=60)
+    assert answer.status_code == 422, answer.text
+    return answer.json()["detail"]
+
+
+def video(server, **body) -> str:
+    answer = httpx.post(f"{server.url}/api/videos", json={"scene": "tiny", **body}, timeout=60)
+    assert answer.status_code == 422, answer.text
+    return answer.json()["detail"]
+
+
+def refusal(walk: Walk) -> str:
+    """The walk's next error, past the frames and notes before it."""
+    while (message := walk.next())["type"] != "error":
+        if message["type"] == "frame":
+            walk.ws.recv(30)  # its JPEG
+    return message["message"]
+
+
+def walking(server) -> Walk:
+    """A walk that said hello within the limit and got its first frame."""
+    walk = Walk(server)
+    walk.send(type="hello", scene="tiny", width=SIDE, height=SIDE)
+    assert walk.next()["type"] == "ready"
+    walk.frame()
+    return walk
+
+
+def test_a_stereo_pair_over_the_pixels_is_refused_alike_by_every_door(server):
+    assert rest(server, width=SIDE, height=SIDE, camera=STEREO) == STEREO_REFUSAL
+    assert video(server, width=SIDE, height=SIDE, path=STEREO_PATH) == STEREO_REFUSAL
+    walk = walking(server)
+    try:
+        walk.send(type="camera", id=7, **STEREO)
+        assert refusal(walk) == STEREO_REFUSAL
+        walk.send(type="camera", id=8, **CAMERA, fov=50)  # the walk goes on, as it was: one eye, its size
+        while (meta := walk.frame()[0])["camera_id"] != 8 or not meta["final"]:
+            assert (meta["width"], meta["height"]) != (SIDE, 2 * SIDE) and meta["camera_id"] != 7
+        assert (meta["width"], meta["height"]) == (SIDE, SIDE)
+    finally:
+        walk.close()
+
+
+def test_a_size_over_the_pixels_is_refused_alike_by_every_door(server):
+    assert rest(server, width=SIDE + 2, height=SIDE) == SIZE_REFUSAL
+    assert video(server, width=SIDE + 2, height=SIDE, path=PATH) == SIZE_REFUSAL
+    walk = Walk(server)
+    try:
+        walk.send(type="hello", scene="tiny", width=SIDE + 2, height=SIDE)
+        assert refusal(walk) == SIZE_REFUSAL
+        walk.close()
+        walk = walking(server)
+        walk.send(type="view", width=SIDE + 2, height=SIDE)
+        assert refusal(walk) == SIZE_REFUSAL
+    finally:
+        walk.close()
+
+
+def test_samples_over_the_work_are_refused_alike_by_every_door(server):
+    assert rest(server, width=SIDE, height=SIDE, paint={"spp": 3}) == WORK_REFUSAL
+    assert video(server, width=SIDE, height=SIDE, path=PATH, paint={"spp": 3}) == WORK_REFUSAL
+    walk = walking(server)
+    try:
+        walk.send(type="paint", spp=3)
+        assert refusal(walk) == WORK_REFUSAL
+    finally:
+        walk.close()
+
+
+def test_a_stereo_walk_refines_with_the_samples_both_eyes_afford(tmp_path):
+    """The planner sizes a resting stereo walk's samples from the pixels of both eyes: the final refinement of
+    a pair stays within the work one painting may take."""
+    (tmp_path / "tiny.toml").write_text(SPINNING_BOX)
+    work = 64 * 64 * 6 * 6  # 6 iterations: one eye affords 6 spp, a pair 3
+    with BackgroundServer(scenes=tmp_path, data=tmp_path / "data", max_work=work, settle_ms=20) as live:
+        walk = Walk(live)
+        try:
+            walk.send(type="hello", scene="tiny", width=64, height=64)
+            assert walk.next()["type"] == "ready"
+            assert walk.until_final()[-1][0]["spp"] == 4  # REFINE_SPP: the work would allow 6
+            walk.send(type="camera", id=1, **STEREO)
+            final = walk.until_final()[-1][0]
+            assert (final["camera_id"], final["width"], final["height"], final["spp"]) == (1, 64, 128, 3)
+        finally:
+            walk.close()
