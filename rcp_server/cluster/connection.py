@@ -128,6 +128,7 @@ class Connection:
         self._num_cpus = num_cpus
         self.started = False  # this process started Ray: it shuts it down
         self.connected = False
+        self.generation = 0  # counts the joins: actors and objects of an earlier one are gone
 
     def start(self, timeout_s: float | None = None) -> None:
         """Join (or start) Ray now, rather than with the first painting; raises :class:`ClusterError`. With
@@ -169,6 +170,14 @@ class Connection:
         if not self.connected:
             self.started = connect(self.address, self._num_cpus)
             self.connected = True
+            self.generation += 1
+
+    def gone(self) -> bool:
+        """Whether Ray went away under us (its runtime stopped): then the next try joins it afresh."""
+        if self.connected and not ray_module().is_initialized():
+            with self.lock:
+                self.connected = False
+        return not self.connected
 
     def ready(self) -> bool:
         """Whether Ray may be tried now (not backing off after a failure)."""

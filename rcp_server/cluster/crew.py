@@ -41,11 +41,15 @@ class Crew:
         self._remote: Any = None  # Ray's actor class of Painter, made with the crew (Ray ships no types)
         self._held: OrderedDict[int, tuple[Scene, Held]] = OrderedDict()
         self.serial = itertools.count(1)  # names the scenes held and the jobs
+        self._generation = 0  # the connection's join the actors and scenes held belong to
 
     def actors(self) -> list:
         """The crew, started on first use."""
         with self.connection.lock:
             self.connection.join()
+            if self._generation != self.connection.generation:  # Ray was joined again: what it held is gone
+                self._actors, self._generation = [], self.connection.generation
+                self._held.clear()
             if not self._actors:
                 ray = ray_module()
                 count = self._wanted or max(1, int(ray.cluster_resources().get("CPU", 1) // self.threads))

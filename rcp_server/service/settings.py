@@ -69,6 +69,12 @@ class Settings(BaseSettings):
     # ---- walking ----
     frame_ms: float = Field(50.0, gt=0)  # while walking, aim for frames at least this fast (20 fps)
     settle_ms: float = Field(150.0, ge=0)  # the camera is at rest after this long without a message
+    # with ray_address, walk-throughs are painted on Ray (RCP_RAY_WALKS=0: on the server's threads), each walker
+    # admitted while the cluster has room for 1000 / frame_ms frames a second of walk_width x walk_height
+    ray_walks: bool = True
+    walk_width: int = Field(320, ge=1, le=4096)
+    walk_height: int = Field(180, ge=1, le=4096)
+    walk_retry_s: int = Field(30, ge=1)  # a walker the cluster has no room for is told to try again after this
     # ---- uploaded scenes (POST /api/scenes) ----
     uploads: bool = True  # RCP_UPLOADS=0 turns uploads off
     upload_max_bytes: int = Field(64 << 20, ge=1024)  # one uploaded file (the body's own limit, not max_body_bytes)

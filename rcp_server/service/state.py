@@ -27,6 +27,7 @@ from .workshop import Workshop
 
 if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
     from ..cluster.painter import RayPainter
+    from ..cluster.walks import Walks
 
 log = logging.getLogger("rcp.service")
 
@@ -56,6 +57,7 @@ class Service:
     videos: Videos
     store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
     cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
+    walks: Walks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
 
@@ -66,7 +68,7 @@ class Service:
         scenes of ``settings.scenes``, compile the kernels, open the workshop, load the stored uploads and
         resume the stored video jobs."""
         store = Store(settings.data)
-        cluster = workshop = videos = None
+        cluster = workshop = videos = walks = None
         try:
             if settings.ray_address is not None:  # joined before serving: healthy means Ray is there
                 from ..cluster.painter import RayPainter
@@ -77,17 +79,27 @@ class Service:
             for scene in list(scenes.values())[:1]:  # load the compiled kernels before a visitor waits for them
                 paint(scene, scene.camera, 16, 16, PaintParams(iterations=2), threads=1)
             log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
+            if cluster is not None and settings.ray_walks:
+                walks = open_walks(settings, cluster, scenes)
             infos = {name: scene_info(scene) for name, scene in scenes.items()}
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
             store.remove_strays()
             service = cls(
-                settings, scenes, infos, workshop, videos, store, cluster, uploads=load_uploads(settings, store)
+                settings,
+                scenes,
+                infos,
+                workshop,
+                videos,
+                store,
+                cluster,
+                walks,
+                uploads=load_uploads(settings, store),
             )
             videos.resume(service.scene)
             return service
         except BaseException:
-            for opened in (videos, workshop, cluster, store):
+            for opened in (videos, workshop, walks, cluster, store):
                 if opened is not None:
                     opened.close()
             raise
@@ -132,6 +144,8 @@ class Service:
             session.close()
         self.workshop.stop()  # the video jobs' paintings stop at their next tile
         self.videos.close()
+        if self.walks is not None:
+            self.walks.close()
         if self.cluster is not None:
             self.cluster.close()
         self.workshop.close()
@@ -143,6 +157,28 @@ class Service:
         Ray failed a moment ago (it backs off: meanwhile the render is painted here rather than refused)."""
         work = width * height * params.spp * params.iterations
         return self.cluster is not None and work >= self.settings.ray_min_work and self.cluster.ready()
+
+
+def open_walks(settings: Settings, cluster: RayPainter, scenes: dict[str, Scene]) -> Walks:
+    """The walkers' place on Ray, with the cost of a ray measured there on the first scene (when that fails, it is
+    measured again with the first walker's frame)."""
+    from ..cluster.admission import Target
+    from ..cluster.walks import Walks
+
+    target = Target(1000.0 / settings.frame_ms, settings.walk_width, settings.walk_height)
+    walks = Walks(cluster.connection, target, settings.walk_retry_s)
+    for scene in list(scenes.values())[:1]:
+        try:
+            frame_s, ray_s = walks.calibrate(scene, scene.painting({}))
+            log.info(
+                "walkers on Ray, measured: %.2f ms a frame and %.3g us a ray of CPU; %s",
+                frame_s * 1e3,
+                ray_s * 1e6,
+                walks.describe(scene.painting({})),
+            )
+        except Exception as exc:  # Ray answers, but not yet for this: the first walker measures it
+            log.warning("walkers on Ray: %s", exc)
+    return walks
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:
