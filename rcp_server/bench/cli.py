@@ -119,6 +119,17 @@ def _cluster(args: argparse.Namespace) -> None:
     bench_cluster(args.scene, args.width, args.height, args.frames, args.ray, args.gbps, args.cores)
 
 
+def _walkers(args: argparse.Namespace) -> None:
+    require("walkers", WEBSOCKETS)
+    if args.ray and not _findable("ray"):
+        raise MissingExtra(
+            "rcp bench walkers --ray needs Ray, which the cluster extra installs: pip install '.[cluster]'"
+        )
+    from .walkers import bench_walkers
+
+    bench_walkers(args.walkers, args.ray, args.scene, args.width, args.height, args.seconds)
+
+
 def _restart(args: argparse.Namespace) -> None:
     from .restart import bench_restart
 
@@ -237,6 +248,15 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--width", type=positive_int, default=640, help="first frames' pixels (default 640)")
     p.add_argument("--height", type=positive_int, default=360, help="first frames' pixels (default 360)")
     p.set_defaults(run_bench=_restart)
+
+    p = command("walkers", "N walkers at once against rcp serve: each one's frame rate, size and latency, and CPU")
+    p.add_argument("walkers", type=positive_int, help="walk-throughs at once")
+    p.add_argument("--ray", metavar="ADDRESS", help="paint on Ray: 'local' (a runtime here) or a cluster's address")
+    p.add_argument("--scene", default="default", help="a scene the server serves (default: default)")
+    p.add_argument("--width", type=positive_int, default=640, help="each walker's pixels (default 640)")
+    p.add_argument("--height", type=positive_int, default=360, help="each walker's pixels (default 360)")
+    p.add_argument("--seconds", type=finite, default=10.0, help="seconds measured, after a warm-up (default 10)")
+    p.set_defaults(run_bench=_walkers)
 
     p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
     p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")

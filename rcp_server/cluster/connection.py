@@ -135,7 +135,8 @@ class Connection:
         ``timeout_s``, an address that does not answer is asked again every ``JOIN_RETRY_S`` (a head starting
         beside us answers in a moment) until then, and one that takes connections but never joins (not Ray's)
         is given up then."""
-        if timeout_s is None:
+        if timeout_s is None or self.address in (None, "", "local"):
+            # a runtime of our own is started on this thread: Ray's processes die with the thread that started them
             with self.lock:
                 self.join()
             return

@@ -109,6 +109,17 @@ class Walks:
             f"{len(cores)} nodes of {sum(cores.values()):g} cores"
         )
 
+    def figures(self) -> dict:
+        """What the walks on Ray did so far: walkers placed, frames painted there, the CPU seconds the workers
+        spent on them, walkers moved after a lost actor, whether Ray is in use now."""
+        return {
+            "walkers": len(self.places),
+            "frames": self.frames,
+            "worker_cpu_s": round(self.worker_cpu_s, 3),
+            "moved": self.moved,
+            "on_ray": self.connection.ready() and not self._trying,
+        }
+
     def admit(self, key: object, params: PaintParams, scene: Scene | None = None) -> None:
         """A place for walker ``key`` (its frames painted with ``params``), on the node with the most cores
         left; :class:`~.admission.Full` when there is none. Its actor starts now, building ``scene``, while the
@@ -361,6 +372,9 @@ class Walks:
         def attempt() -> None:
             actor = None
             try:
+                if self.connection.gone() and self.connection.address in (None, "", "local"):
+                    # Ray's processes die with the thread that starts them: a runtime of our own is not started here
+                    raise ClusterError("the local Ray runtime stopped")
                 self._joined()
                 actor = self._remote.remote(1)  # asks nothing of Ray that waits (the nodes would, on a dead one)
                 if not self._waited(actor.warm.remote(self._hold(scene)), TRY_S):
