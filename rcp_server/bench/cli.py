@@ -116,7 +116,17 @@ def _cluster(args: argparse.Namespace) -> None:
         raise MissingExtra("rcp bench cluster needs Ray, which the cluster extra installs: pip install '.[cluster]'")
     from .cluster import bench_cluster
 
-    bench_cluster(args.scene, args.width, args.height, args.frames, args.ray, args.gbps, args.cores)
+    bench_cluster(
+        args.scene,
+        args.width,
+        args.height,
+        args.frames,
+        args.ray,
+        args.gbps,
+        args.cores,
+        args.walkers_only,
+        args.server_cores,
+    )
 
 
 def _walkers(args: argparse.Namespace) -> None:
@@ -266,4 +276,8 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--ray", metavar="ADDRESS", help="a Ray cluster (default: a local Ray runtime on this machine)")
     p.add_argument("--gbps", type=finite, default=10.0, help="the model's network to the encoder, Gbit/s (default 10)")
     p.add_argument("--cores", type=positive_int, default=32, help="the model's cores per machine (default 32)")
+    p.add_argument(
+        "--server-cores", type=positive_int, default=4, help="the walkers' model: the server's cores (default 4)"
+    )
+    p.add_argument("--walkers-only", action="store_true", help="only the walkers' figures and model")
     p.set_defaults(run_bench=_cluster)

@@ -26,11 +26,17 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..cluster.admission import Target
+from ..cluster.connection import Connection
 from ..cluster.painter import RayPainter, connect
+from ..cluster.walks import Walks
 from ..media.camerapath import parse_path
 from ..painting.loop import default_threads, paint
 from ..painting.sequence import frame_params, paint_sequence
 from ..scene.scenefile import load_scene
+from ..service.planner import WALK_QUALITY
+from ..util.images import encode as encode_image
+from .walkmodel import Measured, banded, walker_cores, walkers_held
 
 
 def walk_path(scene, seconds: float, fps: float) -> dict:
@@ -46,10 +52,111 @@ def walk_path(scene, seconds: float, fps: float) -> dict:
     return {"fps": fps, "keyframes": keyframes}
 
 
+WALK_SIZES = ((640, 360), (1280, 720))  # the walkers' model's frame sizes
+NODES = (1, 4, 16, 64)  # the KubeRay clusters modelled, in two-core nodes
+NODE_CORES = 2
+WALK_FPS = 20.0
+BANDED = ((1280, 720), 30.0, 8)  # one walker's frame in bands: size, frames a second, nodes
+WALK_FRAMES = 5  # frames measured of each size and mode
+
+
+def measure_walks(scene, address: str | None) -> Measured:
+    """A walk actor's figures on Ray (joined already): its frame's and ray's CPU (calibrated at the model's
+    first size, as the server does), and walk frames of each size, per frame and temporal, timed from here."""
+    params = replace(scene.paint, spp=1)  # a walk frame's
+    walks = Walks(Connection(address), Target(1.0, 1, 1), 30)  # a target any cluster has room for: one walker
+    frame_s, ray_s = walks.calibrate(scene, params, WALK_SIZES[0])
+    overheads, server, jpeg, encode = [], [], {}, {}
+    try:
+        for size in WALK_SIZES:
+            walks.paint("bench", scene, scene.camera, *size, params, 0.0, WALK_QUALITY, 0, None)  # built, warm
+            sizes = []
+            for k in range(1, WALK_FRAMES + 1):
+                for temporal in (False, True):
+                    p = replace(params, iterations=1) if temporal else params
+                    clock, cpu = time.perf_counter(), time.process_time()
+                    painted = walks.paint(
+                        "bench",
+                        scene,
+                        scene.camera,
+                        *size,
+                        p,
+                        0.0,
+                        WALK_QUALITY,
+                        2 * k + temporal,
+                        2 * k if temporal else None,
+                    )
+                    server.append(time.process_time() - cpu)
+                    overheads.append(time.perf_counter() - clock - painted.paint_s)
+                    sizes.append(len(painted.jpeg))
+            jpeg[size] = int(np.median(sizes))
+            image = paint(scene, scene.camera, *size, replace(params, iterations=1), threads=1).image
+            clock = time.perf_counter()
+            encode_image(image, "JPEG", WALK_QUALITY)
+            encode[size] = time.perf_counter() - clock
+    finally:
+        walks.close()
+    return Measured(
+        frame_s, ray_s, float(np.median(overheads)), float(np.median(server)), jpeg, encode, params.iterations
+    )
+
+
+def print_walk_model(m: Measured, gbps: float, server_cores: int) -> None:
+    print(
+        f"\nwalkers, measured on Ray: {m.frame_s * 1e3:.2f} ms of CPU a frame and {m.ray_s * 1e9:.1f} ns a ray "
+        f"(a pixel through one iteration, on one core); a frame's round trip beyond its painting "
+        f"{m.overhead_s * 1e3:.1f} ms; {m.server_s * 1e3:.2f} ms of the server's CPU a frame; JPEG "
+        + ", ".join(f"{w}x{h} {b / 1e3:.1f} kB" for (w, h), b in m.jpeg_bytes.items())
+        + "; encoding here "
+        + ", ".join(f"{w}x{h} {s * 1e3:.1f} ms" for (w, h), s in m.encode_s.items())
+    )
+    print(
+        f"model: {WALK_FPS:g} fps, 1 sample a pixel, {m.iterations} iterations a frame (temporal: 1); nodes of "
+        f"{NODE_CORES} cores; a server of {server_cores} cores on {gbps:g} Gbit/s"
+    )
+    print(
+        "each cell: walkers held (cores a walker takes, nodes a walker's frames take: more than 1 in bands, the bound)"
+    )
+    header = "".join(f" {f'{w}x{h} {mode}':>28}" for w, h in WALK_SIZES for mode in ("per frame", "temporal"))
+    print(f"{'nodes':>5}{header}")
+    for nodes in NODES:
+        cells = []
+        for size in WALK_SIZES:
+            for iterations in (m.iterations, 1):
+                held, bound, span = walkers_held(m, size, WALK_FPS, iterations, nodes, NODE_CORES, server_cores, gbps)
+                cores = walker_cores(m, size, WALK_FPS, iterations)
+                cells.append(f"{held:>4} ({cores:5.2f} c, {span} n, {bound:>7})")
+        print(f"{nodes:>5}" + "".join(f" {c:>28}" for c in cells))
+    size, fps, nodes = BANDED
+    print(f"one walker at {size[0]}x{size[1]} in bands over {nodes} nodes ({nodes * NODE_CORES} bands, a core each):")
+    for name, iterations in (("per frame", m.iterations), ("temporal", 1)):
+        rate, latency, bound = banded(m, size, nodes * NODE_CORES, iterations, gbps)
+        verdict = "holds" if rate >= fps else "falls short of"
+        print(f"  {name:>9}: {rate:5.1f} fps ({verdict} {fps:g}; bound by {bound}), {latency * 1e3:.0f} ms a frame")
+
+
 def bench_cluster(
-    scene_name: str, width: int, height: int, frames: int, address: str | None, gbps: float, cores: int
+    scene_name: str,
+    width: int,
+    height: int,
+    frames: int,
+    address: str | None,
+    gbps: float,
+    cores: int,
+    walkers_only: bool = False,
+    server_cores: int = 4,
 ) -> None:
     scene = load_scene(scene_name)
+    if walkers_only:
+        started = connect(address, num_cpus=None if address else default_threads())
+        try:
+            print_walk_model(measure_walks(scene, address), gbps, server_cores)
+        finally:
+            if started:
+                import ray
+
+                ray.shutdown()
+        return
     params = scene.paint
     fps = 24.0
     path = parse_path(walk_path(scene, (frames - 1) / fps, fps)).resolve(scene.camera)
@@ -132,6 +239,8 @@ def bench_cluster(
             f"one {pano[0]}x{pano[1]} panorama: threads {pano_here_s:.2f} s, Ray in {len(actors)} bands "
             f"{pano_ray_s:.2f} s, pixel-identical: {np.array_equal(here, there_one)}"
         )
+        painter.crew.close()  # its actors hold every core: the walkers' figures are measured alone
+        walk_figures = measure_walks(scene, address)
     finally:
         painter.close()
         if started:
@@ -171,6 +280,7 @@ def bench_cluster(
     print(f"\na 4096x2048 panorama ({params.iterations} iterations, {params.spp} spp): {pano_core_s:.1f} core-s; on")
     for n in (1, 2, 4, 8, 16):
         print(f"{n:>5} machines: {pano_core_s / (n * cores) + 4096 * 2048 * 3 / link + trip:6.2f} s")
+    print_walk_model(walk_figures, gbps, server_cores)
 
 
 def _u8(image):

@@ -177,9 +177,9 @@ class Walks:
 
     # ---- painting ----
 
-    def calibrate(self, scene: Scene, params: PaintParams) -> tuple[float, float]:
+    def calibrate(self, scene: Scene, params: PaintParams, size: tuple[int, int] | None = None) -> tuple[float, float]:
         """Measure what a frame costs on a worker (:class:`~.admission.CostMeter`), on an actor of its own: frames
-        of ``scene`` with ``params`` at the target size and at ``SMALL`` pixels (the fewest CPU seconds of
+        of ``scene`` with ``params`` at ``size`` (the target's) and at ``SMALL`` pixels (the fewest CPU seconds of
         ``CALIBRATION_FRAMES`` each, after one that builds the scene). Returns (CPU seconds a frame, a ray)."""
         self._joined()
         actor = self._remote.remote(1)
@@ -193,13 +193,14 @@ class Walks:
                 calls = [actor.frame.remote(held, *shot, k, None) for k in range(CALIBRATION_FRAMES)]
                 return min(p.cpu_s for p in ray.get(calls, timeout=FIRST_FRAME_S))
 
-            small, large = cpu_s(SMALL, SMALL), cpu_s(self.target.width, self.target.height)
+            width, height = size or (self.target.width, self.target.height)
+            small, large = cpu_s(SMALL, SMALL), cpu_s(width, height)
         except Exception as exc:
             raise ClusterError(f"the cost of a frame on Ray was not measured: {first_line(exc)}") from None
         finally:
             _kill(actor)
         per_pixel = params.spp * params.iterations
-        rays = self.target.width * self.target.height * per_pixel - SMALL * SMALL * per_pixel
+        rays = width * height * per_pixel - SMALL * SMALL * per_pixel
         ray_s = max(large - small, 0.0) / max(rays, 1)
         self.cost.calibrated(small - SMALL * SMALL * per_pixel * ray_s, ray_s)
         assert self.cost.frame_s is not None
