@@ -128,11 +128,17 @@ def print_walk_model(m: Measured, gbps: float, server_cores: int) -> None:
                 cells.append(f"{held:>4} ({cores:5.2f} c, {span} n, {bound:>7})")
         print(f"{nodes:>5}" + "".join(f" {c:>28}" for c in cells))
     size, fps, nodes = BANDED
-    print(f"one walker at {size[0]}x{size[1]} in bands over {nodes} nodes ({nodes * NODE_CORES} bands, a core each):")
-    for name, iterations in (("per frame", m.iterations), ("temporal", 1)):
-        rate, latency, bound = banded(m, size, nodes * NODE_CORES, iterations, gbps)
-        verdict = "holds" if rate >= fps else "falls short of"
-        print(f"  {name:>9}: {rate:5.1f} fps ({verdict} {fps:g}; bound by {bound}), {latency * 1e3:.0f} ms a frame")
+    print(f"one walker at {size[0]}x{size[1]} in bands over {nodes} nodes ({nodes * NODE_CORES} cores, a band a core):")
+    for encoders in (0, 2):
+        where = "encoded by 2 worker cores in turn" if encoders else "gathered and encoded by the server"
+        for name, iterations in (("per frame", m.iterations), ("temporal", 1)):
+            bands = nodes * NODE_CORES - encoders
+            rate, latency, bound = banded(m, size, bands, iterations, gbps, encoders)
+            verdict = "holds" if rate >= fps else "falls short of"
+            print(
+                f"  {name:>9}, {bands} bands {where}: {rate:5.1f} fps ({verdict} {fps:g}; bound by {bound}), "
+                f"{latency * 1e3:.0f} ms a frame"
+            )
 
 
 def bench_cluster(

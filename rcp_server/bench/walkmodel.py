@@ -72,11 +72,20 @@ def walkers_held(
     return bounds[which], which, span
 
 
-def banded(m: Measured, size: tuple[int, int], bands: int, iterations: int, gbps: float) -> tuple[float, float, str]:
+def banded(
+    m: Measured, size: tuple[int, int], bands: int, iterations: int, gbps: float, encoders: int = 0
+) -> tuple[float, float, str]:
     """One walker's frame of ``size`` in ``bands`` bands, a core each: (frames a second, the latency of a
-    frame in seconds, what bounds the rate: 'painting', 'network' or 'server')."""
+    frame in seconds, what bounds the rate: 'painting', 'network', 'server' or 'encoding'). Without
+    ``encoders`` the server gathers the bands and encodes; with them, ``encoders`` worker cores gather and encode
+    a frame each in turn (frames in flight), and the server routes one JPEG a frame."""
     paint_s = m.frame_s + size[0] * size[1] * iterations * m.ray_s / bands
     move_s = size[0] * size[1] * 3 * 8 / (gbps * 1e9)
+    if encoders:
+        steps = {"painting": paint_s, "network": move_s, "server": m.server_s, "encoding": m.encode_s[size] / encoders}
+        latency = m.overhead_s + paint_s + move_s + m.encode_s[size] + m.server_s
+        which = max(steps, key=lambda k: steps[k])
+        return 1 / steps[which], latency, which
     server_s = m.encode_s[size] + bands * m.server_s  # the server receives every band, then encodes
     steps = {"painting": paint_s, "network": move_s, "server": server_s}
     which = max(steps, key=lambda k: steps[k])

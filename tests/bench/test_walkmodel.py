@@ -42,3 +42,10 @@ def test_one_walkers_frame_in_bands():
     server = 0.01 + 16 * 0.002
     assert bound == "server" and fps == pytest.approx(1 / server)
     assert latency == pytest.approx(0.004 + paint + 640 * 360 * 3 * 8 / 10e9 + server)
+
+
+def test_bands_encoded_on_workers_leave_the_server_one_jpeg_a_frame():
+    fps, latency, bound = banded(M, SIZE, bands=14, iterations=6, gbps=10, encoders=2)
+    paint = 0.005 + 640 * 360 * 6 * 1e-7 / 14
+    assert bound == "painting" and fps == pytest.approx(1 / paint)  # encoding 10 ms / 2 and routing 2 ms are less
+    assert latency == pytest.approx(0.004 + paint + 640 * 360 * 3 * 8 / 10e9 + 0.01 + 0.002)
