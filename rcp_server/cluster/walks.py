@@ -46,6 +46,7 @@ FRAME_LEAST_S = 2.0  # a frame not back within this, or FRAME_TIMES its walker's
 FRAME_TIMES = 8.0
 NODES_FRESH_S = 2.0  # the nodes and their cores are asked of Ray again after this long
 HELD_SCENES = 8  # scenes kept in the object store for the walkers
+SPARE_START_S = 20.0  # a spare taken before it is warm: its start may take this long
 TRY_S = 30.0  # after a failure, a new actor must start within this for Ray to count as back
 SMALL = 8  # pixels each way of the frames that measure a frame's fixed cost
 CALIBRATION_FRAMES = 3  # frames of each size measured: the cheapest counts (the others met a busy core)
@@ -79,10 +80,11 @@ class Walks:
         self._lock = threading.Lock()
         self._measuring = threading.Lock()
         self._asker: threading.Thread | None = None  # the thread that asks Ray for its nodes
+        self._asking: threading.Thread | None = None  # the last thread that asked the autoscaler
         self._trier: threading.Thread | None = None  # the thread that tries Ray again after a failure
         self._trying = False  # Ray failed: the walkers are painted here until it answers again
         self._closed = False
-        self._spare: tuple[Any, str] | None = None  # an actor started ahead, and its node
+        self._spare: tuple[Any, str, Any] | None = None  # an actor started ahead, its node, the ref of its start
         self._nodes: tuple[float, dict[str, float]] = (-math.inf, {})
         self._held: dict[int, tuple[Scene, Held]] = {}
         self._generation = -1
@@ -173,7 +175,10 @@ class Walks:
         bundles = [{"CPU": s} for s in shares + shares[-1:]]
         if self._trying or not ray_module().is_initialized():  # Ray is down (a call could wait, or start one)
             return
-        threading.Thread(target=_request, args=(bundles,), name="rcp-ray-autoscale", daemon=True).start()
+        if self._closed:
+            return
+        self._asking = threading.Thread(target=_request, args=(bundles,), name="rcp-ray-autoscale", daemon=True)
+        self._asking.start()
 
     # ---- painting ----
 
@@ -325,8 +330,10 @@ class Walks:
             place.node = pick_node(cores, self._taken(but=place), place.share) or place.node
         spare, self._spare = self._spare, None
         if spare is not None and spare[1] in cores:
-            place.actor, place.node = spare
-            place.first_s = FRAME_LEAST_S
+            place.actor, place.node, warm = spare
+            # a spare that is warm answers at once (a dead Ray is found in seconds); one still starting may take
+            # a process's start
+            place.first_s = FRAME_LEAST_S if ray_module().wait([warm], timeout=0)[0] else SPARE_START_S
         else:
             place.first_s = FIRST_FRAME_S
             if spare is not None:
@@ -342,8 +349,7 @@ class Walks:
         node = pick_node(self.cores(), self._taken(), walker)
         if node is not None:
             actor = self._actor(node, self._threads(walker, self.cores()[node]))
-            actor.warm.remote(held)
-            self._spare = (actor, node)
+            self._spare = (actor, node, actor.warm.remote(held))
 
     def _actor(self, node: str, threads: int) -> Any:
         from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
@@ -378,12 +384,13 @@ class Walks:
                     raise ClusterError("the local Ray runtime stopped")
                 self._joined()
                 actor = self._remote.remote(1)  # asks nothing of Ray that waits (the nodes would, on a dead one)
-                if not self._waited(actor.warm.remote(self._hold(scene)), TRY_S):
+                warm = actor.warm.remote(self._hold(scene))
+                if not self._waited(warm, TRY_S):
                     raise ClusterError(f"a Ray worker did not start within {TRY_S:g} s")
                 self._ask_nodes()
                 node = next(iter(self.cores()), None)
                 with self._lock:
-                    self._spare, self._trying = (actor, node) if node else None, False
+                    self._spare, self._trying = (actor, node, warm) if node else None, False
                 log.info("walkers on Ray again")
             except (Exception, SystemExit) as exc:  # Ray's own, many: still down
                 if actor is not None:
@@ -431,8 +438,9 @@ class Walks:
     def close(self) -> None:
         """Stop every walker's actor."""
         self._closed = True
-        if self._trier is not None:
-            self._trier.join(1.0)
+        for thread in (self._trier, self._asker, self._asking):  # no call of theirs may outlive Ray's shutdown
+            if thread is not None:
+                thread.join(1.0)
         with self._lock:
             places, self.places = list(self.places.values()), {}
             spare, self._spare = self._spare, None
