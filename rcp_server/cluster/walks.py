@@ -291,6 +291,7 @@ class Walks:
         """Ray failed as a whole: not tried for a while (painted here meanwhile), then tried again off the frames'
         path (:meth:`_try_again`; if its runtime stopped, it is joined afresh then: :meth:`.Connection.gone`). The
         actors are forgotten: each walker gets a new one once Ray is back."""
+        log.warning("walkers painted on the server until Ray answers again: %s", reason)
         self.connection.gone()
         self.connection.backoff.failed(reason)
         with self._lock:

@@ -303,7 +303,9 @@ class Session:
                 painted = walks.paint(self, *args, should_stop=should_stop)
                 return (painted, None), painted.seconds
             except ClusterError as exc:  # painted here meanwhile
-                log.info("a walk frame painted on the server: %s", exc)
+                log.debug(
+                    "a walk frame painted on the server: %s", exc
+                )  # a failure of Ray says so once, as it backs off
         result = self.workshop.paint(
             job.scene,
             job.camera,
