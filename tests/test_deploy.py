@@ -115,3 +115,21 @@ def test_the_ray_address_is_the_heads_gcs_and_the_head_paints_no_frames(document
     (http,) = [d for d in documents if d["kind"] == "Service"]
     assert http["spec"]["selector"] == {"ray.io/cluster": "rcp", "ray.io/node-type": "head"}
     assert http["spec"]["ports"][0]["targetPort"] == int(env["RCP_PORT"])
+
+
+def test_the_workers_scale_with_the_admitted_walkers(documents):
+    """The autoscaler is on, the painters' group may grow from one two-core node to the 64 the model counts, and
+    the service paints walk-throughs there, admitting walkers for a target the settings declare."""
+    spec = cluster(documents)["spec"]
+    assert spec["enableInTreeAutoscaling"] is True
+    assert spec["autoscalerOptions"]["idleTimeoutSeconds"] > 0
+    (painters,) = spec["workerGroupSpecs"]
+    assert painters["minReplicas"] == 1 <= painters["replicas"] <= painters["maxReplicas"] == 64
+    (worker,) = painters["template"]["spec"]["containers"]
+    assert worker["resources"]["requests"]["cpu"] == worker["resources"]["limits"]["cpu"] == "2"
+    assert "num-cpus" not in painters["rayStartParams"]  # Ray counts the pod's two cores, as the walkers' shares do
+    (service,) = [c for c in pods(documents)[0]["containers"] if c.get("command")]
+    env = {e["name"].removeprefix("RCP_").lower(): e["value"] for e in service["env"]}
+    settings = Settings(**env)
+    assert settings.ray_walks and (settings.walk_width, settings.walk_height) == (640, 360)
+    assert settings.max_sessions >= 64

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+from functools import partial
 from pathlib import Path
 
 from ..util.argtypes import finite, positive_int
@@ -104,7 +105,28 @@ def _cluster(args: argparse.Namespace) -> None:
         raise MissingExtra("rcp bench cluster needs Ray, which the cluster extra installs: pip install '.[cluster]'")
     from .cluster import bench_cluster
 
-    bench_cluster(args.scene, args.width, args.height, args.frames, args.ray, args.gbps, args.cores)
+    bench_cluster(
+        args.scene,
+        args.width,
+        args.height,
+        args.frames,
+        args.ray,
+        args.gbps,
+        args.cores,
+        args.walkers_only,
+        args.server_cores,
+    )
+
+
+def _walkers(args: argparse.Namespace) -> None:
+    require("walkers", WEBSOCKETS)
+    if args.ray and not _findable("ray"):
+        raise MissingExtra(
+            "rcp bench walkers --ray needs Ray, which the cluster extra installs: pip install '.[cluster]'"
+        )
+    from .walkers import bench_walkers
+
+    bench_walkers(args.walkers, args.ray, args.scene, args.width, args.height, args.seconds)
 
 
 def _restart(args: argparse.Namespace) -> None:
@@ -130,11 +152,18 @@ def add_bench_commands(subparsers) -> None:
         help="benchmarks that print figures (accuracy and stability also chart them)",
         description="Benchmarks that print figures; 'rcp bench BENCHMARK --help' gives each one's flags.",
     )
-    which = bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK")
+    command = partial(_command, bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK"))
+    _engine_benchmarks(command)
+    _service_benchmarks(command)
+    _cluster_benchmarks(command)
 
-    def command(name: str, summary: str) -> argparse.ArgumentParser:
-        return which.add_parser(name, help=summary, description=f"rcp bench {name}: {summary}.")
 
+def _command(which, name: str, summary: str) -> argparse.ArgumentParser:
+    return which.add_parser(name, help=summary, description=f"rcp bench {name}: {summary}.")
+
+
+def _engine_benchmarks(command) -> None:
+    """The engine's: its speed, projections, accuracy, stability and memory."""
     p = command("speed", "the engine against Embree alone: where an iteration's time goes")
     p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")
     p.add_argument("--width", type=positive_int, default=640, help="pixels (default 640)")
@@ -155,6 +184,28 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--ipd", type=finite, help="distance between the eyes, scene units (default: the scene camera's)")
     p.set_defaults(run_bench=_projection)
 
+    p = command("accuracy", "time per frame against error, both methods (needs the bench extra)")
+    _out_and_quick(p)
+    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    p.set_defaults(run_bench=_accuracy)
+
+    p = command("stability", "where each method breaks (needs the bench extra)")
+    _out_and_quick(p)
+    p.add_argument("--noise-only", action="store_true", help="only the walk flicker of the two kinds of noise")
+    p.set_defaults(run_bench=_stability)
+
+    p = command("memory", "resident memory per loaded scene, and its peak once painted, over the interpreter")
+    p.add_argument(
+        "models", nargs="*", metavar="MODEL", help="model files (or scene files) measured after the shipped scenes"
+    )
+    p.add_argument("--width", type=positive_int, default=1280, help="pixels (default 1280)")
+    p.add_argument("--height", type=positive_int, default=720, help="pixels (default 720)")
+    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
+    p.set_defaults(run_bench=_memory)
+
+
+def _service_benchmarks(command) -> None:
+    """The service's: latency, load, fuzzing, restarts."""
     p = command("latency", "the walk-through's latency and frame rate, against a real server")
     p.add_argument("--scene", default="default", help="a scene the server serves (default: default)")
     p.add_argument("--seconds", type=finite, default=4.0, help="seconds of walking per size and mode (default 4)")
@@ -184,25 +235,6 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--seed", type=int, help="the seed of an earlier run, to repeat it (default: a random one)")
     p.set_defaults(run_bench=_fuzz)
 
-    p = command("accuracy", "time per frame against error, both methods (needs the bench extra)")
-    _out_and_quick(p)
-    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
-    p.set_defaults(run_bench=_accuracy)
-
-    p = command("stability", "where each method breaks (needs the bench extra)")
-    _out_and_quick(p)
-    p.add_argument("--noise-only", action="store_true", help="only the walk flicker of the two kinds of noise")
-    p.set_defaults(run_bench=_stability)
-
-    p = command("memory", "resident memory per loaded scene, and its peak once painted, over the interpreter")
-    p.add_argument(
-        "models", nargs="*", metavar="MODEL", help="model files (or scene files) measured after the shipped scenes"
-    )
-    p.add_argument("--width", type=positive_int, default=1280, help="pixels (default 1280)")
-    p.add_argument("--height", type=positive_int, default=720, help="pixels (default 720)")
-    p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
-    p.set_defaults(run_bench=_memory)
-
     p = command("restart", "rcp serve killed and started again: how soon it serves a stored upload")
     p.add_argument("--model", type=Path, help="a model file to upload (default: a sphere built in code)")
     p.add_argument(
@@ -215,6 +247,18 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--height", type=positive_int, default=360, help="first frames' pixels (default 360)")
     p.set_defaults(run_bench=_restart)
 
+
+def _cluster_benchmarks(command) -> None:
+    """Ray's: walkers, films and the models of N machines."""
+    p = command("walkers", "N walkers at once against rcp serve: each one's frame rate, size and latency, and CPU")
+    p.add_argument("walkers", type=positive_int, help="walk-throughs at once")
+    p.add_argument("--ray", metavar="ADDRESS", help="paint on Ray: 'local' (a runtime here) or a cluster's address")
+    p.add_argument("--scene", default="default", help="a scene the server serves (default: default)")
+    p.add_argument("--width", type=positive_int, default=640, help="each walker's pixels (default 640)")
+    p.add_argument("--height", type=positive_int, default=360, help="each walker's pixels (default 360)")
+    p.add_argument("--seconds", type=finite, default=10.0, help="seconds measured, after a warm-up (default 10)")
+    p.set_defaults(run_bench=_walkers)
+
     p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
     p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")
     p.add_argument("--width", type=positive_int, default=320, help="pixels (default 320)")
@@ -223,4 +267,8 @@ def add_bench_commands(subparsers) -> None:
     p.add_argument("--ray", metavar="ADDRESS", help="a Ray cluster (default: a local Ray runtime on this machine)")
     p.add_argument("--gbps", type=finite, default=10.0, help="the model's network to the encoder, Gbit/s (default 10)")
     p.add_argument("--cores", type=positive_int, default=32, help="the model's cores per machine (default 32)")
+    p.add_argument(
+        "--server-cores", type=positive_int, default=4, help="the walkers' model: the server's cores (default 4)"
+    )
+    p.add_argument("--walkers-only", action="store_true", help="only the walkers' figures and model")
     p.set_defaults(run_bench=_cluster)

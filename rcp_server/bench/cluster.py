@@ -26,11 +26,17 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..cluster.admission import Target
+from ..cluster.connection import Connection
 from ..cluster.painter import RayPainter, connect
+from ..cluster.walks import Walks
 from ..media.camerapath import parse_path
 from ..painting.loop import default_threads, paint
 from ..painting.sequence import frame_params, paint_sequence
 from ..scene.scenefile import load_scene
+from ..service.planner import WALK_QUALITY
+from ..util.images import encode as encode_image
+from .walkmodel import Measured, banded, walker_cores, walkers_held
 
 
 def walk_path(scene, seconds: float, fps: float) -> dict:
@@ -46,10 +52,136 @@ def walk_path(scene, seconds: float, fps: float) -> dict:
     return {"fps": fps, "keyframes": keyframes}
 
 
+WALK_SIZES = ((640, 360), (1280, 720))  # the walkers' model's frame sizes
+NODES = (1, 4, 16, 64)  # the KubeRay clusters modelled, in two-core nodes
+NODE_CORES = 2
+WALK_FPS = 20.0
+BANDED = ((1280, 720), 30.0, 8)  # one walker's frame in bands: size, frames a second, nodes
+WALK_FRAMES = 5  # frames measured of each size and mode
+
+
+def measure_walks(scene, address: str | None) -> Measured:
+    """A walk actor's figures on Ray (joined already): its frame's and ray's CPU (calibrated at the model's
+    first size, as the server does), and walk frames of each size, per frame and temporal, timed from here."""
+    params = replace(scene.paint, spp=1)  # a walk frame's
+    walks = Walks(Connection(address), Target(1.0, 1, 1), 30)  # a target any cluster has room for: one walker
+    frame_s, ray_s = walks.calibrate(scene, params, WALK_SIZES[0])
+    overheads, server, jpeg, encode = [], [], {}, {}
+    try:
+        for size in WALK_SIZES:
+            walks.paint("bench", scene, scene.camera, *size, params, 0.0, WALK_QUALITY, 0, None)  # built, warm
+            sizes = []
+            for k in range(1, WALK_FRAMES + 1):
+                for temporal in (False, True):
+                    p = replace(params, iterations=1) if temporal else params
+                    clock, cpu = time.perf_counter(), time.process_time()
+                    painted = walks.paint(
+                        "bench",
+                        scene,
+                        scene.camera,
+                        *size,
+                        p,
+                        0.0,
+                        WALK_QUALITY,
+                        2 * k + temporal,
+                        2 * k if temporal else None,
+                    )
+                    server.append(time.process_time() - cpu)
+                    overheads.append(time.perf_counter() - clock - painted.paint_s)
+                    sizes.append(len(painted.jpeg))
+            jpeg[size] = int(np.median(sizes))
+            image = paint(scene, scene.camera, *size, replace(params, iterations=1), threads=1).image
+            clock = time.perf_counter()
+            encode_image(image, "JPEG", WALK_QUALITY)
+            encode[size] = time.perf_counter() - clock
+    finally:
+        walks.close()
+    return Measured(
+        frame_s, ray_s, float(np.median(overheads)), float(np.median(server)), jpeg, encode, params.iterations
+    )
+
+
+def print_walk_model(m: Measured, gbps: float, server_cores: int) -> None:
+    print(
+        f"\nwalkers, measured on Ray: {m.frame_s * 1e3:.2f} ms of CPU a frame and {m.ray_s * 1e9:.1f} ns a ray "
+        f"(a pixel through one iteration, on one core); a frame's round trip beyond its painting "
+        f"{m.overhead_s * 1e3:.1f} ms; {m.server_s * 1e3:.2f} ms of the server's CPU a frame; JPEG "
+        + ", ".join(f"{w}x{h} {b / 1e3:.1f} kB" for (w, h), b in m.jpeg_bytes.items())
+        + "; encoding here "
+        + ", ".join(f"{w}x{h} {s * 1e3:.1f} ms" for (w, h), s in m.encode_s.items())
+    )
+    print(
+        f"model: {WALK_FPS:g} fps, 1 sample a pixel, {m.iterations} iterations a frame (temporal: 1); nodes of "
+        f"{NODE_CORES} cores; a server of {server_cores} cores on {gbps:g} Gbit/s"
+    )
+    print(
+        "each cell: walkers held (cores a walker takes, nodes a walker's frames take: more than 1 in bands, the bound)"
+    )
+    header = "".join(f" {f'{w}x{h} {mode}':>28}" for w, h in WALK_SIZES for mode in ("per frame", "temporal"))
+    print(f"{'nodes':>5}{header}")
+    for nodes in NODES:
+        cells = []
+        for size in WALK_SIZES:
+            for iterations in (m.iterations, 1):
+                held, bound, span = walkers_held(m, size, WALK_FPS, iterations, nodes, NODE_CORES, server_cores, gbps)
+                cores = walker_cores(m, size, WALK_FPS, iterations)
+                cells.append(f"{held:>4} ({cores:5.2f} c, {span} n, {bound:>7})")
+        print(f"{nodes:>5}" + "".join(f" {c:>28}" for c in cells))
+    size, fps, nodes = BANDED
+    print(f"one walker at {size[0]}x{size[1]} in bands over {nodes} nodes ({nodes * NODE_CORES} cores, a band a core):")
+    for encoders in (0, 2):
+        where = "encoded by 2 worker cores in turn" if encoders else "gathered and encoded by the server"
+        for name, iterations in (("per frame", m.iterations), ("temporal", 1)):
+            bands = nodes * NODE_CORES - encoders
+            rate, latency, bound = banded(m, size, bands, iterations, gbps, encoders)
+            verdict = "holds" if rate >= fps else "falls short of"
+            print(
+                f"  {name:>9}, {bands} bands {where}: {rate:5.1f} fps ({verdict} {fps:g}; bound by {bound}), "
+                f"{latency * 1e3:.0f} ms a frame"
+            )
+
+
 def bench_cluster(
-    scene_name: str, width: int, height: int, frames: int, address: str | None, gbps: float, cores: int
+    scene_name: str,
+    width: int,
+    height: int,
+    frames: int,
+    address: str | None,
+    gbps: float,
+    cores: int,
+    walkers_only: bool = False,
+    server_cores: int = 4,
 ) -> None:
     scene = load_scene(scene_name)
+    if walkers_only:
+        started = connect(address, num_cpus=None if address else default_threads())
+        try:
+            print_walk_model(measure_walks(scene, address), gbps, server_cores)
+        finally:
+            if started:
+                import ray
+
+                ray.shutdown()
+        return
+    measured = _measure_on_ray(scene, scene_name, width, height, frames, address)
+    _print_films_model(measured, cores, gbps)
+    print_walk_model(measured["walks"], gbps, server_cores)
+
+
+def _threaded(scene, shots, params, width: int, height: int, threads: int, temporal) -> tuple[float, list]:
+    """Seconds and paintings of ``shots`` on this machine's threads (``temporal`` False: the first shot alone)."""
+
+    def paint_frame(camera, scene_time, p, previous):
+        return paint(scene, camera, width, height, p, time=scene_time, previous=previous, threads=threads)
+
+    clock = time.perf_counter()
+    out = list(paint_sequence(paint_frame, shots if temporal is not False else shots[:1], params, temporal or None))
+    return time.perf_counter() - clock, out
+
+
+def _measure_on_ray(scene, scene_name: str, width: int, height: int, frames: int, address: str | None) -> dict:
+    """Films, one large painting and a panorama on Ray against the threads (printed as measured), and the
+    walkers' figures: what the models are made from."""
     params = scene.paint
     fps = 24.0
     path = parse_path(walk_path(scene, (frames - 1) / fps, fps)).resolve(scene.camera)
@@ -58,16 +190,7 @@ def bench_cluster(
     print(
         f"scene {scene_name!r}, {width}x{height}, {len(shots)} frames, {params.spp} spp, {params.iterations} iterations"
     )
-
-    def threaded(temporal):
-        def paint_frame(camera, scene_time, p, previous):
-            return paint(scene, camera, width, height, p, time=scene_time, previous=previous, threads=threads)
-
-        clock = time.perf_counter()
-        out = list(paint_sequence(paint_frame, shots if temporal is not False else shots[:1], params, temporal or None))
-        return time.perf_counter() - clock, out
-
-    threaded(False)  # load the compiled kernels (and the BVH) before anything is timed
+    _threaded(scene, shots, params, width, height, threads, False)  # the kernels (and the BVH) before any timing
     clock = time.perf_counter()
     started = connect(address, num_cpus=None if address else threads)
     joined = time.perf_counter() - clock
@@ -96,7 +219,7 @@ def bench_cluster(
         print(f"bytes per frame: {request:,} out (camera, time, settings), {answer:,} back (uint8 frame)")
         rows = []
         for name, temporal in (("per frame", None), ("temporal K=1", 1)):
-            here_s, here = threaded(temporal)
+            here_s, here = _threaded(scene, shots, params, width, height, threads, temporal)
             clock = time.perf_counter()
             there = list(painter.images(scene, shots, width, height, params, temporal))
             ray_s = time.perf_counter() - clock
@@ -132,16 +255,36 @@ def bench_cluster(
             f"one {pano[0]}x{pano[1]} panorama: threads {pano_here_s:.2f} s, Ray in {len(actors)} bands "
             f"{pano_ray_s:.2f} s, pixel-identical: {np.array_equal(here, there_one)}"
         )
+        painter.crew.close()  # its actors hold every core: the walkers' figures are measured alone
+        walk_figures = measure_walks(scene, address)
     finally:
         painter.close()
         if started:
             import ray
 
             ray.shutdown()
+    return {
+        "params": params,
+        "shots": shots,
+        "actors": len(actors),
+        "rows": rows,
+        "trip": trip,
+        "request": request,
+        "pano": pano,
+        "pano_ray_s": pano_ray_s,
+        "walks": walk_figures,
+        "size": (width, height),
+    }
 
+
+def _print_films_model(measured: dict, cores: int, gbps: float) -> None:
+    """The model of N machines painting films and a panorama, from :func:`_measure_on_ray`'s figures."""
+    params, shots, actors, rows = measured["params"], measured["shots"], measured["actors"], measured["rows"]
+    trip, request, pano, pano_ray_s = measured["trip"], measured["request"], measured["pano"], measured["pano_ray_s"]
+    width, height = measured["size"]
     # ---- the model: core-seconds per ray x iteration from the Ray runs, applied to a target workload ----
     rays = width * height * params.spp
-    core_s = {name: ray_s / len(shots) * len(actors) for name, _, ray_s, _ in rows}
+    core_s = {name: ray_s / len(shots) * actors for name, _, ray_s, _ in rows}
     per_ray = {
         "per frame": core_s["per frame"] / (rays * params.iterations),
         "temporal K=1": core_s["temporal K=1"] / rays,  # one iteration a frame (after the first)
@@ -167,7 +310,7 @@ def bench_cluster(
         print(f"{n:>5} {achieved:14.2f} {achieved / ideal:5.2f} {1 / t_frame:13.1f} {t_paint / t_frame:5.2f}")
 
     # a 4096x2048 panorama at the scene's settings: its core-seconds from the Ray run, a band a core
-    pano_core_s = pano_ray_s * len(actors) / (pano[0] * pano[1]) * 4096 * 2048
+    pano_core_s = pano_ray_s * actors / (pano[0] * pano[1]) * 4096 * 2048
     print(f"\na 4096x2048 panorama ({params.iterations} iterations, {params.spp} spp): {pano_core_s:.1f} core-s; on")
     for n in (1, 2, 4, 8, 16):
         print(f"{n:>5} machines: {pano_core_s / (n * cores) + 4096 * 2048 * 3 / link + trip:6.2f} s")

@@ -13,6 +13,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import collections
+import logging
 import math
 import time as _time
 from dataclasses import dataclass
@@ -24,7 +25,10 @@ from pydantic import ValidationError
 
 from ..camera.camera import Camera, CameraError
 from ..camera.wire import camera_of
-from ..painting.loop import Abandoned, PaintResult, PaintState, Workspace
+from ..cluster.admission import Full
+from ..cluster.connection import ClusterError
+from ..cluster.walkactor import Painted
+from ..painting.loop import Abandoned, PaintState, Workspace
 from ..painting.raytrace import object_pixels, pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
@@ -36,6 +40,8 @@ from .asked import asked, check
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
 from .state import Service
+
+log = logging.getLogger("rcp.service")
 
 MASK_PIXELS = 160 * 90 * 4  # a picked object's outline is traced at most this fine (a few ms of rays)
 
@@ -65,6 +71,8 @@ class _Job:
     camera_id: int | None
     previous: PaintState | None  # the last frame's state at the plan's size, when the plan continues it
     quality: int
+    serial: int  # the frame's number in the session
+    after: int | None  # on Ray: the frame whose state the worker keeps, when the plan continues it
 
 
 class Session:
@@ -90,6 +98,8 @@ class Session:
         # the buffers every painting of this walk works in, frame after frame (one painting at a time: a result
         # lives until the painting after next, and only self.state is kept)
         self.workspace = Workspace()
+        self.kept: int | None = None  # on Ray: the last frame shown, whose per-pixel data its worker keeps
+        self.serial = 0  # frames asked for
         self.closed = False
         # ---- the outbox (drained by the sender) ----
         self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
@@ -115,6 +125,8 @@ class Session:
     def close(self) -> None:
         """End the walk-through's painting: one still in flight stops at its next iteration."""
         self.closed = True
+        if self.service.walks is not None:
+            self.service.walks.leave(self)
 
     @property
     def walking(self) -> bool:
@@ -172,7 +184,7 @@ class Session:
             self.params = check(self.settings, self.scene, camera, self.width, self.height, self.overrides).params
             kind = (camera.projection, camera.stereo)
             if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
-                self.state = None  # another kind of picture: the recursion starts again
+                self.state = self.kept = None  # another kind of picture: the recursion starts again
             self.camera = camera
             self.camera_id = msg.id
             self.planner.camera_moved(_time.monotonic())
@@ -213,10 +225,15 @@ class Session:
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
             raise ValueError(busy_message(self.settings.max_sessions))
         painting = asked(self.service, msg.scene, None, msg.width, msg.height, {})
+        if self.scene is None and self.service.walks is not None:  # a place on Ray, while it has room
+            try:
+                self.service.walks.admit(self, painting.params, painting.scene)
+            except Full as full:
+                raise ValueError(str(full)) from None
         self.params, self.scene = painting.params, painting.scene
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
-        self.overrides, self.state = {}, None
+        self.overrides, self.state, self.kept = {}, None, None
         self.planner.scene_started(_time.monotonic())
         self.epoch += 1
         self.frame = None  # a frame of the scene being left must not follow the new `ready`
@@ -286,12 +303,17 @@ class Session:
         assert self.camera is not None, "hello sets the camera with the scene"
         size = self.camera.image_size(plan.width, plan.height)
         previous = self.state.resized(*size) if plan.continues and self.state is not None else None
-        return _Job(plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality)
+        after = self.kept if plan.continues else None
+        self.serial += 1
+        return _Job(
+            plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality, self.serial, after
+        )
 
-    def _paint_and_encode(self, job: _Job) -> tuple[tuple[PaintResult, bytes], float]:
-        """Blocking, on a painter's thread: paint the job and encode it. Refinements are abandoned as soon as
-        anything changes; walk frames are short by design and always finish, or a camera that never rests
-        would never see a frame."""
+    def _paint_and_encode(self, job: _Job) -> tuple[tuple[Painted, PaintState | None], float]:
+        """Blocking, on a painter's thread: paint the job and encode it, on Ray when the server is joined to it
+        (the worker keeps the state), else here, or meanwhile when Ray cannot paint it (the state is ours).
+        Refinements are abandoned as soon as anything changes; walk frames are short by design and always
+        finish, or a camera that never rests would never see a frame."""
         plan = job.plan
 
         def should_stop() -> bool:
@@ -299,10 +321,22 @@ class Session:
             return self.closed or stale
 
         clock = _time.perf_counter()
+        size = job.camera.image_size(plan.width, plan.height)
+        quality = frame_quality(plan, job.quality)
+        walks = self.service.walks
+        if walks is not None and self.service.cluster is not None and self.service.cluster.ready():
+            try:
+                args = (job.scene, job.camera, *size, plan.params, plan.time, quality, job.serial, job.after)
+                painted = walks.paint(self, *args, should_stop=should_stop)
+                return (painted, None), painted.seconds
+            except ClusterError as exc:  # painted here meanwhile
+                log.debug(
+                    "a walk frame painted on the server: %s", exc
+                )  # a failure of Ray says so once, as it backs off
         result = self.workshop.paint(
             job.scene,
             job.camera,
-            *job.camera.image_size(plan.width, plan.height),
+            *size,
             plan.params,
             time=plan.time,
             previous=job.previous,
@@ -310,32 +344,34 @@ class Session:
             workspace=self.workspace,
         )
         seconds = _time.perf_counter() - clock
-        return (result, images.encode(result.image, "JPEG", frame_quality(plan, job.quality))), seconds
+        jpeg = images.encode(result.image, "JPEG", quality)
+        painted = Painted(jpeg, *size, None, job.previous is not None, seconds, 0.0, seconds=seconds)
+        return (painted, result.state), seconds
 
-    def _finished(self, job: _Job, painted: tuple[PaintResult, bytes], seconds: float) -> None:
-        result, jpeg = painted
+    def _finished(self, job: _Job, painted: tuple[Painted, PaintState | None], seconds: float) -> None:
+        frame, state = painted
         plan = job.plan
         self.planner.frame_painted(plan, seconds)
-        self.state = result.state
+        self.state, self.kept = state, frame.serial
         self.shown_time = plan.time
         meta = protocol.Frame(
             seq=0,
-            width=result.state.region.full_width,
-            height=result.state.region.full_height,
+            width=frame.width,
+            height=frame.height,
             render_ms=round(seconds * 1000, 2),
             iteration=plan.iteration,
             spp=plan.params.spp,
             scale=round(plan.width / self.width, 4),
             phase=plan.phase,
             final=plan.final,
-            temporal=plan.continues,
+            temporal=frame.continued,
             quality=frame_quality(plan, job.quality),
             paint=plan.params.settings(),
             camera_id=job.camera_id,
             time=plan.time,
             dropped=0,
         )
-        self._post_frame(meta, jpeg)
+        self._post_frame(meta, frame.jpeg)
 
     # ---- sending ----
 

@@ -161,6 +161,16 @@ class Settings(BaseSettings):
         50.0, gt=0, description="while walking, aim for frames at least this fast (20 fps), 80% of it painting"
     )
     settle_ms: float = Field(150.0, ge=0, description="the camera is at rest after this long without a message")
+    ray_walks: bool = Field(
+        True,
+        description="with RCP_RAY_ADDRESS, walk-throughs are painted on Ray (0: on the server's threads), each walker "
+        "admitted while the cluster has room for 1000 / frame_ms frames a second of walk_width x walk_height",
+    )
+    walk_width: int = Field(320, ge=1, le=4096, description="the walk frame size a walker on Ray is admitted for")
+    walk_height: int = Field(180, ge=1, le=4096, description="the walk frame size a walker on Ray is admitted for")
+    walk_retry_s: int = Field(
+        30, ge=1, description="a walker the cluster has no room for is told to try again after this"
+    )
     # ---- uploaded scenes (POST /api/scenes) ----
     uploads: bool = Field(True, description="0 turns uploads off (403)")
     upload_max_bytes: int = Field(

@@ -18,7 +18,7 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 
 RETRY_AFTER_S = 1  # what a caller is told to wait while the server starts: the page shows progress that often
 
-PHASES = ("loading scenes", "compiling kernels", "loading uploads")
+PHASES = ("loading scenes", "compiling kernels", "measuring a walk frame on Ray", "loading uploads")
 
 
 class Startup:

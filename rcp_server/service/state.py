@@ -29,6 +29,7 @@ from .workshop import Workshop
 
 if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
     from ..cluster.painter import RayPainter
+    from ..cluster.walks import Walks
 
 log = logging.getLogger("rcp.service")
 
@@ -58,6 +59,7 @@ class Service:
     videos: Videos
     store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
     cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
+    walks: Walks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
     startup: Startup = field(default_factory=Startup)  # ready once the scenes are loaded and the kernels compiled
@@ -108,6 +110,14 @@ class Service:
             except Exception:  # the kernels compile at the first painting instead: slower, not broken
                 log.exception("the kernels could not be compiled ahead")
             compiled = time.monotonic()
+            if self.cluster is not None and self.settings.ray_walks:
+                startup.enter("measuring a walk frame on Ray")
+                walks = open_walks(self.settings, self.cluster, scenes)
+                with self._closing:
+                    if self.closed:
+                        walks.close()
+                        return
+                    self.walks = walks
             startup.enter("loading uploads")
             with self._closing:
                 if self.closed:
@@ -168,6 +178,8 @@ class Service:
             session.close()
         self.workshop.stop()  # the video jobs' paintings stop at their next tile
         self.videos.close()
+        if self.walks is not None:
+            self.walks.close()
         if self.cluster is not None:
             self.cluster.close()
         self.workshop.close()
@@ -179,6 +191,28 @@ class Service:
         Ray failed a moment ago (it backs off: meanwhile the render is painted here rather than refused)."""
         work = width * height * params.spp * params.iterations
         return self.cluster is not None and work >= self.settings.ray_min_work and self.cluster.ready()
+
+
+def open_walks(settings: Settings, cluster: RayPainter, scenes: dict[str, Scene]) -> Walks:
+    """The walkers' place on Ray, with the cost of a ray measured there on the first scene (when that fails, it is
+    measured again with the first walker's frame)."""
+    from ..cluster.admission import Target
+    from ..cluster.walks import Walks
+
+    target = Target(1000.0 / settings.frame_ms, settings.walk_width, settings.walk_height)
+    walks = Walks(cluster.connection, target, settings.walk_retry_s)
+    for scene in list(scenes.values())[:1]:
+        try:
+            frame_s, ray_s = walks.calibrate(scene, scene.painting({}))
+            log.info(
+                "walkers on Ray, measured: %.2f ms a frame and %.3g us a ray of CPU; %s",
+                frame_s * 1e3,
+                ray_s * 1e6,
+                walks.describe(scene.painting({})),
+            )
+        except Exception as exc:  # Ray answers, but not yet for this: the first walker measures it
+            log.warning("walkers on Ray: %s", exc)
+    return walks
 
 
 def scene_info(scene: Scene) -> protocol.SceneInfo:

@@ -18,7 +18,18 @@ FLAGS = {
     "soak": {"--seconds", "--clients", "--rest"},
     "accuracy": {"--out", "--quick", "--threads"},
     "stability": {"--out", "--quick", "--noise-only"},
-    "cluster": {"--scene", "--width", "--height", "--frames", "--ray", "--gbps", "--cores"},
+    "cluster": {
+        "--scene",
+        "--width",
+        "--height",
+        "--frames",
+        "--ray",
+        "--gbps",
+        "--cores",
+        "--server-cores",
+        "--walkers-only",
+    },
+    "walkers": {"--ray", "--scene", "--width", "--height", "--seconds"},
     "memory": {"--width", "--height", "--threads"},
 }
 # what a plain install lacks: the test extra's packages (the bench extra's among them)
@@ -101,6 +112,8 @@ def test_the_benchmarks_import_without_the_test_extra(tmp_path):
         "stability",
         "cluster",
         "memory",
+        "walkers",
+        "walkmodel",
     ]
     code = _blocked(NOT_PLAIN) + "".join(f"import rcp_server.bench.{name}\n" for name in modules)
     code += "assert not {'httpx', 'matplotlib'} & {m.split('.')[0] for m in sys.modules if sys.modules[m]}\n"

@@ -47,6 +47,7 @@ async def health(request: Request, service: ServiceDep) -> dict:
         "threads": service.workshop.threads,
         "renders": service.workshop.admitted,
         "painting": service.workshop.in_progress,
+        **({} if service.walks is None else {"walks": service.walks.figures()}),
     }
 
 

@@ -1,0 +1,126 @@
+"""The actor: one Ray worker's painter, holding the scenes it paints warm and each temporal band's last paintings.
+
+Workers are Ray actors that hold the scenes they paint warm: a scene's arrays are put in the object store
+once, and each actor builds its BVH itself (an Embree handle cannot travel). What a frame needs (camera,
+time, settings) is a few hundred bytes; what comes back is the frame as uint8, 3 bytes a pixel.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import OrderedDict
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from ..camera.camera import Camera, Region
+from ..painting.loop import PaintState, paint
+from ..scene.scene import Scene
+from ..settings.params import PaintParams
+from ..util import images
+from .connection import ray_module
+
+WARM_SCENES = 4  # scenes each actor keeps built (and the driver keeps in the object store)
+KEPT_STATES = 4  # temporal states each band keeps (frames in flight and the one before): a frame can be asked again
+
+
+# ---- the scene as it travels ----
+
+
+def portable(scene: Scene) -> dict:
+    """What a scene is, without what it caches (BVHs, locks): its public fields, as ``Scene(**fields)``."""
+    return {f.name: getattr(scene, f.name) for f in fields(scene) if not f.name.startswith("_")}
+
+
+@dataclass(frozen=True)
+class Held:
+    """A scene in the object store: ``key`` names it to the actors, ``ref`` (in a list, so that Ray hands it
+    over unread) is fetched only by an actor that does not hold the scene warm yet."""
+
+    key: str
+    ref: list
+
+
+class LostState(RuntimeError):
+    """A temporal band's previous frame is gone: its actor died and Ray restarted it empty."""
+
+
+class Painter:
+    """One Ray actor's work: paints frames, or bands of rows, of the scenes it holds warm.
+
+    Scenes are built here (BVH included) on first use and kept for the next call, the last ``WARM_SCENES``;
+    ``previous`` keeps the last ``KEPT_STATES`` paintings of each temporal band this actor paints (by job and
+    frame), so a band's recursion continues here, frame after frame, with nothing sent back and forth but the
+    band's pixels, and a frame asked again (after another worker was lost) is painted again the same."""
+
+    def __init__(self, threads: int):
+        self.threads = threads
+        self.scenes: OrderedDict[str, Scene] = OrderedDict()
+        self.previous: dict[tuple[str | None, Region], dict[int, PaintState]] = {}
+
+    def _scene(self, held: Held) -> Scene:
+        scene = self.scenes.get(held.key)
+        if scene is None:
+            scene = Scene(**ray_module().get(held.ref[0]))
+            scene.geometry(0.0)
+            self.scenes[held.key] = scene
+            while len(self.scenes) > WARM_SCENES:
+                self.scenes.popitem(last=False)
+        self.scenes.move_to_end(held.key)
+        return scene
+
+    def warm(self, held: Held) -> bool:
+        """Build ``held``'s scene now, before the first frame waits for it."""
+        self._scene(held)
+        return True
+
+    def frame(self, held: Held, shot: tuple[Camera, float], width: int, height: int, params: PaintParams):
+        """A whole frame from ``I_0``: (height, width, 3) uint8."""
+        camera, time = shot
+        result = paint(self._scene(held), camera, width, height, params, time=time, threads=self.threads)
+        return images.to_uint8(result.image)
+
+    def band(
+        self,
+        held: Held,
+        job: str | None,
+        region: Region,
+        index: int,
+        shot: tuple[Camera, float],
+        params: PaintParams,
+    ) -> np.ndarray:
+        """The rows of ``region`` of frame ``index``: from ``I_0`` for frame 0, else continuing from this band's
+        painting of ``job``'s frame ``index - 1`` (kept when ``job`` is given): (rows, width, 3) uint8."""
+        camera, time = shot
+        previous = None
+        if index > 0:
+            previous = self.previous.get((job, region), {}).get(index - 1)
+            if previous is None:
+                raise LostState(f"a Ray worker was lost mid-job, and with it a band's frame {index - 1}")
+        result = paint(
+            self._scene(held),
+            camera,
+            region.full_width,
+            region.full_height,
+            params,
+            time=time,
+            previous=previous,
+            region=region,
+            threads=self.threads,
+        )
+        if job is not None:
+            states = self.previous.setdefault((job, region), {})
+            states[index] = result.state
+            for old in [k for k in states if k <= index - KEPT_STATES]:
+                del states[old]
+        return images.to_uint8(result.image)
+
+    def painted(self, job: str, region: Region) -> list[int]:
+        """The frames of ``job`` whose band ``region`` this actor holds, to go on from."""
+        return sorted(self.previous.get((job, region), {}))
+
+    def forget(self, job: str) -> None:
+        self.previous = {key: states for key, states in self.previous.items() if key[0] != job}
+
+    def pid(self) -> int:
+        return os.getpid()
