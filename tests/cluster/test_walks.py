@@ -201,6 +201,12 @@ def test_an_actor_killed_mid_walk_moves_and_the_walk_goes_on(runtime, scenes, re
         assert walks.moved == 1
 
 
+def _rays(args: list[bytes]) -> bool:
+    """Whether a process is Ray's, by the program or script it runs: not a browser the session keeps open, nor
+    the uploads' fork server (``python -c``, whose code lists a sys.path that holds Ray's own folders)."""
+    return args[1:2] != [b"-c"] and any(b"ray" in arg for arg in args[:3])
+
+
 def descendants(pid: int) -> list[int]:
     """The processes ``pid`` started, and theirs."""
     import subprocess
@@ -221,8 +227,8 @@ def test_the_runtime_killed_mid_walk_paints_here_and_no_connection_closes(runtim
             if not stopped and frames[-1] > frames[0] + 3:  # walking on Ray for a while
                 for pid in descendants(os.getpid()):
                     with contextlib.suppress(OSError):  # gone meanwhile
-                        if b"ray" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                            os.kill(pid, signal.SIGKILL)  # Ray's (a browser the session keeps open is not)
+                        if _rays(Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")):
+                            os.kill(pid, signal.SIGKILL)
                 stopped.append((time.monotonic(), service.walks.frames))
 
         frames: list[float] = []
