@@ -66,12 +66,14 @@ def page(browser, live_server):
 # ---- helpers ----
 
 
-def wait_final(page, after_seq: int = 0, camera_id: int | None = None) -> dict:
-    """Wait for a frame at rest (fully refined) newer than ``after_seq`` (showing ``camera_id``); its description."""
+def wait_final(page, after_seq: int = 0, camera_id: int | None = None, current: bool = False) -> dict:
+    """Wait for a frame at rest (fully refined) newer than ``after_seq`` (showing ``camera_id``, or with
+    ``current`` the camera last sent); its description."""
     page.wait_for_function(
-        """([seq, id]) => { const f = rcp.overlay.frame;
-            return f && f.final && f.seq > seq && (id === null || f.camera_id === id); }""",
-        arg=[after_seq, camera_id],
+        """([seq, id, current]) => { const f = rcp.overlay.frame;
+            const want = current ? rcp.state.cameraId : id;
+            return f && f.final && f.seq > seq && (want === null || f.camera_id === want); }""",
+        arg=[after_seq, camera_id, current],
         timeout=WAIT_MS,
     )
     return page.evaluate("rcp.overlay.frame")
@@ -136,9 +138,14 @@ def test_holding_w_walks_forward_and_the_view_follows(page):
     page.keyboard.down("w")
     page.wait_for_timeout(300)  # the key is held this long: that is the input
     page.keyboard.up("w")
-    page.wait_for_function("rcp.walk.velocity.every((v) => v === 0)", timeout=WAIT_MS)
+    # at rest: the keys' velocity gone, and no collision move in flight or left to send (its answer moves the eye)
+    page.wait_for_function(
+        "rcp.walk.velocity.every((v) => v === 0) && rcp.collider.flight === null"
+        " && rcp.collider.pending.every((x) => x === 0)",
+        timeout=WAIT_MS,
+    )
+    wait_final(page, current=True)
     last_id = page.evaluate("rcp.state.cameraId")
-    wait_final(page, camera_id=last_id)
 
     cameras = sent(page, "camera")
     assert len(cameras) >= 3  # one per animation frame while moving, never more
