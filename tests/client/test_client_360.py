@@ -256,7 +256,11 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     page.keyboard.down("w")
     page.wait_for_timeout(300)  # the key is held this long: that is the input
     page.keyboard.up("w")
-    page.wait_for_function("rcp.walk.velocity.every((v) => v === 0)")  # eased to a stop: the last camera sent
+    # eased to a stop, and no collision move in flight or left to send: the last camera sent
+    page.wait_for_function(
+        "rcp.walk.velocity.every((v) => v === 0) && rcp.collider.flight === null"
+        " && rcp.collider.pending.every((x) => x === 0)"
+    )
     page.wait_for_timeout(100)
     cameras = [m for m in page.evaluate("rcp.sent") if m["type"] == "camera"]
     last = cameras[-1]

@@ -47,7 +47,7 @@ def test_a_link_reopens_the_same_view_and_picture_in_a_fresh_browser(browser, li
         page.fill("#own-lambda_p", "2")
         page.dispatch_event("#own-lambda_p", "change")
         page.check("#gravity")
-        wait_final(page, camera_id=page.evaluate("rcp.state.cameraId"))
+        wait_final(page, current=True)
         page.wait_for_function("location.search.includes('objects=')", timeout=WAIT_MS)  # replaceState, throttled
         page.wait_for_timeout(600)  # one more address update at most: the view is at rest
         address = page.url
