@@ -23,6 +23,10 @@ silent address for minutes)."""
 JOIN_RETRY_S = 1.0  # joining at start-up: how often an address that does not answer yet is asked again
 BACKOFF_FIRST_S = 5.0  # after a Ray failure, Ray is not tried for this long; doubled at each failure in a row
 BACKOFF_MOST_S = 300.0
+GCS_PATIENCE_S = 7 * 24 * 3600
+"""How long this process outlives its cluster's head (Ray's ``gcs_rpc_server_reconnect_timeout_s``): by default
+Ray ends the whole driver after 60 s without its GCS, and a server must go on painting here meanwhile (seen: the
+process killed at 60 s; with this, alive at 75 s)."""
 
 
 class ClusterError(RuntimeError):
@@ -102,6 +106,8 @@ def connect(address: str | None = None, num_cpus: int | None = None, **local_opt
         check_address(address)
     if ray.is_initialized():  # joined already (a test's runtime, an earlier job): it stays as it is
         return False
+    # read by the driver's core worker as it starts (an operator's own setting wins)
+    os.environ.setdefault("RAY_gcs_rpc_server_reconnect_timeout_s", str(GCS_PATIENCE_S))
     options: dict[str, Any] = {"log_to_driver": False, "configure_logging": False}
     if address is None:
         options |= {"include_dashboard": False, "num_cpus": num_cpus, **local_options}
