@@ -111,7 +111,7 @@ class Workspace:
                 pair.append(PaintState.empty(region, channels))
                 return pair[-1]
             state = pair[0] if keep is None or pair[0].color is not keep.color else pair[1]
-            pair.remove(state)
-            pair.append(state)  # the least recently given goes first next time
+            # by identity (a state's == compares its arrays); the least recently given goes first next time
+            pair[:] = [other for other in pair if other is not state] + [state]
             state.blank = False
             return state

@@ -53,6 +53,12 @@ def test_a_result_kept_as_the_frame_before_is_never_painted_over():
     third = paint(scene, CAMERA, W, H, params, previous=second.state, workspace=workspace)
     assert third.state.color is first.state.color  # the frame before the one kept is painted over
     np.testing.assert_array_equal(second.image, shown)
+    # kept: the one given first of the two (its arrays come first in the workspace's list)
+    kept = third.image.copy()
+    fourth = paint(scene, CAMERA, W, H, params, previous=third.state, workspace=workspace)
+    again = paint(scene, CAMERA, W, H, params, previous=third.state, workspace=workspace)
+    assert fourth.state.color is second.state.color and again.state.color is second.state.color
+    np.testing.assert_array_equal(third.image, kept)
 
 
 @pytest.mark.parametrize("style", [None, *STYLES])
