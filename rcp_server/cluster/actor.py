@@ -41,6 +41,26 @@ class Held:
     ref: list
 
 
+class WarmScenes:
+    """The scenes an actor keeps built (their trees too), the most recently used last, at most ``most``."""
+
+    def __init__(self, most: int):
+        self.most = most
+        self.built: OrderedDict[str, Scene] = OrderedDict()
+
+    def get(self, held: Held) -> Scene:
+        """``held``'s scene, built here the first time it is asked for."""
+        scene = self.built.get(held.key)
+        if scene is None:
+            scene = Scene(**ray_module().get(held.ref[0]))
+            scene.geometry(0.0)
+            self.built[held.key] = scene
+            while len(self.built) > self.most:
+                self.built.popitem(last=False)
+        self.built.move_to_end(held.key)
+        return scene
+
+
 class LostState(RuntimeError):
     """A temporal band's previous frame is gone: its actor died and Ray restarted it empty."""
 
@@ -55,19 +75,11 @@ class Painter:
 
     def __init__(self, threads: int):
         self.threads = threads
-        self.scenes: OrderedDict[str, Scene] = OrderedDict()
+        self.scenes = WarmScenes(WARM_SCENES)
         self.previous: dict[tuple[str | None, Region], dict[int, PaintState]] = {}
 
     def _scene(self, held: Held) -> Scene:
-        scene = self.scenes.get(held.key)
-        if scene is None:
-            scene = Scene(**ray_module().get(held.ref[0]))
-            scene.geometry(0.0)
-            self.scenes[held.key] = scene
-            while len(self.scenes) > WARM_SCENES:
-                self.scenes.popitem(last=False)
-        self.scenes.move_to_end(held.key)
-        return scene
+        return self.scenes.get(held)
 
     def warm(self, held: Held) -> bool:
         """Build ``held``'s scene now, before the first frame waits for it."""

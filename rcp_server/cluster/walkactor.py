@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import os
 import time
-from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -22,8 +21,7 @@ from ..painting.loop import PaintState, paint
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from ..util import images
-from .actor import Held
-from .connection import ray_module
+from .actor import Held, WarmScenes
 
 WALK_SCENES = 2  # scenes a walk actor keeps built: the one shown and the one just left
 
@@ -55,20 +53,12 @@ class WalkPainter:
 
     def __init__(self, threads: int):
         self.threads = threads
-        self.scenes: OrderedDict[str, Scene] = OrderedDict()
+        self.scenes = WarmScenes(WALK_SCENES)
         self.serial: int | None = None  # the frame whose state is kept
         self.state: PaintState | None = None
 
     def _scene(self, held: Held) -> Scene:
-        scene = self.scenes.get(held.key)
-        if scene is None:
-            scene = Scene(**ray_module().get(held.ref[0]))
-            scene.geometry(0.0)
-            self.scenes[held.key] = scene
-            while len(self.scenes) > WALK_SCENES:
-                self.scenes.popitem(last=False)
-        self.scenes.move_to_end(held.key)
-        return scene
+        return self.scenes.get(held)
 
     def warm(self, held: Held) -> int:
         """Build ``held``'s scene now and paint a tiny frame of it (the compiled kernels load in this process),
