@@ -19,7 +19,7 @@ import numpy as np
 from ..camera.camera import Camera, Region, eye_pixels
 from ..engine import kernels
 from ..painting.loop import paint
-from ..painting.raytrace import visible_faces
+from ..painting.seen import visible_faces
 from ..painting.stereo import partners
 from ..scene.scene import Scene
 from ..scene.scenefile import load_scene

@@ -17,8 +17,8 @@ import numpy as np
 
 from ..camera.camera import Region
 from ..engine.kernels.embree import EmbreexScene
+from ..painting.assign import Rays, assign_cameras, setup_tile
 from ..painting.loop import STAGES, default_threads, paint, tile_rows
-from ..painting.raytrace import Rays, assign_cameras, setup_tile
 from ..scene.scene import Scene
 from ..scene.scenefile import load_scene
 from ..settings.params import PaintParams

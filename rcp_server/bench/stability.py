@@ -26,9 +26,9 @@ from scipy.ndimage import binary_dilation
 
 from ..camera.camera import Camera, CameraError, Region, directions_at
 from ..camera.camera import project as camera_project
+from ..painting.assign import Rays, assign_cameras, displacements, setup_tile
 from ..painting.imagespace import bilinear, lookup_coords
 from ..painting.loop import paint
-from ..painting.raytrace import Rays, assign_cameras, displacements, setup_tile
 from ..scene.meshes import Part, primitive
 from ..scene.scene import Environment, Scene, SceneObject
 from ..scene.scenefile import load_scene

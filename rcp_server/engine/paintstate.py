@@ -1,7 +1,7 @@
 """The data a painting hands from one iteration to the next: per-pixel channels of a region.
 
-Its own module, below everything that paints, so that the painting recursion (``painting.py``) and both
-methods (``raytrace.py``, ``imagespace.py``) share it without importing each other.
+Its own module, below everything that paints, so that the tile loop (``painting/loop.py``) and both methods
+(``raytrace.py``, ``imagespace.py``) share it without importing each other.
 """
 
 from __future__ import annotations
@@ -76,22 +76,6 @@ class PaintState:
         }
         return cls(region, **arrays)
 
-    @classmethod
-    def joined(cls, states: list[PaintState], region: Region) -> PaintState:
-        """The states of consecutive row bands, in order, as one state of ``region``."""
-
-        def cat(name):
-            arrays = [getattr(s, name) for s in states]
-            return None if arrays[0] is None else np.concatenate(arrays)
-
-        joined: dict[str, Any] = {name: cat(name) for name in CHANNELS}
-        return cls(region, **joined)
-
-    def copy(self) -> PaintState:
-        """A state of its own with this one's values."""
-        arrays: dict[str, Any] = {name: None if (a := getattr(self, name)) is None else a.copy() for name in CHANNELS}
-        return PaintState(self.region, blank=self.blank, **arrays)
-
     def recorded(self) -> frozenset[str]:
         """The channels this state holds."""
         return frozenset(name for name in CHANNELS if getattr(self, name) is not None)
@@ -147,5 +131,5 @@ class PaintState:
 
 
 TileIteration = Callable[[PaintState, Stopwatch], PaintState]
-"""The tile interface both methods offer (``raytrace.tile_iteration``, ``imagespace.tile_iteration``): one
+"""The tile interface both methods lend (``raytrace.TracedTile``, ``imagespace.LookupTile``): one
 iteration ``I_{n-1} -> I_n`` of one tile, its stages timed on the stopwatch. The painting runs it."""

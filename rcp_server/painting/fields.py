@@ -7,7 +7,7 @@ and which one each (object, material) pair takes. Its field is then
     ``V_p = lambda_p p (D (1 + surface_scale h) + surface_noise v + noise n)``,  ``V_e`` alike with ``lambda_e``
 
 ``D`` the mapping's field (``mappings.py``), ``n`` the screen noise (a fixed random vector per pixel, in the
-camera's frame: ``raytrace.setup_tile``), and ``h, v`` the **surface noise** (:func:`surface_noise`): one
+camera's frame: ``assign.setup_tile``), and ``h, v`` the **surface noise** (:func:`surface_noise`): one
 seeded value per cell of ``grain`` scene units of the world, so a stroke stays on its wall as the camera
 moves. It is read where the pixel's first ray of the painting met the scene (the plain render's point), not
 where ``I_{n-1}``'s displaced ray did: read there, each iteration's noise moved the point the next one read,

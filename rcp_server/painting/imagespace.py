@@ -15,11 +15,14 @@ Off screen, an integer pixel index ``k`` of a row of ``n`` pixels is mapped back
 
 A pixel whose displaced target is not in front of the eye (``(P_p' - eye) . f <= 0``: it has no
 projection) or whose offset is not finite keeps its own plain value. ``kernels.look_up`` is the
-compiled pass the painting runs (:func:`tile_iteration`); :func:`lookup_coords` and :func:`bilinear` are
+compiled pass the painting runs (:class:`LookupTile`); :func:`lookup_coords` and :func:`bilinear` are
 its plain numpy form (the tests check that they agree).
 """
 
 from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -28,8 +31,8 @@ from ..engine import kernels
 from ..engine.paintstate import PaintState, TileIteration
 from ..settings.params import EDGES, PaintParams
 from ..util.stopwatch import Stopwatch
+from .assign import TileSetup, cameras, setup_tile
 from .fields import Looks
-from .raytrace import TileSetup, cameras
 
 
 def lookup_coords(v_p: np.ndarray, camera: Camera, region: Region) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -121,51 +124,61 @@ def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray, edge: str) -> np.n
     return top * (1.0 - fy) + bottom * fy
 
 
-def tile_iteration(
-    plain: PaintState, setup: TileSetup, params: PaintParams, looks: Looks | None = None
-) -> TileIteration:
-    """One image-space iteration of the tile ``setup`` describes: ``I_{n-1} -> I_n``, each pixel looking up
-    ``plain`` (the full frame's plain render, every recorded channel) where its displaced target projects,
-    one bilinear lookup per pixel at its centre (samples per pixel only antialias the plain render).
+class LookupTile:
+    """One image-space iteration of the tile ``setup`` describes (a ``paintstate.TileIteration``):
+    ``I_{n-1} -> I_n``, each pixel looking up ``plain`` (the full frame's plain render, every recorded channel)
+    where its displaced target projects, one bilinear lookup per pixel at its centre (samples per pixel only
+    antialias the plain render).
 
     Stages: "camera" is the displacement, "shade" the projection and lookup. A state that cannot move a
     pixel (the canvas, a missing channel) leaves it its plain value. ``looks``: the settings per object and
     material (``fields.Looks``), as the traced method takes them.
     """
-    region = setup.region
-    z0 = params.focus(setup.camera)
-    edge = EDGES.index(params.edge)
-    source = kernels.channels(plain)
-    v_p = np.zeros((region.pixel_count, 3))
-    anchor = plain.rows(region).position  # the surface noise is read on the plain render's points
 
-    def iterate(state: PaintState, watch: Stopwatch) -> PaintState:
+    def __init__(self, plain: PaintState, setup: TileSetup, params: PaintParams, looks: Looks | None = None):
+        self.plain, self.setup, self.params, self.looks = plain, setup, params, looks
+        self.z0 = params.focus(setup.camera)
+        self.edge = EDGES.index(params.edge)
+        self.v_p = np.zeros((setup.region.pixel_count, 3))
+        self.anchor = plain.rows(setup.region).position  # the surface noise is read on the plain render's points
+
+    def __call__(self, state: PaintState, watch: Stopwatch) -> PaintState:
+        setup, plain = self.setup, self.plain
         with watch.stage("camera"):
             # V_p, the same fields as the traced method
-            cast = cameras(state, setup, params, z0, looks, anchor=anchor)
+            cast = cameras(state, setup, self.params, self.z0, self.looks, anchor=self.anchor)
             field = cast.target
             if field.kind != kernels.FIELD_ZERO:
                 kernels.fill_field(
                     field=field,
                     plane=setup.image_plane,
                     previous=kernels.channels(state),
-                    z0=float(z0),
+                    z0=float(self.z0),
                     noise=cast.noise,
                     noise_scale=cast.noise_scale,
                     pixels=setup.pixels,
-                    out=v_p,
+                    out=self.v_p,
                 )
         with watch.stage("shade"):
             # every recorded channel, where the displaced ray crosses the image plane
-            new = PaintState.empty(region, plain.recorded())
+            new = PaintState.empty(setup.region, plain.recorded())
             kernels.look_up(
-                v_p=v_p,
+                v_p=self.v_p,
                 moves=field.kind != kernels.FIELD_ZERO,
                 plane=setup.image_plane,
-                edge=edge,
-                plain=source,
+                edge=self.edge,
+                plain=kernels.channels(plain),
                 out=kernels.channels(new),
             )
         return new
 
-    return iterate
+
+class LookupTiles:
+    """The image-space method's evaluator (``loop.Tiles``): each tile's iterations look up ``plain``."""
+
+    def __init__(self, plain: PaintState, camera: Camera, params: PaintParams, looks: Looks):
+        self.plain, self.camera, self.params, self.looks = plain, camera, params, looks
+
+    @contextmanager
+    def lend(self, tile: Region, reads: PaintState | None) -> Iterator[TileIteration]:
+        yield LookupTile(self.plain, setup_tile(self.camera, tile, self.params), self.params, self.looks)

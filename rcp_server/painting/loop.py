@@ -1,8 +1,11 @@
 """The recursion ``I_n = F(I_{n-1}, S(n))``: previous per-pixel data -> per-pixel cameras -> new data.
 
-Each iteration has the four stages of ``stopwatch.STAGES``, timed separately. How an iteration sees
-its displaced targets is the method's: traced (``raytrace.py``) or looked up in the plain render
-(``imagespace.py``); both offer the same tile interface (``paintstate.TileIteration``).
+The loop owns the painting, as pbrt-v4's ``ImageTileIntegrator::Render`` owns its tiles: :func:`paint` builds
+the :class:`Job`, asks the method for its :class:`Pass` es, and runs each on every tile (:class:`TileLoop`). A
+method only plans passes; what evaluates one tile's iteration is the pass's ``tiles``: traced
+(``raytrace.TracedTiles``) or looked up in the plain render (``imagespace.LookupTiles``), both lending the same
+tile interface (``paintstate.TileIteration``). Each iteration has the four stages of ``stopwatch.STAGES``,
+timed separately.
 
 A pixel reads only its own previous value, so the image splits into tiles that run every iteration
 independently: tiles go to threads, and a tile gives exactly the pixels of the same region of a full
@@ -14,7 +17,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Iterator
 from concurrent.futures import Executor, ThreadPoolExecutor
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Protocol
@@ -26,8 +29,10 @@ from ..engine.paintstate import Abandoned, PaintState, TileIteration
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from ..util.stopwatch import STAGES, Stopwatch, total
-from . import imagespace, raytrace, stereo
-from .raytrace import setup_tile
+from . import stereo
+from .frame import Frame
+from .imagespace import LookupTiles
+from .raytrace import TracedTiles
 from .workspace import Workspace
 
 __all__ = [
@@ -105,8 +110,10 @@ def paint(
         scene, camera, width, height, params, time, previous, region, threads, keep_iterations, pool, should_stop,
         workspace or Workspace(),
     )  # fmt: skip
-    method: Method = ImageSpace(job) if params.method == "image" else Traced(job)
-    seconds = method.paint(TileLoop(job))
+    loop = TileLoop(job)
+    seconds: list[dict[str, float]] = []
+    for step in METHODS[params.method](job):
+        seconds += loop.run(step)
     return PaintResult(job.result, total(seconds), job.keep or [])
 
 
@@ -140,7 +147,7 @@ class Job:
     threads: int
     pool: Executor | None
     should_stop: Callable[[], bool] | None
-    frame: raytrace.Frame  # the scene as every tile's kernels take it, once
+    frame: Frame  # the scene as every tile's kernels take it, once
     tiles: list[Region]
     keep: list[np.ndarray] | None  # (h, w, 3) float32 per iteration, when kept
     workspace: Workspace
@@ -173,7 +180,7 @@ class Job:
             threads=threads,
             pool=pool,
             should_stop=should_stop,
-            frame=raytrace.Frame.of(scene, time, camera, params, width, height),
+            frame=Frame.of(scene, time, camera, params, width, height),
             tiles=region.tiles(tile_rows(region, threads, params.spp * params.iterations)),
             keep=[np.empty((height, width, 3), np.float32) for _ in range(params.iterations)]
             if keep_iterations
@@ -184,160 +191,99 @@ class Job:
         )
 
 
-class Method(Protocol):
-    """A way to paint (as pbrt-v4's integrators plug into ``ImageTileIntegrator::Render``): the iteration of
-    each tile that the loop runs, lent its buffers for a run, and the runs a whole painting takes."""
+class Tiles(Protocol):
+    """What evaluates one tile's iteration (pbrt-v4's ``EvaluatePixelSample``, a tile at a time): for a pass,
+    the tile's iteration with its buffers, lent for the ``with`` block. ``reads``: the tile's rows of what the
+    displacement fields read instead of the tile's own state (the eyes of a stereo painting sharing smudges)."""
 
-    def lend(self, tile: Region) -> AbstractContextManager[TileIteration]: ...
+    def lend(self, tile: Region, reads: PaintState | None) -> AbstractContextManager[TileIteration]: ...
 
-    def paint(self, loop: TileLoop) -> list[dict[str, float]]: ...
+
+@dataclass(frozen=True)
+class Pass:
+    """One run of the tile loop: ``iterations`` iterations of every tile by ``tiles``, from ``start``'s rows
+    (None: the canvas ``I_0``), the last into ``into``'s rows. ``keep``: full images, one per iteration, that
+    get each iteration's color; ``reads``: what the fields read instead of each tile's own state."""
+
+    tiles: Tiles
+    start: PaintState | None
+    iterations: int
+    into: PaintState
+    keep: list[np.ndarray] | None = None
+    reads: PaintState | None = None
+
+
+def traced(job: Job) -> Iterator[Pass]:
+    """The traced method's passes: every iteration of every tile in one pass. With shared eyes, one pass an
+    iteration, each reading what the eyes share of the one before (``stereo.shared_sources``)."""
+    tiles = TracedTiles(job.frame, job.camera, job.params, job.workspace, job.tiles, keeps_anchor=job.shared)
+    if not job.shared:
+        yield Pass(tiles, job.previous, job.params.iterations, job.result, job.keep)
+        return
+    sources: np.ndarray | None = None  # the pixel each pixel's fields read, found once
+    for n in range(job.params.iterations):
+        start = job.previous if n == 0 else job.result
+        reads = None
+        if start is not None:
+            if sources is None:
+                sources = stereo.shared_sources(job.scene, job.time, job.camera, job.region)
+            reads = start.gathered(sources)
+        keep = job.keep[n : n + 1] if job.keep is not None else None
+        yield Pass(tiles, start, 1, job.result, keep, reads)
+
+
+def image_space(job: Job) -> Iterator[Pass]:
+    """The image-space method's passes: the plain render traced, then every later iteration looked up in it
+    (in temporal mode every iteration looks up)."""
+    plain = PaintState.empty(job.region, job.params.reads())
+    temporal = job.previous is not None
+    keep = job.keep
+    # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
+    traced_tiles = TracedTiles(job.frame, job.camera, job.params, job.workspace, job.tiles)
+    yield Pass(traced_tiles, None, 1, plain, keep[:1] if keep is not None and not temporal else None)
+    # ---- the later iterations (all of them in temporal mode), looked up tile by tile ----
+    lookups = job.params.iterations if temporal else job.params.iterations - 1
+    kept = (keep if temporal else keep[1:]) if keep is not None else None
+    looked_up = LookupTiles(plain, job.camera, job.params, job.frame.looks)
+    yield Pass(looked_up, job.previous if temporal else plain, lookups, job.result, kept)
+
+
+METHODS: dict[str, Callable[[Job], Iterator[Pass]]] = {"raytrace": traced, "image": image_space}
+"""Each painting method (``PaintParams.method``) by name: the passes it plans for a job."""
 
 
 class TileLoop:
-    """Runs a method's iterations over the tiles of one painting, on the pool: the one loop of every method."""
+    """Runs the passes of one painting over its tiles, on the pool: the one loop of every method."""
 
     def __init__(self, job: Job):
         self.job = job
 
-    def map(self, work: Callable, items: list) -> list:
-        """``work`` of every item, on the painting's pool (or its own threads, or here)."""
+    def run(self, step: Pass) -> list[dict[str, float]]:
+        """Every tile of ``step``, on the painting's pool (or its own threads, or here): each tile's stage
+        seconds."""
         job = self.job
+        work = partial(self.tile, step)
+        tiles = list(range(len(job.tiles)))
         if job.pool is not None:
-            return list(job.pool.map(work, items))
-        if job.threads == 1 or len(items) == 1:
-            return [work(item) for item in items]
+            return list(job.pool.map(work, tiles))
+        if job.threads == 1 or len(tiles) == 1:
+            return [work(n) for n in tiles]
         with ThreadPoolExecutor(job.threads, thread_name_prefix="rcp-tile") as own:
-            return list(own.map(work, items))
+            return list(own.map(work, tiles))
 
-    def run(
-        self,
-        method: Method,
-        start: PaintState | None,
-        iterations: int,
-        keep: list[np.ndarray] | None,
-        into: PaintState | None = None,
-        beside: Callable[[], None] | None = None,
-    ) -> list[dict[str, float]]:
-        """Every tile: ``iterations`` of ``method`` from ``start``'s rows (None: the canvas), the last into
-        ``into``'s rows (default the painting's result); each tile's stage seconds. ``beside``: a job for the
-        same pool at the same time, started first, on a core of its own, so that it ends with the tiles
-        (queued last, it ran alone once they were done, the other cores idle)."""
-        work = partial(self.tile, method, start, iterations, keep, self.job.result if into is None else into)
-        tiles = list(range(len(self.job.tiles)))
-        if beside is None:
-            return self.map(work, tiles)
-        return self.map(partial(_beside_first, beside, work), [None, *tiles])[1:]
-
-    def tile(
-        self,
-        method: Method,
-        start: PaintState | None,
-        iterations: int,
-        keep: list[np.ndarray] | None,
-        into: PaintState,
-        n: int,
-    ) -> dict[str, float]:
-        """``iterations`` iterations of tile ``n``: its stage seconds. ``keep`` (full images, one per iteration)
-        gets each iteration's color at the tile's rows."""
+    def tile(self, step: Pass, n: int) -> dict[str, float]:
+        """The pass's iterations of tile ``n``: its stage seconds."""
         tile, should_stop = self.job.tiles[n], self.job.should_stop
-        state = PaintState.canvas(tile) if start is None else start.rows(tile)
+        state = PaintState.canvas(tile) if step.start is None else step.start.rows(tile)
         watch = Stopwatch()
-        with method.lend(tile) as iterate:
-            for iteration in range(iterations):
+        with step.tiles.lend(tile, None if step.reads is None else step.reads.rows(tile)) as iterate:
+            for iteration in range(step.iterations):
                 if should_stop is not None and should_stop():
                     raise Abandoned
                 state = iterate(state, watch)
                 with watch.stage("bookkeeping"):
-                    if keep is not None:
-                        state.paste_color(keep[iteration])
+                    if step.keep is not None:
+                        state.paste_color(step.keep[iteration])
             with watch.stage("bookkeeping"):
-                state.write_into(into.rows(tile))
+                state.write_into(step.into.rows(tile))
         return watch.seconds
-
-
-def _beside_first(beside: Callable[[], None], work: Callable[[int], dict[str, float]], n: int | None):
-    """``beside()`` for the item None, else ``work(n)``."""
-    if n is None:
-        beside()
-        return None
-    return work(n)
-
-
-class Traced:
-    """Every ray traced: each tile's iterations are a :class:`raytrace.TracedTile`, set up once a painting.
-    With shared eyes, one iteration at a time over the whole painting, each reading what the eyes share of
-    the one before."""
-
-    def __init__(self, job: Job):
-        self.job = job
-        self.painters: dict[Region, raytrace.TracedTile] = {}
-        self.sources: np.ndarray | None = None  # with shared eyes: the pixel each pixel's fields read
-        reads = job.params.reads()
-        capacity = max(tile.pixel_count for tile in job.tiles)
-        self.buffers = partial(job.workspace.tile_buffers, capacity, job.params.spp, job.frame.trace.masked, reads)
-
-    def painter(self, tile: Region) -> raytrace.TracedTile:
-        """The tile's traced iterations (the same over the runs of a painting)."""
-        if tile not in self.painters:
-            job = self.job
-            setup = setup_tile(job.camera, tile, job.params)
-            self.painters[tile] = raytrace.TracedTile(job.frame, setup, job.params, keeps_anchor=job.shared)
-        return self.painters[tile]
-
-    @contextmanager
-    def lend(self, tile: Region) -> Iterator[TileIteration]:
-        painter = self.painter(tile)
-        with self.buffers() as buffers:
-            painter.bind(buffers)
-            yield painter
-
-    def paint(self, loop: TileLoop) -> list[dict[str, float]]:
-        return self.iterate(loop, self.job.previous, self.job.params.iterations, self.job.keep)
-
-    def iterate(
-        self, loop: TileLoop, start: PaintState | None, iterations: int, keep: list[np.ndarray] | None
-    ) -> list[dict[str, float]]:
-        """``iterations`` traced iterations of every tile from ``start`` (None: the canvas) into the result."""
-        job = self.job
-        if not job.shared:
-            return loop.run(self, start, iterations, keep)
-        seconds: list[dict[str, float]] = []
-        for n in range(iterations):
-            states = start if n == 0 else job.result
-            source = None
-            if states is not None:
-                if self.sources is None:
-                    self.sources = stereo.shared_sources(job.scene, job.time, job.camera, job.region)
-                source = states.gathered(self.sources)
-            for tile in job.tiles:
-                self.painter(tile).source = source.rows(tile) if source is not None else None
-            seconds += loop.run(self, states, 1, keep[n : n + 1] if keep is not None else None)
-        return seconds
-
-
-class ImageSpace:
-    """The image-space method: the plain render traced, every later iteration looked up in it tile by tile
-    (``imagespace.tile_iteration``); in temporal mode every iteration looks up."""
-
-    def __init__(self, job: Job):
-        self.job = job
-        self.plain = PaintState.empty(job.region, job.params.reads())
-
-    @contextmanager
-    def lend(self, tile: Region) -> Iterator[TileIteration]:
-        job = self.job
-        yield imagespace.tile_iteration(
-            self.plain, setup_tile(job.camera, tile, job.params), job.params, job.frame.looks
-        )
-
-    def paint(self, loop: TileLoop) -> list[dict[str, float]]:
-        job = self.job
-        temporal = job.previous is not None
-        keep = job.keep
-        # ---- the plain render, traced: iteration 1 of a new painting, the source of every lookup ----
-        plain = loop.run(Traced(job), None, 1, keep[:1] if keep is not None and not temporal else None, into=self.plain)
-        # ---- the later iterations (all of them in temporal mode), looked up tile by tile ----
-        start = job.previous if temporal else self.plain
-        lookups = job.params.iterations if temporal else job.params.iterations - 1
-        kept = (keep if temporal else keep[1:]) if keep is not None else None
-        return plain + loop.run(self, start, lookups, kept)

@@ -1,7 +1,7 @@
 """Outlines, a shading result: ink where the object, the surface normal or the depth jumps between
 neighbouring pixels of the frame camera's plain view (the paper's "nonphotorealistic shaders").
 
-What the pixel centres see is traced once a painting (``raytrace.ink``, the one caller of :func:`edges`); a
+What the pixel centres see is traced once a painting (:func:`ink`, the one caller of :func:`edges`); a
 pixel gets ink where it and a neighbour (right or below) show different objects, normals more than
 ``CREASE_DEGREES`` apart, or depths more than ``DEPTH_JUMP`` apart (relative). Shading then inks a hit of a
 material with an outline when it lies on the surface its pixel of that view saw (``kernels.shade``): every
@@ -17,6 +17,7 @@ import numpy as np
 from ..camera.camera import Camera, Region, directions_at, eye_pixels, pixel_frames
 from ..engine import kernels
 from ..scene.scene import Geometry
+from .seen import visible_faces
 
 CREASE_DEGREES = 40.0  # a fold sharper than this is drawn (a smooth sphere's facets are not)
 DEPTH_JUMP = 0.1  # a step in depth of more than a tenth is drawn (a floor seen at a grazing angle is not)
@@ -57,3 +58,26 @@ def edges(face: np.ndarray, distance: np.ndarray, camera: Camera, geometry: Geom
         ink[a] |= jump
         ink[b] |= jump
     return ink.astype(np.uint8).ravel(), np.where(hit, distance, 0.0).astype(np.float32)
+
+
+INK_BAND = 1 << 14  # pixels of the ink's pass at a time: its float64 work costs some 300 bytes a pixel
+
+
+def ink(scene, time: float, camera: Camera, width: int, height: int) -> kernels.Ink:
+    """The ink of a painting of ``scene`` at ``time`` seen by ``camera`` at ``width x height``; none (no pass
+    at all) unless some material draws outlines."""
+    geometry, tracer = scene.geometry(time)
+    if tracer is None or not (geometry.material_outline > 0).any():
+        return NO_INK
+    grid, far = np.zeros(width * height, np.uint8), np.zeros(width * height, np.float32)
+    band = max(1, INK_BAND // width)
+    for y0 in range(0, height, band):
+        # a band and the first row of the next: an edge between the two inks both sides
+        rows = Region(width, height, 0, y0, width, min(band + 1, height - y0))
+        seen = kernels.Seen.empty(rows.width, rows.height)
+        visible_faces(scene, time, camera, rows, seen)
+        ink, distance = edges(seen.face, seen.distance, camera, geometry, rows)
+        at = slice(y0 * width, (y0 + rows.height) * width)
+        np.maximum(grid[at], ink, out=grid[at])
+        far[at] = distance
+    return kernels.Ink(True, grid, far)

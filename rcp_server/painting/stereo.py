@@ -15,7 +15,7 @@ import numpy as np
 from ..camera.camera import Camera, Region, directions_at, eye_pixels, pixel_frames, project
 from ..engine import kernels
 from ..scene.scene import Scene
-from . import raytrace
+from .seen import visible_faces
 
 SAME_POINT = 0.01
 """Two eyes' hits count as one surface point within this share of its distance, or within 1.5 pixels' width
@@ -76,7 +76,7 @@ def shared_sources(scene: Scene, time: float, camera: Camera, region: Region) ->
     """Which pixel of the painting each pixel reads its displacement from when the eyes share their smudges:
     a right-eye pixel its left partner (:func:`partners`), every other pixel itself."""
     seen = kernels.Seen.empty(region.full_width, region.full_height)
-    raytrace.visible_faces(scene, time, camera, region, seen)
+    visible_faces(scene, time, camera, region, seen)
     source = np.arange(region.pixel_count)
     pair = partners(camera, region, seen)
     side, _, _ = eye_pixels(camera, region, *region.pixel_coords())

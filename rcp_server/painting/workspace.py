@@ -12,13 +12,75 @@ from __future__ import annotations
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera.camera import Region
+from ..camera.camera import RAY_DTYPE, Region
+from ..engine import kernels
+from ..engine.kernels.embree import Hits
 from ..engine.paintstate import CHANNELS, PaintState, channel_shape
 from ..settings.params import PaintParams
-from .raytrace import TileBuffers
+
+
+@dataclass(eq=False)  # lent and given back by identity: the same arrays, not equal ones
+class TileBuffers:
+    """The buffers of one tile's traced iterations, lent to one tile at a time (``workspace.Workspace``): the
+    kernels' :class:`kernels.Scratch` and the two states an iteration alternates between, for tiles of up to
+    ``capacity`` pixels. A large allocation inside a kernel costs more than the kernel, and a painting needs
+    only as many of these as it runs tiles at once, however large it is."""
+
+    scratch: kernels.Scratch
+    states: tuple[PaintState, PaintState]
+    anchor: np.ndarray | None  # (capacity, 3) float32 the plain render's points, when the states record them
+    capacity: int  # pixels
+    spp: int
+
+    @classmethod
+    def allocate(cls, capacity: int, spp: int, masked: bool, channels: frozenset[str]) -> TileBuffers:
+        """Buffers for tiles of up to ``capacity`` pixels at ``spp`` samples; ``masked``: rays may pass
+        cut-outs (their lists then have a row per ray); ``channels``: what the states record beside color."""
+        rays = capacity * spp
+        cut = rays if masked else 1
+        scratch = kernels.Scratch(
+            v_p=np.empty((capacity, 3)),
+            v_e=np.empty((capacity, 3)),
+            origins=np.empty((rays, 3), RAY_DTYPE),
+            directions=np.empty((rays, 3), RAY_DTYPE),
+            hits=Hits.empty(rays),
+            every=np.arange(rays),
+            starts=np.empty((cut, 3), RAY_DTYPE),
+            todo=np.empty(cut, np.int64),
+            next_todo=np.empty(cut, np.int64),
+        )
+        whole = Region(capacity, 1)
+        states = (PaintState.empty(whole, channels), PaintState.empty(whole, channels))
+        anchor = np.empty((capacity, 3), np.float32) if "position" in channels else None
+        return cls(scratch, states, anchor, capacity, spp)
+
+    def fit(self, region: Region) -> tuple[kernels.Scratch, tuple[PaintState, PaintState], np.ndarray | None]:
+        """Views of these buffers for ``region``'s pixels (at most ``capacity``): the scratch, the two states
+        and the anchor."""
+        n = region.pixel_count
+        if n > self.capacity:
+            raise ValueError(f"a tile of {n} pixels does not fit buffers for {self.capacity}")
+        rays = n * self.spp
+        s = self.scratch
+        cut = slice(None) if len(s.todo) == 1 else slice(rays)
+        scratch = kernels.Scratch(
+            v_p=s.v_p[:n],
+            v_e=s.v_e[:n],
+            origins=s.origins[:rays],
+            directions=s.directions[:rays],
+            hits=Hits(*(a[:rays] for a in s.hits)),
+            every=s.every[:rays],
+            starts=s.starts[cut],
+            todo=s.todo[cut],
+            next_todo=s.next_todo[cut],
+        )
+        states = (self.states[0].first(n, region), self.states[1].first(n, region))
+        return scratch, states, None if self.anchor is None else self.anchor[:n]
+
 
 FLOAT = np.dtype(np.float32).itemsize
 

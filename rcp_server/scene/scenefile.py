@@ -427,11 +427,6 @@ def mesh_scene(path: Path) -> Scene:
     return model_scene(model, Path(path).stem, Path(path).name)
 
 
-def parts_scene(parts: list[Part], name: str, title: str) -> Scene:
-    """Parts of a model as a scene (:func:`model_scene` of a model with no cameras or lights)."""
-    return model_scene(Model(parts), name, title)
-
-
 def _unique(names: list[str]) -> list[str]:
     seen: dict[str, int] = {}
     out = []

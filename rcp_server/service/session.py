@@ -29,7 +29,7 @@ from ..cluster.admission import Full
 from ..cluster.connection import ClusterError
 from ..cluster.walkactor import Painted
 from ..painting.loop import Abandoned, PaintState, Workspace
-from ..painting.raytrace import object_pixels, pick
+from ..painting.picking import object_pixels, pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
 from ..scene.walking import walk

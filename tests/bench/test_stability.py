@@ -20,9 +20,9 @@ from rcp_server.bench.stability import (
     thin_poles_scene,
 )
 from rcp_server.camera.camera import Camera, CameraError, Region
+from rcp_server.painting.assign import displacements, setup_tile
 from rcp_server.painting.imagespace import bilinear, lookup_coords
 from rcp_server.painting.loop import paint
-from rcp_server.painting.raytrace import displacements, setup_tile
 from rcp_server.settings.mappings import MAPPINGS
 from rcp_server.settings.params import EDGES, PaintParams
 

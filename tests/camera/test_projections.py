@@ -24,7 +24,7 @@ from rcp_server.engine.kernels.projection import centre_frame, locate, target_of
 from rcp_server.engine.paintstate import PaintState
 from rcp_server.painting.imagespace import bilinear, lookup_coords
 from rcp_server.painting.loop import paint
-from rcp_server.painting.raytrace import visible_faces
+from rcp_server.painting.seen import visible_faces
 from rcp_server.painting.stereo import partners
 from rcp_server.scene.meshes import primitive
 from rcp_server.scene.scene import Environment, Light, SceneObject

@@ -10,7 +10,7 @@ import json
 import numpy as np
 
 from rcp_server.bench.harness import BackgroundServer
-from rcp_server.painting.raytrace import object_pixels
+from rcp_server.painting.picking import object_pixels
 from rcp_server.service.session import pick_mask
 
 from .test_client import SIZE, WAIT_MS, browser, canvas, click_view, client, set_slider, wait_final  # noqa: F401

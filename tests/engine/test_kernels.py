@@ -13,9 +13,9 @@ from rcp_server.camera.camera import Camera, Region, pixel_frames, sample_target
 from rcp_server.engine import kernels
 from rcp_server.engine.kernels.embree import Hits
 from rcp_server.engine.paintstate import CHANNELS, channel_shape
+from rcp_server.painting.assign import displacements, setup_tile
 from rcp_server.painting.loop import PaintState
 from rcp_server.painting.outlines import NO_INK
-from rcp_server.painting.raytrace import displacements, setup_tile
 from rcp_server.settings.params import PaintParams
 
 KINDS = {

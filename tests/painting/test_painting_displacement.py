@@ -6,8 +6,8 @@ from conftest import CAMERA, facing_plane, gradient, make_scene
 from painting_helpers import H, W, hit_points
 
 from rcp_server.camera.camera import Camera, Region
+from rcp_server.painting.assign import displacements, setup_tile
 from rcp_server.painting.loop import PaintState, paint
-from rcp_server.painting.raytrace import displacements, setup_tile
 from rcp_server.settings.mappings import register_mapping
 from rcp_server.settings.params import PaintParams
 

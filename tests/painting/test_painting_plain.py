@@ -6,8 +6,8 @@ from conftest import CAMERA, make_scene
 from painting_helpers import H, W
 
 from rcp_server.camera.camera import Region
+from rcp_server.painting.assign import displacements, setup_tile
 from rcp_server.painting.loop import paint
-from rcp_server.painting.raytrace import displacements, setup_tile
 from rcp_server.settings.mappings import BUILT_IN
 from rcp_server.settings.params import PaintParams
 

@@ -8,9 +8,9 @@ from conftest import CAMERA
 from painting_helpers import H, W
 
 from rcp_server.camera.camera import Region
+from rcp_server.painting.assign import displacements, setup_tile
 from rcp_server.painting.fields import surface_noise
 from rcp_server.painting.loop import paint
-from rcp_server.painting.raytrace import displacements, setup_tile
 from rcp_server.settings.params import PaintParams
 
 SHIFT = 5  # pixels between the two cameras' views of the plane

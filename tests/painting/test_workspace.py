@@ -8,7 +8,7 @@ from painting_helpers import H, W
 from test_outlines import _scene as inked_scene
 
 from rcp_server.camera.camera import Camera, Region
-from rcp_server.painting import raytrace
+from rcp_server.painting import outlines
 from rcp_server.painting.loop import Workspace, paint, tile_rows
 from rcp_server.painting.workspace import pixel_bytes, state_bytes
 from rcp_server.settings.mappings import BUILT_IN
@@ -73,10 +73,10 @@ def test_a_painted_pixel_is_declared_within_the_budget_in_every_mapping_and_styl
 
 def test_the_ink_found_a_band_at_a_time_is_the_ink_of_the_whole_image(monkeypatch):
     scene = inked_scene(1.0)
-    whole = raytrace.ink(scene, 0.0, CAMERA, W, H)
+    whole = outlines.ink(scene, 0.0, CAMERA, W, H)
     assert whole.ink.dtype == np.uint8 and whole.ink.any()
-    monkeypatch.setattr(raytrace, "INK_BAND", 3 * W)  # bands of three rows and the first row of the next
-    banded = raytrace.ink(scene, 0.0, CAMERA, W, H)
+    monkeypatch.setattr(outlines, "INK_BAND", 3 * W)  # bands of three rows and the first row of the next
+    banded = outlines.ink(scene, 0.0, CAMERA, W, H)
     np.testing.assert_array_equal(banded.ink, whole.ink)
     np.testing.assert_array_equal(banded.distance, whole.distance)
 

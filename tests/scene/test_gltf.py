@@ -235,21 +235,21 @@ def test_the_geometry_keeps_a_models_textures_without_copying_them(tmp_path):
 def test_a_scene_without_cut_outs_never_enters_the_alpha_pass(tmp_path, monkeypatch):
     """The pass is skipped unless a scene has cut-outs: a tile's compiled iteration reads it from its
     ``Trace``, and the pass of what pixel centres see (outlines, picks, shared eyes) never calls it."""
-    from rcp_server.painting import raytrace
+    from rcp_server.painting import frame, picking, seen
 
     def refuse(*args):
         raise AssertionError("the alpha pass ran for a scene without cut-outs")
 
-    monkeypatch.setattr(raytrace, "pass_masked", refuse)
+    monkeypatch.setattr(seen, "pass_masked", refuse)
     scene = _unlit_scene(_cut_out_quad(tmp_path, mode="OPAQUE"))
-    assert not raytrace.Frame.of(scene, 0.0, CAMERA, PaintParams()).trace.masked
+    assert not frame.Frame.of(scene, 0.0, CAMERA, PaintParams()).trace.masked
     for spp in (1, 2):
         paint(scene, CAMERA, W, H, PaintParams(iterations=2, spp=spp, lambda_p=2.0), threads=1)
-    raytrace.pick(scene, 0.0, CAMERA, W, H, W // 2, H // 2)
+    picking.pick(scene, 0.0, CAMERA, W, H, W // 2, H // 2)
     masked = _unlit_scene(_cut_out_quad(tmp_path, mode="MASK", name="masked.glb"))
-    assert raytrace.Frame.of(masked, 0.0, CAMERA, PaintParams()).trace.masked
+    assert frame.Frame.of(masked, 0.0, CAMERA, PaintParams()).trace.masked
     with pytest.raises(AssertionError, match="alpha pass ran"):  # the same patch does see a scene with them
-        raytrace.pick(masked, 0.0, CAMERA, W, H, W // 2, H // 2)
+        picking.pick(masked, 0.0, CAMERA, W, H, W // 2, H // 2)
 
 
 def test_a_malformed_gltf_json_yields_what_it_can_and_never_raises():

@@ -184,7 +184,7 @@ class Scratch(NamedTuple):
 
 class Seen(NamedTuple):
     """What the camera sees at the pixel centres of a ``width x height`` image: the hits of its plain render's
-    rays, row-major (``raytrace.visible_faces``): where outlines are drawn, which surface point the other eye
+    rays, row-major (``seen.visible_faces``): where outlines are drawn, which surface point the other eye
     of a stereo pair sees (``stereo.partners``), what a click picks."""
 
     face: np.ndarray  # (height * width,) int32, -1: the sky

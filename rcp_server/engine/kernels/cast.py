@@ -91,7 +91,6 @@ def cast_rays(
     target, eye_field : bundles.Field of V_p (scale lambda_p * p) and of V_e (scale lambda_e)
     noise : (n, 3) world-space random vectors, added to both fields times noise_scale
     pixels : (m,) int64 the pixels to cast, ascending: sample k of the m-th listed pixel is ray m * spp + k
-    (a painting that reuses unchanged pixels casts only the others)
     v_p, v_e : (n, 3) float64 out: the displacements (scratch owned by the caller: a large allocation
     inside a kernel costs more than the whole pass); a field of kind FIELD_ZERO is not written
     origins, directions : (n*spp, 3) float32 out (the first m*spp rows): P_e' = eye_ij + V_e, unit direction to
