@@ -6,7 +6,7 @@ import sys
 
 import numpy as np
 import pytest
-from conftest import SPINNING_BOX
+from helpers.scenes import SPINNING_BOX
 from PIL import Image
 
 from rcp_server.camera.camera import Camera

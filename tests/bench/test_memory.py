@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from conftest import SPINNING_BOX
+from helpers.scenes import SPINNING_BOX
 
 from rcp_server.bench.memory import measure
 

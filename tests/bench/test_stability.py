@@ -5,7 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA, make_scene
+from helpers.scenes import CAMERA, make_scene
 
 from rcp_server.bench.stability import (
     BROKEN,

@@ -7,7 +7,7 @@ own painting, and the image-space lookup through the inverse map.
 import numba
 import numpy as np
 import pytest
-from conftest import facing_plane, make_scene, noise_texture, sphere, translate, wavy_sky
+from helpers.scenes import facing_plane, make_scene, noise_texture, sphere, translate, wavy_sky
 
 from rcp_server.bench.projection import rivalry
 from rcp_server.camera.camera import (

@@ -1,5 +1,4 @@
-"""The browser client's tests: the service's real server and one headless Chromium (tests/service/conftest.py)."""
+"""The browser client's fixtures: the service's real server (``tests/service/conftest.py``). Every module here
+drives a headless Chromium (``helpers/browser.py``) and marks itself ``pytestmark = needs_chromium``."""
 
-from service.conftest import CHROMIUM, SOFTWARE_WEBGL, chromium, live_server  # noqa: F401 (live_server: a fixture)
-
-__all__ = ["CHROMIUM", "SOFTWARE_WEBGL", "chromium"]
+from service.conftest import live_server  # noqa: F401 (a fixture)

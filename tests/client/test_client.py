@@ -8,99 +8,36 @@ is checked as pixel equality.
 
 from __future__ import annotations
 
-import base64
-import contextlib
-import io
 import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PIL import Image
+from helpers.browser import (
+    SIZE,
+    WAIT_MS,
+    canvas,
+    click_view,
+    client,
+    difference,
+    needs_chromium,
+    sent,
+    set_slider,
+    wait_final,
+)
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.loop import paint
 from rcp_server.service import protocol
 from rcp_server.settings.params import PaintParams
 
-from .conftest import CHROMIUM, chromium
-
-SIZE = (480, 270)  # the painting's size (small: fast frames); the window is larger, so the panel is open
-WINDOW = (1024, 576)
-WAIT_MS = 30_000  # two shared cores: a refined frame may take a few seconds under load
-
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
-
-
-@pytest.fixture(scope="module")
-def browser():
-    with chromium() as launched:
-        yield launched
-
-
-@contextlib.contextmanager
-def client(browser, url: str, scene: str = "default", wait: bool = True, touch: bool = False, fragment: str = ""):
-    """The client on ``scene`` (its first refined frame shown unless ``wait`` is false); fails on console errors."""
-    viewport = {"width": WINDOW[0], "height": WINDOW[1]}
-    context = browser.new_context(viewport=viewport, accept_downloads=True, has_touch=touch)
-    page = context.new_page()
-    problems = []
-    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: problems.append(str(e)))
-    page.goto(f"{url}/?scene={scene}&width={SIZE[0]}&height={SIZE[1]}{fragment}")
-    if wait:
-        wait_final(page)
-    try:
-        yield page
-    finally:
-        context.close()
-    assert problems == [], f"console errors: {problems}"
+pytestmark = needs_chromium
 
 
 @pytest.fixture
 def page(browser, live_server):
     with client(browser, live_server.url) as page:
         yield page
-
-
-# ---- helpers ----
-
-
-def wait_final(page, after_seq: int = 0, camera_id: int | None = None, current: bool = False) -> dict:
-    """Wait for a frame at rest (fully refined) newer than ``after_seq`` (showing ``camera_id``, or with
-    ``current`` the camera last sent); its description."""
-    page.wait_for_function(
-        """([seq, id, current]) => { const f = rcp.overlay.frame;
-            const want = current ? rcp.state.cameraId : id;
-            return f && f.final && f.seq > seq && (want === null || f.camera_id === want); }""",
-        arg=[after_seq, camera_id, current],
-        timeout=WAIT_MS,
-    )
-    return page.evaluate("rcp.overlay.frame")
-
-
-def canvas(page) -> np.ndarray:
-    """The canvas's pixels: (height, width, 3) uint8."""
-    url = page.evaluate("rcp.canvas.toDataURL('image/png')")
-    return np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"))
-
-
-def difference(a: np.ndarray, b: np.ndarray) -> float:
-    return float(np.abs(a.astype(np.int16) - b.astype(np.int16)).mean())
-
-
-def sent(page, kind: str | None = None) -> list[dict]:
-    return page.evaluate("([kind]) => rcp.sent.filter((m) => kind === null || m.type === kind)", [kind])
-
-
-def click_view(page, x: int, y: int) -> None:
-    """A click (no drag) on pixel (x, y) of the painting, wherever the canvas shows it."""
-    box = page.locator("#view").bounding_box()
-    page.mouse.click(box["x"] + (x + 0.5) * box["width"] / SIZE[0], box["y"] + (y + 0.5) * box["height"] / SIZE[1])
-
-
-def set_slider(page, field: str, value: float) -> None:
-    page.locator(f'[data-field="{field}"] input[type=range]').fill(str(value))
 
 
 # ---- tests ----

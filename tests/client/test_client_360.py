@@ -8,23 +8,16 @@ directions of shared/MISSION.md's equirect convention), so a flipped, mirrored o
 
 from __future__ import annotations
 
-import base64
-import contextlib
 import io
 
 import av
 import httpx
 import numpy as np
 import pytest
+from helpers.browser import SIZE, WAIT_360_MS, client_360, data_url_image, needs_chromium
 from PIL import Image
 
-from .conftest import CHROMIUM, SOFTWARE_WEBGL, chromium
-
-WINDOW = (1024, 576)
-SIZE = (480, 270)  # the flat painting's size; the panorama's costs about as much (view360.js panoramaSize)
-WAIT_MS = 60_000
-
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+pytestmark = needs_chromium
 
 # a panorama whose every pixel's color is its own direction, (d + 1) / 2 in the panorama's frame
 DIRECTIONS = """async ([w, h]) => {
@@ -53,53 +46,18 @@ TURNING = """() => new Promise((done) => {
 })"""
 
 
-@pytest.fixture(scope="module")
-def browser():
-    with chromium(*SOFTWARE_WEBGL) as launched:
-        yield launched
-
-
-@contextlib.contextmanager
-def client(browser, url: str, scene: str = "default", init_script: str | None = None):
-    """The client on ``scene``, its first refined frame shown; ``page.ws_sent`` lists every WebSocket message
-    the page sent, as the browser saw it go. Fails on console errors."""
-    context = browser.new_context(viewport={"width": WINDOW[0], "height": WINDOW[1]}, accept_downloads=True)
-    if init_script:
-        context.add_init_script(init_script)
-    page = context.new_page()
-    problems: list[str] = []
-    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: problems.append(str(e)))
-    frames_sent: list = []
-    page.on("websocket", lambda ws: ws.on("framesent", lambda payload: frames_sent.append(payload)))
-    page.ws_sent = frames_sent  # type: ignore[attr-defined]
-    page.goto(f"{url}/?scene={scene}&width={SIZE[0]}&height={SIZE[1]}")
-    page.wait_for_function("rcp.overlay.frame && rcp.overlay.frame.final", timeout=WAIT_MS)
-    try:
-        yield page
-    finally:
-        context.close()
-    assert problems == [], f"console errors: {problems}"
-
-
 @pytest.fixture
-def page(browser, live_server):
-    with client(browser, live_server.url) as page:
+def page(webgl_browser, live_server):
+    with client_360(webgl_browser, live_server.url) as page:
         yield page
 
 
 # ---- helpers ----
 
 
-def decode(url: str) -> np.ndarray:
-    """A data URL's PNG as (height, width, 3) float64."""
-    data = base64.b64decode(url.split(",", 1)[1])
-    return np.asarray(Image.open(io.BytesIO(data)).convert("RGB")).astype(np.float64)
-
-
 def drawn(page) -> np.ndarray:
     """What the 360° view draws now."""
-    return decode(page.evaluate("rcp.view360.snapshot(rcp.walk.walk, rcp.state.size[1])"))
+    return data_url_image(page.evaluate("rcp.view360.snapshot(rcp.walk.walk, rcp.state.size[1])"))
 
 
 def view_of(page) -> dict:
@@ -160,7 +118,7 @@ def enter_360(page) -> dict:
         """(seq) => { const f = rcp.overlay.frame;
             return f.final && f.seq > seq && rcp.view360.accepts(f) && rcp.view360.pano.uploaded > 0; }""",
         arg=seq,
-        timeout=WAIT_MS,
+        timeout=WAIT_360_MS,
     )
     return page.evaluate("rcp.overlay.frame")
 
@@ -267,7 +225,7 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     assert last["eye"] != eye and last["projection"] == "equirect"
     assert last["look_at"][1] == last["eye"][1]
     page.wait_for_function(
-        "(id) => rcp.overlay.frame.final && rcp.overlay.frame.camera_id === id", arg=last["id"], timeout=WAIT_MS
+        "(id) => rcp.overlay.frame.final && rcp.overlay.frame.camera_id === id", arg=last["id"], timeout=WAIT_360_MS
     )
     # and back to the flat view: its camera first, then its size
     page.click("#view360")
@@ -277,8 +235,8 @@ def test_dragging_looks_around_with_no_message_and_walking_repaints(page):
     assert page.evaluate("rcp.view360.canvas.hidden")
 
 
-def test_a_path_taken_in_the_360_view_renders_a_360_video(browser, live_server, tmp_path):
-    with client(browser, live_server.url, scene="sky") as page:
+def test_a_path_taken_in_the_360_view_renders_a_360_video(webgl_browser, live_server, tmp_path):
+    with client_360(webgl_browser, live_server.url, scene="sky") as page:
         enter_360(page)
         add = page.locator("#path [data-path=add]")
         add.click()
@@ -288,7 +246,7 @@ def test_a_path_taken_in_the_360_view_renders_a_360_video(browser, live_server, 
         assert [(k["projection"], k["stereo"]) for k in keyframes] == [("equirect", "mono")] * 2
         page.locator("#path-fps").fill("2")
         page.locator("#path [data-path=render]").click()
-        link = page.wait_for_selector("#path [data-path=download]:not([hidden])", timeout=WAIT_MS)
+        link = page.wait_for_selector("#path [data-path=download]:not([hidden])", timeout=WAIT_360_MS)
         with page.expect_download() as video:
             link.click()
         out = tmp_path / "360.mp4"

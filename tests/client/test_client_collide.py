@@ -8,9 +8,9 @@ import httpx
 import numpy as np
 import pytest
 import trimesh
+from helpers.browser import SOFTWARE_WEBGL, WAIT_MS, chromium, needs_chromium
 
-from .conftest import SOFTWARE_WEBGL, chromium
-from .test_client import WAIT_MS
+pytestmark = needs_chromium
 
 HEIGHT = 1.6
 RISE, RUN, STAIRS = 0.17, 0.3, 8

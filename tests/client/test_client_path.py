@@ -10,12 +10,11 @@ from pathlib import Path
 
 import av
 import pytest
-
-from .conftest import CHROMIUM, chromium
+from helpers.browser import chromium, needs_chromium
 
 WAIT_MS = 60_000
 
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+pytestmark = needs_chromium
 
 SIDE = {"eye": [0, 1.6, 0], "look_at": [3, 1.6, -3], "up": [0, 1, 0], "fov": 50}
 

@@ -8,12 +8,13 @@ from __future__ import annotations
 import json
 
 import numpy as np
+from helpers.browser import SIZE, WAIT_MS, canvas, click_view, client, needs_chromium, set_slider, wait_final
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.picking import object_pixels
 from rcp_server.service.session import pick_mask
 
-from .test_client import SIZE, WAIT_MS, browser, canvas, click_view, client, set_slider, wait_final  # noqa: F401
+pytestmark = needs_chromium
 
 CAMERA_KEYS = ("eye", "look_at", "up", "fov")
 

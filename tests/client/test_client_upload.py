@@ -4,8 +4,9 @@ walk through it; drop one on the page; find it again after a reload."""
 from __future__ import annotations
 
 import trimesh
+from helpers.browser import canvas, client, needs_chromium, wait_final
 
-from .test_client import browser, canvas, client, wait_final  # noqa: F401 (browser: the module's fixture)
+pytestmark = needs_chromium
 
 DROP = """([name, text]) => {
     const data = new DataTransfer();
@@ -55,7 +56,7 @@ def test_a_model_picked_in_the_page_uploads_with_progress_and_is_walked_through(
 
 
 def test_a_models_other_cameras_are_offered_as_viewpoints(browser, live_server):  # noqa: F811
-    from scene.gltf_helpers import GltfBuilder
+    from helpers.gltf import GltfBuilder
 
     b = GltfBuilder()
     b.quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]], material=b.material())

@@ -16,10 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers.browser import SOFTWARE_WEBGL, chromium, needs_chromium
+from helpers.wire import decode, post
 from PIL import Image
-from service.conftest import decode, post
-
-from .conftest import CHROMIUM, SOFTWARE_WEBGL, chromium
 
 CANVAS = (1280, 720)  # the full painting's size: the canvas the walk frames are drawn on
 WALK_SIZES = [(320, 180), (640, 360)]  # today's walk frame, and the one aimed at
@@ -34,7 +33,7 @@ PAINTINGS = [
 ]
 WAIT_MS = 60_000
 
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+pytestmark = needs_chromium
 
 # a frame pushed as the connection would (its JPEG's bytes after a `frame` message), drawn once decoded
 PUSH = """async ([b64, probe]) => {

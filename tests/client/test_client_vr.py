@@ -19,8 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from .test_client_360 import CHROMIUM, browser, client, decode  # noqa: F401 - browser is a fixture
+from helpers.browser import client_360, data_url_image, needs_chromium
 
 IWER_VERSION = "2.5.0"
 CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rcp-tests" / f"iwer-{IWER_VERSION}"
@@ -43,7 +42,7 @@ XR_RATE = """() => new Promise((done) => {
   }, 8);
 })"""
 
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+pytestmark = needs_chromium
 
 
 @pytest.fixture(scope="session")
@@ -67,7 +66,7 @@ def shot(page) -> np.ndarray:
     """What the next headset frame draws (both eyes, side by side)."""
     page.evaluate("rcp.vr.shot = null; rcp.vr.capture = true")
     page.wait_for_function("rcp.vr.shot !== null", timeout=10_000)
-    return decode(page.evaluate("rcp.vr.shot"))
+    return data_url_image(page.evaluate("rcp.vr.shot"))
 
 
 def head_turned(page, yaw: float) -> None:
@@ -75,18 +74,18 @@ def head_turned(page, yaw: float) -> None:
     page.evaluate(f"xrDevice.quaternion.set(0, {math.sin(yaw / 2)}, 0, {math.cos(yaw / 2)})")
 
 
-def test_enter_vr_is_offered_only_where_a_headset_is(browser, live_server):  # noqa: F811
-    with client(browser, live_server.url, scene="sky") as page:
+def test_enter_vr_is_offered_only_where_a_headset_is(webgl_browser, live_server):
+    with client_360(webgl_browser, live_server.url, scene="sky") as page:
         page.wait_for_timeout(500)  # isSessionSupported has answered
         assert page.is_hidden("#enter-vr")  # Chromium's own navigator.xr: no immersive-vr here
 
 
 def test_vr_shows_each_eye_its_half_turns_with_the_head_and_walks_with_the_thumbstick(
-    browser,  # noqa: F811
+    webgl_browser,
     live_server,
     iwer,
 ):
-    with client(browser, live_server.url, init_script=iwer + HEADSET) as page:
+    with client_360(webgl_browser, live_server.url, init_script=iwer + HEADSET) as page:
         page.click("#enter-vr")  # a click: the session needs a user gesture
         page.wait_for_function("rcp.vr.frames > 2", timeout=30_000)
         assert page.text_content("#enter-vr") == "Exit VR"

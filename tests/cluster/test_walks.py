@@ -20,7 +20,7 @@ import pytest
 
 ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs it
 
-from service.conftest import Walk  # noqa: E402
+from helpers.wire import Walk  # noqa: E402
 
 from rcp_server.bench.harness import BackgroundServer  # noqa: E402
 from rcp_server.cluster.admission import Target  # noqa: E402

@@ -1,4 +1,5 @@
-"""The Embree binding (kernels/embree.py) against embreex, on random and adversarial rays; packets against single rays."""
+"""The Embree binding (kernels/embree.py) against embreex, on random and adversarial rays; packets against
+single rays."""
 
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import av
 import numpy as np
 import pytest
-from conftest import SPINNING_BOX
+from helpers.scenes import SPINNING_BOX
 
 from rcp_server.camera.camera import STEREO
 from rcp_server.cli import main

@@ -9,7 +9,7 @@ from dataclasses import replace
 import av
 import numpy as np
 import pytest
-from conftest import SPINNING_BOX
+from helpers.scenes import SPINNING_BOX
 from PIL import Image
 
 from rcp_server.cli import main

@@ -6,8 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, make_scene, sphere, translate
-from painting_helpers import H, W, hit_points
+from helpers.scenes import CAMERA, H, W, facing_plane, hit_points, make_scene, sphere, translate
 
 from rcp_server.engine.paintstate import CHANNELS
 from rcp_server.painting.loop import paint

@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import CAMERA
+from helpers.scenes import CAMERA
 
 from rcp_server.camera.camera import Camera, Region
 from rcp_server.engine import kernels

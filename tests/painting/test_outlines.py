@@ -1,30 +1,16 @@
 """Outlines: ink where the object, the normal or the depth jumps, a shading result the painting smudges."""
 
-from dataclasses import replace
-
 import numpy as np
-from conftest import CAMERA, facing_plane, make_scene, translate
-from painting_helpers import H, W
+from helpers.scenes import CAMERA, H, W, inked_scene
 
 from rcp_server.painting.loop import paint
-from rcp_server.scene.meshes import Material, primitive
-from rcp_server.scene.scene import SceneObject
 from rcp_server.settings.params import PaintParams
 
 
-def _scene(outline: float):
-    """A box turned to show two faces, in front of a wall at depth 8; the box's material draws outlines."""
-    ink = Material(name="inked", outline=outline)
-    part = replace(primitive("box", extents=(1.6, 1.6, 1.6)), material=ink)
-    turn = np.array([[0.8, 0, 0.6, 0], [0, 1, 0, 0], [-0.6, 0, 0.8, 0], [0, 0, 0, 1]], float)
-    box = SceneObject("box#0", part, [(translate(0.0, -0.8, -4.0) @ turn, part)], label="box")
-    return make_scene([box, facing_plane(8.0, color=(0.9, 0.9, 0.9), name="wall")])
-
-
 def test_ink_darkens_exactly_the_inked_material_where_the_view_jumps():
-    plain = paint(_scene(0.0), CAMERA, W, H, PaintParams(iterations=1)).image
-    inked = paint(_scene(1.0), CAMERA, W, H, PaintParams(iterations=1)).image
-    shows = paint(_scene(0.0), CAMERA, W, H, PaintParams(iterations=1, objects={"box": {}})).state.object
+    plain = paint(inked_scene(0.0), CAMERA, W, H, PaintParams(iterations=1)).image
+    inked = paint(inked_scene(1.0), CAMERA, W, H, PaintParams(iterations=1)).image
+    shows = paint(inked_scene(0.0), CAMERA, W, H, PaintParams(iterations=1, objects={"box": {}})).state.object
     box = (shows == 0).reshape(H, W)
     dark = (inked < plain - 1e-6).any(axis=2)
     assert dark.any() and not (dark & ~box).any()  # only the inked material, never the wall
@@ -41,8 +27,8 @@ def test_ink_darkens_exactly_the_inked_material_where_the_view_jumps():
 
 def test_the_painting_smudges_the_ink():
     params = PaintParams(mapping="color", lambda_p=10.0, iterations=5)
-    with_ink = paint(_scene(1.0), CAMERA, W, H, params, keep_iterations=True).iterations
-    without = paint(_scene(0.0), CAMERA, W, H, params).image
+    with_ink = paint(inked_scene(1.0), CAMERA, W, H, params, keep_iterations=True).iterations
+    without = paint(inked_scene(0.0), CAMERA, W, H, params).image
     first_dark = (with_ink[0] < 0.02).all(axis=2)
     last_dark = (with_ink[-1] < 0.02).all(axis=2)
     assert (last_dark & ~first_dark).any()  # ink moved where the plain render had none

@@ -4,8 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, make_scene
-from painting_helpers import H, W
+from helpers.scenes import CAMERA, H, W, facing_plane, make_scene
 
 from rcp_server.painting.loop import paint
 from rcp_server.scene.meshes import Part

@@ -2,8 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, gradient, make_scene
-from painting_helpers import H, W, hit_points
+from helpers.scenes import CAMERA, H, W, facing_plane, gradient, hit_points, make_scene
 
 from rcp_server.camera.camera import Camera, Region
 from rcp_server.painting.assign import displacements, setup_tile

@@ -6,8 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA, make_scene
-from painting_helpers import H, W
+from helpers.scenes import CAMERA, H, W, make_scene
 
 from rcp_server.camera.camera import Region
 from rcp_server.painting.loop import Abandoned, paint

@@ -4,8 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, make_scene, sphere
-from painting_helpers import H, W, hit_points
+from helpers.scenes import CAMERA, H, W, facing_plane, hit_points, make_scene, sphere
 
 from rcp_server.camera.camera import Camera, Region
 from rcp_server.painting.loop import paint

@@ -5,8 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, gradient, make_scene, translate
-from painting_helpers import H, W
+from helpers.scenes import CAMERA, H, W, facing_plane, gradient, make_scene, translate
 
 from rcp_server.camera.camera import Region
 from rcp_server.painting.loop import Abandoned, PaintState, paint

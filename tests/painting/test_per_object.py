@@ -6,8 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA, make_scene, sphere
-from painting_helpers import H, W
+from helpers.scenes import CAMERA, H, W, make_scene, sphere
 
 from rcp_server.painting.loop import paint
 from rcp_server.scene.meshes import Material

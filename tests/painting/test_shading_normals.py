@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import trimesh
-from conftest import CAMERA, make_scene, translate
+from helpers.scenes import CAMERA, make_scene, translate
 
 from rcp_server.painting.loop import paint
 from rcp_server.scene.meshes import CREASE_COS, DEFAULT_ALBEDO, corner_normals, grid, primitive

@@ -4,8 +4,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import CAMERA
-from painting_helpers import H, W
+from helpers.scenes import CAMERA, H, W
 
 from rcp_server.camera.camera import Region
 from rcp_server.painting.assign import displacements, setup_tile

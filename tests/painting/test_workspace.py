@@ -3,9 +3,7 @@ one place, and the passes that work a band at a time giving what the whole image
 
 import numpy as np
 import pytest
-from conftest import CAMERA, facing_plane, make_scene, sphere
-from painting_helpers import H, W
-from test_outlines import _scene as inked_scene
+from helpers.scenes import CAMERA, H, W, facing_plane, inked_scene, make_scene, sphere
 
 from rcp_server.camera.camera import Camera, Region
 from rcp_server.painting import outlines

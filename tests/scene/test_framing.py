@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from gltf_helpers import GltfBuilder, quaternion
+from helpers.gltf import GltfBuilder, quaternion
 
 from rcp_server.scene import framing
 from rcp_server.scene.meshes import Model, Part, _grey, primitive

@@ -1,5 +1,5 @@
 """glTF as its authors made it: cameras, lights, materials (factors, emission, unlit, alpha masks, texture
-transforms), from files built in code (``gltf_helpers``); OBJ's map_d; and the sandbox's arrays carrying
+transforms), from files built in code (``helpers/gltf.py``); OBJ's map_d; and the sandbox's arrays carrying
 all of it."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from gltf_helpers import GltfBuilder, quaternion
+from helpers.gltf import GltfBuilder, quaternion
 from PIL import Image
 
 from rcp_server.camera.camera import Camera

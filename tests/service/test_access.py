@@ -8,12 +8,11 @@ import socket
 
 import httpx
 import pytest
+from helpers.wire import Walk
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.service.access import host_allowed
 from rcp_server.service.settings import Settings
-
-from .conftest import Walk
 
 TOKEN = "open sesame"
 DOCS = ["/openapi.json", "/docs", "/redoc", "/docs/oauth2-redirect"]

@@ -6,11 +6,10 @@ from __future__ import annotations
 
 import httpx
 import pytest
-from conftest import SPINNING_BOX
+from helpers.scenes import SPINNING_BOX
+from helpers.wire import Walk
 
 from rcp_server.bench.harness import BackgroundServer
-
-from .conftest import Walk
 
 SIDE = 540  # the limit is one eye of SIDE x SIDE: a stereo pair of it is twice over
 PIXELS = SIDE * SIDE

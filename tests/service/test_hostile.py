@@ -13,12 +13,11 @@ from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 import pytest
+from helpers.wire import Walk, decode
 from websockets.exceptions import ConnectionClosed
 
 from rcp_server.bench.harness import BackgroundServer, rcp_serve
 from rcp_server.service.server import Server
-
-from .conftest import Walk, decode
 
 BIG = {"scene": "default", "width": 1280, "height": 720, "paint": {"spp": 8}}  # seconds of work on 2 cores
 

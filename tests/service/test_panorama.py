@@ -9,12 +9,11 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from helpers.wire import decode, post
 
 from rcp_server.camera.wire import camera_of
 from rcp_server.painting.loop import paint
 from rcp_server.util import images
-
-from .conftest import decode, post
 
 CAMERA = {"eye": [0.8, 1.7, 30.0], "look_at": [0.0, 2.0, 0.0]}
 

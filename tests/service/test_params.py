@@ -16,6 +16,7 @@ import httpx
 import jsonschema
 import numpy as np
 import pytest
+from helpers.wire import decode
 from PIL import Image
 
 from rcp_server.cli import main
@@ -23,8 +24,6 @@ from rcp_server.painting.loop import paint
 from rcp_server.service import protocol
 from rcp_server.settings.params import PAINT_SETTINGS, PER, PaintParams
 from rcp_server.util import images
-
-from .conftest import decode
 
 ROOT = Path(__file__).resolve().parents[2]
 FIELDS = [f.name for f in dataclasses.fields(PaintParams) if f.name not in PER]  # per object: test_per_object.py

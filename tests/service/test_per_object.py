@@ -7,13 +7,12 @@ import json
 
 import httpx
 import numpy as np
+from helpers.wire import decode, post
 from PIL import Image
 
 from rcp_server.cli import main
 from rcp_server.painting.loop import paint
 from rcp_server.util import images
-
-from .conftest import decode, post
 
 SCENE = "default"  # the village: walls, roofs, the well ... by name
 W, H = 64, 36

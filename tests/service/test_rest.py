@@ -11,11 +11,10 @@ from dataclasses import replace
 import httpx
 import numpy as np
 import pytest
+from helpers.wire import decode, post
 
 from rcp_server.painting.loop import paint
 from rcp_server.util import images
-
-from .conftest import decode, post
 
 
 def test_health_and_scenes(live_server):

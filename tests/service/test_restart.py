@@ -13,10 +13,9 @@ import time
 import av
 import httpx
 import numpy as np
+from helpers import uploads as files
 
 from rcp_server.bench.harness import PACKAGE_ROOT, free_port, rcp_serve
-
-from . import upload_files as files
 
 PATH = {  # 41 frames around the uploaded box
     "fps": 20,

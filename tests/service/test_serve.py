@@ -13,12 +13,11 @@ from pathlib import Path
 
 import httpx
 import pytest
+from helpers.browser import CHROMIUM, chromium
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
 
 from rcp_server.bench.harness import PACKAGE_ROOT, free_port
-
-from .conftest import CHROMIUM, chromium
 
 COLD_START_S = 5  # the page must answer within this of `rcp serve` starting, however cold the kernel cache
 LOADED_S = 60  # the same in wall time on a machine busy with other work (the CPU time keeps COLD_START_S)

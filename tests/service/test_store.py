@@ -15,7 +15,8 @@ import av
 import httpx
 import numpy as np
 import pytest
-from conftest import CAMERA, SPINNING_BOX
+from helpers import uploads as files
+from helpers.scenes import CAMERA, SPINNING_BOX
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.media.camerapath import PathSpec, parse_path
@@ -23,8 +24,6 @@ from rcp_server.painting.loop import paint
 from rcp_server.service.store import DataFolderError, Store, load_state, save_state
 from rcp_server.service.videos import ANY_CAMERA, path_spec
 from rcp_server.settings.params import PaintParams
-
-from . import upload_files as files
 
 PATH = {
     "fps": 10,

@@ -12,7 +12,8 @@ import json
 import httpx
 import numpy as np
 import pytest
-from client.test_client import CHROMIUM, SIZE, browser, client, sent, set_slider, wait_final  # noqa: F401 - browser is a fixture
+from helpers.browser import SIZE, client, needs_chromium, sent, set_slider, wait_final
+from helpers.wire import decode
 from PIL import Image
 
 from rcp_server.cli import main
@@ -20,8 +21,6 @@ from rcp_server.painting.loop import paint
 from rcp_server.settings.params import PaintParams
 from rcp_server.settings.styles import LOOK, STYLES, get_style, with_style
 from rcp_server.util import images
-
-from .conftest import decode
 
 SCENE = "sky"
 W, H = 48, 27
@@ -101,7 +100,7 @@ def test_a_style_reaches_the_command_line(tmp_path, scene, capsys):
     assert error.count("\n") == 1 and error.startswith("rcp: error: ") and all(name in error for name in STYLES)
 
 
-@pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+@needs_chromium
 def test_the_client_picks_a_style_and_keeps_a_preset(browser, live_server):  # noqa: F811 - the fixture
     with client(browser, live_server.url, SCENE) as page:
         page.select_option("#style", "fractured")

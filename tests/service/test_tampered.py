@@ -15,7 +15,8 @@ from pathlib import Path
 
 import httpx
 import pytest
-from conftest import SPINNING_BOX
+from helpers import uploads as files
+from helpers.scenes import SPINNING_BOX
 
 from rcp_server.bench.harness import PACKAGE_ROOT, BackgroundServer, free_port
 from rcp_server.camera.camera import Camera
@@ -23,8 +24,6 @@ from rcp_server.media.camerapath import parse_path
 from rcp_server.service.store import DataFolderError, Store, UploadRecord, VideoRecord, VideoSettings, new_video_id
 from rcp_server.service.videos import path_spec
 from rcp_server.settings.params import PaintParams
-
-from . import upload_files as files
 
 SCENE_CAMERA = Camera((0.0, 1.0, 4.0), (0.0, 0.5, 0.0))
 PATH = {

@@ -15,13 +15,12 @@ from pathlib import Path
 import httpx
 import numpy as np
 import pytest
+from helpers import uploads as files
+from helpers.wire import Walk, decode
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.scene.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
 from rcp_server.scene.untrusted import Limits, NoRoom, read_model
-
-from . import upload_files as files
-from .conftest import Walk, decode
 
 LIMITS = dict(upload_max_bytes=1 << 20, upload_max_texture_pixels=1 << 20, upload_max_scenes=4)
 
@@ -346,7 +345,7 @@ def test_an_uploaded_scene_makes_a_video(server):
 def test_a_gltf_arrives_as_authored_its_cameras_offered_and_its_cut_outs_seen_through(server):
     """Through the sandbox: the file's first camera is the scene's, the second a viewpoint; its cut-out shows
     the wall behind it."""
-    from scene.gltf_helpers import GltfBuilder
+    from helpers.gltf import GltfBuilder
 
     b = GltfBuilder()
     b.quad(

@@ -8,7 +8,7 @@ import time
 
 import httpx
 import pytest
-from conftest import SPINNING_BOX
+from helpers.scenes import SPINNING_BOX
 
 from rcp_server.bench.harness import BackgroundServer
 

@@ -11,7 +11,7 @@ import av
 import httpx
 import numpy as np
 import pytest
-from conftest import CAMERA, SPINNING_BOX, make_scene
+from helpers.scenes import CAMERA, SPINNING_BOX, make_scene
 from PIL import Image
 
 from rcp_server.bench.harness import BackgroundServer

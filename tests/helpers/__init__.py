@@ -1,0 +1,1 @@
+"""What tests share that is not a fixture: scenes built in code, the wire's clients, the browser."""
