@@ -17,6 +17,7 @@ import math
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -365,79 +366,96 @@ def _part_from_trimesh(
     with np.errstate(invalid="ignore", over="ignore"):  # non-finite vertices are repaired just below
         vertices = np.asarray(mesh.vertices, dtype=np.float64) @ world_from_mesh[:3, :3].T + world_from_mesh[:3, 3]
     visual = mesh.visual
-    colors = _grey(len(faces))
-    uv = texture = None
-    material_out = PLAIN
     kind = getattr(visual, "kind", None)
     material = getattr(visual, "material", None)
-    colored = kind in ("texture", "vertex", "face")
     if material is not None:
+        surface = _material_surface(mesh, faces, material, images, materials, folder)
+        if surface is None:
+            return None
+        colors, uv, texture, material_out = surface
         colored = True
-        colors[:] = 1.0  # glTF's base color factor and OBJ's Kd default to white over a texture
-        image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
-        index = gltf.material_index(getattr(material, "name", None))
-        info = materials[index] if materials is not None and index is not None and index < len(materials) else None
-        if info is not None:  # a glTF material: its factors from the JSON, as floats and display colors
-            colors[:] = np.asarray(info.base_color, dtype=np.float32)
-        else:
-            factor = getattr(material, "baseColorFactor", None)
-            if factor is None:
-                factor = getattr(material, "diffuse", None)
-            if factor is not None:
-                colors[:] = np.asarray(factor, dtype=np.float32)[:3] / 255.0
-        vertex_rgb = getattr(visual, "vertex_attributes", {}).get("color")
-        if vertex_rgb is not None and len(vertex_rgb) == len(mesh.vertices):  # glTF's COLOR_0 beside a texture
-            colors *= gltf.display(_rgb(vertex_rgb)).astype(np.float32)[faces]
-        # a material without an image is a flat color (a texture trimesh failed to read is reported by
-        # load_mesh_file, from trimesh's own log)
-        has_uv = getattr(visual, "uv", None) is not None and len(visual.uv) == len(mesh.vertices)
-        if has_uv:
-            uv = np.asarray(visual.uv, dtype=np.float32)[faces]
-            if info is not None and info.uv_transform is not None:
-                uv = gltf.transformed_uv(uv, info.uv_transform)
-        if image is not None and has_uv:
-            texture = images.decoded(image)
-        alpha_cutoff, alpha_texture, emission, emission_texture, unlit = 0.0, None, (0.0, 0.0, 0.0), None, False
-        if info is not None:
-            coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
-            if coverage < info.alpha_cutoff and info.alpha_mode != "OPAQUE":
-                return None
-            alpha_texture = (
-                images.alphas.get(id(image)) if texture is not None and info.alpha_mode != "OPAQUE" else None
-            )
-            alpha_cutoff = info.alpha_cutoff / coverage if alpha_texture is not None else 0.0
-            emission, unlit = info.emissive, info.unlit
-            emissive_image = getattr(material, "emissiveTexture", None)
-            if info.has_emissive_texture and emissive_image is not None and has_uv:
-                emission_texture = images.decoded(emissive_image)
-        elif kind == "texture" or image is not None:  # OBJ: map_d and d
-            alpha, dissolve = _obj_alpha(material, folder, images)
-            if dissolve < 0.5:
-                return None
-            if alpha is not None and has_uv and alpha.min() < 255:
-                if texture is None:  # map_d without map_Kd: a white texture to cut out of
-                    key = ("white", alpha.shape)
-                    if key not in images:
-                        images[key] = np.full(alpha.shape + (3,), 255, np.uint8)
-                    texture = images[key]
-                key = ("map_d", id(alpha), texture.shape[:2])
-                if key not in images:
-                    images[key] = _fitted(alpha, texture.shape[:2])
-                alpha_texture, alpha_cutoff = images[key], 0.5
-        if texture is None and emission_texture is None:
-            uv = None
-        material_out = Material(emission, emission_texture, unlit, alpha_cutoff, alpha_texture)
-    elif kind == "vertex":
-        colors = _rgb(visual.vertex_colors)[faces]
-    elif kind == "face":
-        face_rgb = _rgb(visual.face_colors)
-        colors = np.repeat(face_rgb[:, None, :], 3, axis=1)
+    else:
+        colors, uv, texture, material_out = _grey(len(faces)), None, None, PLAIN
+        colored = kind in ("texture", "vertex", "face")
+        if kind == "vertex":
+            colors = _rgb(visual.vertex_colors)[faces]
+        elif kind == "face":
+            face_rgb = _rgb(visual.face_colors)
+            colors = np.repeat(face_rgb[:, None, :], 3, axis=1)
     part = repaired(Part(vertices, faces, colors, uv, texture, colored, material_out), source, tally)
     # weld corners that share a position (a triangle soup, UV seams) so normals shade smooth across
     # them; colors and UVs live per corner, so welding changes nothing else
     unique, inverse = trimesh.grouping.unique_rows(part.vertices[part.faces].reshape(-1, 3), digits=8)
     welded = part.vertices[part.faces].reshape(-1, 3)[unique]
     return replace(part, vertices=welded, faces=inverse.reshape(-1, 3).astype(np.int64))
+
+
+def _material_surface(
+    mesh: trimesh.Trimesh,
+    faces: np.ndarray,
+    material: Any,
+    images: dict,
+    materials: list[gltf.MaterialInfo] | None,
+    folder: Path | None,
+) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None, Material] | None:
+    """What a mesh with a material shows: its corners' colors, UVs, texture and :class:`Material`; None when the
+    material is wholly transparent (alpha below its cutoff)."""
+    visual = mesh.visual
+    kind = getattr(visual, "kind", None)
+    colors = _grey(len(faces))
+    uv = texture = None
+    colors[:] = 1.0  # glTF's base color factor and OBJ's Kd default to white over a texture
+    image = getattr(material, "baseColorTexture", None) or getattr(material, "image", None)
+    index = gltf.material_index(getattr(material, "name", None))
+    info = materials[index] if materials is not None and index is not None and index < len(materials) else None
+    if info is not None:  # a glTF material: its factors from the JSON, as floats and display colors
+        colors[:] = np.asarray(info.base_color, dtype=np.float32)
+    else:
+        factor = getattr(material, "baseColorFactor", None)
+        if factor is None:
+            factor = getattr(material, "diffuse", None)
+        if factor is not None:
+            colors[:] = np.asarray(factor, dtype=np.float32)[:3] / 255.0
+    vertex_rgb = getattr(visual, "vertex_attributes", {}).get("color")
+    if vertex_rgb is not None and len(vertex_rgb) == len(mesh.vertices):  # glTF's COLOR_0 beside a texture
+        colors *= gltf.display(_rgb(vertex_rgb)).astype(np.float32)[faces]
+    # a material without an image is a flat color (a texture trimesh failed to read is reported by
+    # load_mesh_file, from trimesh's own log)
+    has_uv = getattr(visual, "uv", None) is not None and len(visual.uv) == len(mesh.vertices)
+    if has_uv:
+        uv = np.asarray(visual.uv, dtype=np.float32)[faces]
+        if info is not None and info.uv_transform is not None:
+            uv = gltf.transformed_uv(uv, info.uv_transform)
+    if image is not None and has_uv:
+        texture = images.decoded(image)
+    alpha_cutoff, alpha_texture, emission, emission_texture, unlit = 0.0, None, (0.0, 0.0, 0.0), None, False
+    if info is not None:
+        coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
+        if coverage < info.alpha_cutoff and info.alpha_mode != "OPAQUE":
+            return None
+        alpha_texture = images.alphas.get(id(image)) if texture is not None and info.alpha_mode != "OPAQUE" else None
+        alpha_cutoff = info.alpha_cutoff / coverage if alpha_texture is not None else 0.0
+        emission, unlit = info.emissive, info.unlit
+        emissive_image = getattr(material, "emissiveTexture", None)
+        if info.has_emissive_texture and emissive_image is not None and has_uv:
+            emission_texture = images.decoded(emissive_image)
+    elif kind == "texture" or image is not None:  # OBJ: map_d and d
+        alpha, dissolve = _obj_alpha(material, folder, images)
+        if dissolve < 0.5:
+            return None
+        if alpha is not None and has_uv and alpha.min() < 255:
+            if texture is None:  # map_d without map_Kd: a white texture to cut out of
+                key = ("white", alpha.shape)
+                if key not in images:
+                    images[key] = np.full(alpha.shape + (3,), 255, np.uint8)
+                texture = images[key]
+            key = ("map_d", id(alpha), texture.shape[:2])
+            if key not in images:
+                images[key] = _fitted(alpha, texture.shape[:2])
+            alpha_texture, alpha_cutoff = images[key], 0.5
+    if texture is None and emission_texture is None:
+        uv = None
+    return colors, uv, texture, Material(emission, emission_texture, unlit, alpha_cutoff, alpha_texture)
 
 
 class _Images(dict):
@@ -524,22 +542,14 @@ def _read_trimesh_scene(path: Path) -> tuple[trimesh.Scene, gltf.GltfExtras | No
     return loaded, found
 
 
-def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
-    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied, and
-    a glTF's cameras and lights.
-
-    Meshes of the file with no usable triangle are skipped with a warning; a file with none is an error.
-    ``refuse_nonfinite``: a vertex that is not a finite number is an error, not a repair (files from strangers).
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise MeshError(f"{path}: no such mesh file")
+def _read_meshes(path: Path) -> tuple[list, Any]:
+    """Every mesh of the file with triangles, and its world transform (n, 4, 4) float64; and what the file says
+    beside them (a glTF's cameras, lights and materials), or None. trimesh's complaints are logged once each."""
     troubles = _TrimeshTroubles()
     trimesh_log = logging.getLogger("trimesh")
     trimesh_log.addHandler(troubles)
     level = trimesh_log.level
     trimesh_log.setLevel(logging.DEBUG)
-    found = None
     try:
         loaded, found = _read_trimesh_scene(path)
         # walk the scene graph rather than dump(): dump() copies every mesh and its texture image
@@ -560,6 +570,20 @@ def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
         log.warning("%s: %s", path, message)
     if not meshes:
         raise MeshError(f"{path}: the file holds no triangles")
+    return meshes, found
+
+
+def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
+    """Every mesh of a file (OBJ, PLY, STL, GLB/glTF, ...), with the file's own transforms applied, and
+    a glTF's cameras and lights.
+
+    Meshes of the file with no usable triangle are skipped with a warning; a file with none is an error.
+    ``refuse_nonfinite``: a vertex that is not a finite number is an error, not a repair (files from strangers).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: no such mesh file")
+    meshes, found = _read_meshes(path)
     parts, unusable, hidden, tally, images = [], 0, 0, Counter(), _Images(meshes)
     materials = found.materials if found is not None else None
     for mesh, world_from_mesh in meshes:
@@ -575,7 +599,7 @@ def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
     mesh_count = len(meshes)
     # trimesh's scene holds its meshes and decoded images in reference cycles: collect them now, not at
     # the next cyclic collection (the staircase interior: 100 MB held for nothing until then)
-    del loaded, meshes, images
+    del meshes, images
     gc.collect()
     if refuse_nonfinite and tally["non-finite"]:
         raise MeshError(

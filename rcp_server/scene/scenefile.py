@@ -323,6 +323,34 @@ def one_line(exc: ValidationError) -> str:
     return problems[0] + more
 
 
+def _environment(env: EnvironmentSpec, folder: Path) -> Environment:
+    """The scene file's environment: an image beside it, or a constant color."""
+    if (env.image is None) == (env.color is None):
+        raise SceneError("environment: give exactly one of 'image' or 'color'")
+    return load_environment(folder / env.image, env.exposure) if env.image else Environment.constant(env.color)
+
+
+def _light(spec: LightSpec | str | None) -> Light | None:
+    """The scene file's own light (a named glTF light is placed once the scene is built)."""
+    if not isinstance(spec, LightSpec):
+        return None
+    d = np.asarray(spec.direction, dtype=np.float64)
+    if np.linalg.norm(d) == 0:
+        raise SceneError("light.direction must not be zero")
+    return Light(tuple(d / np.linalg.norm(d)), spec.ambient)
+
+
+def _objects(specs: list[ObjectSpec], folder: Path, named: _Named, materials: dict[str, Material]) -> list[SceneObject]:
+    """The scene file's objects, each made of its material from ``[materials]``."""
+    objects = []
+    for index, obj in enumerate(specs):
+        where = f"objects.{index}" + (f" ({obj.name})" if obj.name else "")
+        if obj.material is not None and obj.material not in materials:
+            raise SceneError(f"{where}: no material {obj.material!r} in [materials] (it has: {_listed(materials)})")
+        objects.extend(_scene_object(obj, folder, where, named, materials.get(obj.material or "")))
+    return objects
+
+
 def load_scene_file(path: Path, name: str | None = None) -> Scene:
     """A scene from a TOML scene file; every fault is a :class:`SceneError` naming the file."""
     path = Path(path)
@@ -340,28 +368,10 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
     try:
         named = _Named()
         camera = camera_of(spec.camera) if isinstance(spec.camera, CameraSpec) else None
-        env = spec.environment
-        if (env.image is None) == (env.color is None):
-            raise SceneError("environment: give exactly one of 'image' or 'color'")
-        environment = (
-            load_environment(folder / env.image, env.exposure) if env.image else Environment.constant(env.color)
-        )
-        light = None
-        if isinstance(spec.light, LightSpec):
-            d = np.asarray(spec.light.direction, dtype=np.float64)
-            if np.linalg.norm(d) == 0:
-                raise SceneError("light.direction must not be zero")
-            light = Light(tuple(d / np.linalg.norm(d)), spec.light.ambient)
         materials = {
             name: Material(name=name, bands=m.bands if m.shading == "toon" else 0, outline=m.outline)
             for name, m in spec.materials.items()
         }
-        objects = []
-        for index, obj in enumerate(spec.objects):
-            where = f"objects.{index}" + (f" ({obj.name})" if obj.name else "")
-            if obj.material is not None and obj.material not in materials:
-                raise SceneError(f"{where}: no material {obj.material!r} in [materials] (it has: {_listed(materials)})")
-            objects.extend(_scene_object(obj, folder, where, named, materials.get(obj.material or "")))
         per_object = {obj.name or f"objects.{index}": obj.paint for index, obj in enumerate(spec.objects) if obj.paint}
         per_material = {name: m.paint for name, m in spec.materials.items() if m.paint}
         # refuse bad painting settings now, not at the first render
@@ -371,9 +381,9 @@ def load_scene_file(path: Path, name: str | None = None) -> Scene:
             name or path.stem,
             spec.title or path.stem,
             camera or stand_in,
-            environment,
-            light,
-            objects,
+            _environment(spec.environment, folder),
+            _light(spec.light),
+            _objects(spec.objects, folder, named, materials),
             paint,
             spec.z_max,
         )

@@ -116,75 +116,75 @@ def _array(arrays: dict, key: str, dtype, shape: tuple) -> np.ndarray:
 
 
 def _parts(arrays: dict, limits: Limits) -> list[Part]:
+    """The model's parts from the reader's arrays, each checked (a bad one is refused in one line)."""
     count = int(_array(arrays, "images", np.int64, ()))
-    images = [_array(arrays, f"image_{j}", np.uint8, (None, None, 3)) for j in range(count)]
+    textures = [_array(arrays, f"image_{j}", np.uint8, (None, None, 3)) for j in range(count)]  # as shading reads them
     coverages = [
         _array(arrays, f"coverage_{j}", np.uint8, (None, None))
         for j in range(int(_array(arrays, "coverages", np.int64, ())))
     ]
-    if sum(im.shape[0] * im.shape[1] for im in images) > limits.max_texture_pixels:
+    if sum(im.shape[0] * im.shape[1] for im in textures) > limits.max_texture_pixels:
         raise Refused(f"the model's images have more than {limits.max_texture_pixels:,} pixels")
-    textures = images  # 8-bit RGBA, as the shading reads them
     count = int(_array(arrays, "parts", np.int64, ()))
     if not 1 <= count <= limits.max_meshes:
         raise Refused(f"the model has {count:,} meshes; from 1 to {limits.max_meshes:,} are taken")
-    parts, triangles = [], 0
-    for k in range(count):
-        vertices = _array(arrays, f"vertices_{k}", np.float64, (None, 3))
-        faces = _array(arrays, f"faces_{k}", np.int64, (None, 3))
-        colors = _array(arrays, f"colors_{k}", np.float32, (len(faces), 3, 3))
-        texture = int(_array(arrays, f"texture_{k}", np.int64, ()))
-        if not np.isfinite(vertices).all():
-            raise Refused("the model has vertices that are not finite numbers (NaN or infinity)")
-        if len(faces) == 0 or faces.min() < 0 or faces.max() >= len(vertices):
-            raise Refused("the model has triangles whose corners are not among its vertices")
-        if not np.isfinite(colors).all():
-            raise Refused("the model has colors that are not finite numbers")
-        uv = None
-        if texture >= 0:
-            if texture >= len(textures):
-                raise ValueError(f"texture_{k}: {texture} of {len(textures)}")
-            uv = _array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2))
-            uv = np.nan_to_num(uv, nan=0.0, posinf=0.0, neginf=0.0)
-        triangles += len(faces)
-        colored = bool(_array(arrays, f"colored_{k}", np.bool_, ()))
-        emission = int(_array(arrays, f"emission_texture_{k}", np.int64, ()))
-        if emission >= len(textures) or (emission >= 0 and uv is None):
-            if uv is None and 0 <= emission < len(textures):
-                uv = np.nan_to_num(
-                    _array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2)), nan=0.0, posinf=0.0, neginf=0.0
-                )
-            else:
-                raise ValueError(f"emission_texture_{k}: {emission} of {len(textures)}")
-        m = _array(arrays, f"material_{k}", np.float64, (5,))
-        alpha = int(_array(arrays, f"alpha_{k}", np.int64, ()))
-        if alpha >= len(coverages) or (
-            alpha >= 0 and (texture < 0 or coverages[alpha].shape != textures[texture].shape[:2])
-        ):
-            raise ValueError(f"alpha_{k}: {alpha} of {len(coverages)}")
-        if not np.isfinite(m).all():
-            raise Refused("the model has material values that are not finite numbers")
-        material = Material(
-            triple(np.clip(m[:3], 0.0, 1.0)),
-            textures[emission] if emission >= 0 else None,
-            bool(m[3]),
-            float(np.clip(m[4], 0.0, 1e6)) if alpha >= 0 else 0.0,
-            coverages[alpha] if alpha >= 0 else None,
-        )
-        parts.append(
-            Part(
-                vertices,
-                faces,
-                np.clip(colors, 0.0, 1.0),
-                uv,
-                textures[texture] if texture >= 0 else None,
-                colored,
-                PLAIN if material.plain else material,
-            )
-        )
+    parts = [_part(arrays, k, textures, coverages) for k in range(count)]
+    triangles = sum(len(part.faces) for part in parts)
     if triangles > limits.max_triangles:
         raise Refused(f"the model has {triangles:,} triangles; at most {limits.max_triangles:,} are taken")
     return parts
+
+
+def _part(arrays: dict, k: int, textures: list[np.ndarray], coverages: list[np.ndarray]) -> Part:
+    """Part ``k`` of the reader's arrays, checked."""
+    vertices = _array(arrays, f"vertices_{k}", np.float64, (None, 3))
+    faces = _array(arrays, f"faces_{k}", np.int64, (None, 3))
+    colors = _array(arrays, f"colors_{k}", np.float32, (len(faces), 3, 3))
+    texture = int(_array(arrays, f"texture_{k}", np.int64, ()))
+    if not np.isfinite(vertices).all():
+        raise Refused("the model has vertices that are not finite numbers (NaN or infinity)")
+    if len(faces) == 0 or faces.min() < 0 or faces.max() >= len(vertices):
+        raise Refused("the model has triangles whose corners are not among its vertices")
+    if not np.isfinite(colors).all():
+        raise Refused("the model has colors that are not finite numbers")
+    uv = None
+    if texture >= 0:
+        if texture >= len(textures):
+            raise ValueError(f"texture_{k}: {texture} of {len(textures)}")
+        uv = np.nan_to_num(_array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2)), nan=0.0, posinf=0.0, neginf=0.0)
+    emission = int(_array(arrays, f"emission_texture_{k}", np.int64, ()))
+    if emission >= len(textures) or (emission >= 0 and uv is None):
+        if uv is None and 0 <= emission < len(textures):
+            uv = np.nan_to_num(
+                _array(arrays, f"uv_{k}", np.float32, (len(faces), 3, 2)), nan=0.0, posinf=0.0, neginf=0.0
+            )
+        else:
+            raise ValueError(f"emission_texture_{k}: {emission} of {len(textures)}")
+    m = _array(arrays, f"material_{k}", np.float64, (5,))
+    alpha = int(_array(arrays, f"alpha_{k}", np.int64, ()))
+    if alpha >= len(coverages) or (
+        alpha >= 0 and (texture < 0 or coverages[alpha].shape != textures[texture].shape[:2])
+    ):
+        raise ValueError(f"alpha_{k}: {alpha} of {len(coverages)}")
+    if not np.isfinite(m).all():
+        raise Refused("the model has material values that are not finite numbers")
+    material = Material(
+        triple(np.clip(m[:3], 0.0, 1.0)),
+        textures[emission] if emission >= 0 else None,
+        bool(m[3]),
+        float(np.clip(m[4], 0.0, 1e6)) if alpha >= 0 else 0.0,
+        coverages[alpha] if alpha >= 0 else None,
+    )
+    colored = bool(_array(arrays, f"colored_{k}", np.bool_, ()))
+    return Part(
+        vertices,
+        faces,
+        np.clip(colors, 0.0, 1.0),
+        uv,
+        textures[texture] if texture >= 0 else None,
+        colored,
+        PLAIN if material.plain else material,
+    )
 
 
 def _cameras_and_lights(arrays: dict) -> tuple[list[Viewpoint], list[PunctualLight]]:
