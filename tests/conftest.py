@@ -8,6 +8,7 @@ import pytest
 from helpers.browser import SOFTWARE_WEBGL, chromium
 from helpers.scenes import facing_plane, gradient, make_scene, sphere
 
+from rcp_server.bench.harness import BackgroundServer
 from rcp_server.scene.scene import Environment, Light, Scene
 
 
@@ -56,3 +57,10 @@ def webgl_browser():
     """A headless Chromium drawing WebGL in software (SwiftShader): the same pixels on every machine."""
     with chromium(*SOFTWARE_WEBGL) as launched:
         yield launched
+
+
+@pytest.fixture(scope="session")
+def live_server():
+    """One real server per test process (settles fast, so refinement starts soon after the camera rests)."""
+    with BackgroundServer(settle_ms=80) as server:
+        yield server

@@ -1,8 +1,8 @@
 """The package's structure, read from its import graph (``ast``: module-level and function-level imports alike):
 no two modules import each other, directly or round a cycle; nobody imports another module's underscore names;
 and the layers below the service (``util``, ``camera``, ``engine``, ``settings``, ``scene``, ``painting``,
-``media``) never import the service, the benchmarks or the command line; and no function outside the compiled
-kernels runs over a hundred lines."""
+``media``) never import the service, the benchmarks or the command line; no function outside the compiled kernels
+runs over sixty lines and no class over two hundred; and no test module imports another test module."""
 
 import ast
 from pathlib import Path
@@ -129,15 +129,43 @@ def test_the_layers_below_the_service_never_import_it_the_benchmarks_or_the_comm
     assert upward == []
 
 
-LONGEST = 100  # lines a function may take, outside the compiled kernels (their loops are fused on purpose)
+LONGEST = 60  # lines a function may take, outside the compiled kernels (their loops are fused on purpose)
+LARGEST = 200  # lines a class may take, outside the compiled kernels
 
 
-def test_no_function_outside_the_kernels_runs_over_a_hundred_lines():
-    long = [
+def _outside_the_kernels(kind, limit: int) -> list[str]:
+    """Every ``kind`` of node (functions, or classes) over ``limit`` lines outside the compiled kernels."""
+    return [
         f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name} ({node.end_lineno - node.lineno + 1} lines)"
         for name, path in MODULES.items()
         if not name.startswith("rcp_server.engine.kernels")
         for node in ast.walk(ast.parse(path.read_text(), str(path)))
-        if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and node.end_lineno - node.lineno + 1 > LONGEST
+        if isinstance(node, kind) and node.end_lineno - node.lineno + 1 > limit
     ]
-    assert long == []
+
+
+def test_no_function_outside_the_kernels_runs_over_sixty_lines():
+    assert _outside_the_kernels(ast.FunctionDef | ast.AsyncFunctionDef, LONGEST) == []
+
+
+def test_no_class_outside_the_kernels_runs_over_two_hundred_lines():
+    assert _outside_the_kernels(ast.ClassDef, LARGEST) == []
+
+
+TESTS = PACKAGE.parent / "tests"
+
+
+def test_no_test_module_imports_another_test_module_or_a_conftest():
+    """Tests share through ``tests/helpers/`` (what is not a fixture) and conftests (fixtures only)."""
+    found = []
+    for path in sorted(TESTS.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = []
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or ""] + [f"{node.module or ''}.{alias.name}" for alias in node.names]
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            bad = [n for n in names if any(part.startswith("test_") or part == "conftest" for part in n.split("."))]
+            if bad:
+                found.append(f"{path.relative_to(TESTS)}:{node.lineno} imports {bad[0]}")
+    assert found == []

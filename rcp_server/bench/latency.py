@@ -56,74 +56,88 @@ def percentile(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
 
-async def _walk(url: str, scene: dict, width: int, height: int, temporal: bool, seconds: float, steps: int):
-    sent: dict[int, float] = {}
-    eye, target = np.array(scene["camera"]["eye"]), np.array(scene["camera"]["look_at"])
-    forward = (target - eye) / np.linalg.norm(target - eye)
-    figures = WalkFigures(0, seconds, [], [], [], [], [], [], [])
-    async with websockets.connect(url, max_size=None) as ws:
+class _Walker:
+    """One walk-through over the WebSocket, as ``rcp bench latency`` times it: camera messages sent, frames read."""
 
-        async def frame() -> dict:
-            while (meta := json.loads(await ws.recv()))["type"] != "frame":
-                if meta["type"] == "error":
-                    raise RuntimeError(meta["message"])
-            await ws.recv()  # the JPEG
-            return meta
+    def __init__(self, ws, scene: dict):
+        self.ws = ws
+        self.sent: dict[int, float] = {}  # camera id -> when it was sent
+        self.eye, target = np.array(scene["camera"]["eye"]), np.array(scene["camera"]["look_at"])
+        self.forward = (target - self.eye) / np.linalg.norm(target - self.eye)
 
-        async def camera(k: int, offset: float) -> None:
-            sent[k] = time.perf_counter()
-            position = eye + offset * forward
-            message = {"type": "camera", "eye": list(position), "look_at": list(position + forward), "id": k}
-            await ws.send(json.dumps(message))
+    async def frame(self) -> dict:
+        """The next frame's description (its JPEG read and dropped)."""
+        while (meta := json.loads(await self.ws.recv()))["type"] != "frame":
+            if meta["type"] == "error":
+                raise RuntimeError(meta["message"])
+        await self.ws.recv()  # the JPEG
+        return meta
 
-        async def until_final() -> dict:
-            while not (meta := await frame())["final"]:
-                pass
-            return meta
+    async def camera(self, k: int, offset: float) -> None:
+        """Camera ``k``: ``offset`` scene units ahead of the scene's own."""
+        self.sent[k] = time.perf_counter()
+        position = self.eye + offset * self.forward
+        message = {"type": "camera", "eye": list(position), "look_at": list(position + self.forward), "id": k}
+        await self.ws.send(json.dumps(message))
 
-        await ws.send(json.dumps({"type": "hello", "scene": scene["name"], "width": width, "height": height}))
-        await ws.send(json.dumps({"type": "mode", "temporal": temporal}))
-        await until_final()
+    async def until_final(self) -> dict:
+        while not (meta := await self.frame())["final"]:
+            pass
+        return meta
 
-        # ---- walk: a camera message every 1/RATE s, frames read as they come ----
-        messages = int(seconds * RATE)
+    async def held_key(self, messages: int) -> None:
+        """A camera message every 1/RATE s, as a held key sends them."""
+        for k in range(messages):
+            await self.camera(k, 0.03 * k)
+            await asyncio.sleep(1 / RATE)
 
-        async def held_key():
-            for k in range(messages):
-                await camera(k, 0.03 * k)
-                await asyncio.sleep(1 / RATE)
-
-        walker = asyncio.create_task(held_key())
+    async def walk(self, messages: int, figures: WalkFigures) -> None:
+        """Walk frames read as they come while the key is held."""
+        walker = asyncio.create_task(self.held_key(messages))
         clock = time.perf_counter()
         while not walker.done() or figures.frames == 0:
             try:
-                meta = await asyncio.wait_for(frame(), 5)
+                meta = await asyncio.wait_for(self.frame(), 5)
             except TimeoutError:
                 break
             if meta["phase"] != "walk" or meta["camera_id"] is None:
                 continue
             figures.frames += 1
-            figures.latencies_ms.append((time.perf_counter() - sent[meta["camera_id"]]) * 1000)
+            figures.latencies_ms.append((time.perf_counter() - self.sent[meta["camera_id"]]) * 1000)
             figures.render_ms.append(meta["render_ms"])
             figures.scales.append(meta["scale"])
             figures.pixels.append(meta["width"] * meta["height"])
         figures.seconds = time.perf_counter() - clock
         await walker
-        await until_final()
 
+    async def step(self, k: int, offset: float, figures: WalkFigures) -> None:
+        """One camera message from rest: its first frame, its full-size painting, its refined one."""
+        await self.camera(k, offset)
+        while (meta := await self.frame())["camera_id"] != k:
+            pass
+        figures.step_ms.append((time.perf_counter() - self.sent[k]) * 1000)
+        while meta["phase"] != "refine":
+            meta = await self.frame()
+        figures.full_ms.append((time.perf_counter() - self.sent[k]) * 1000)
+        while not meta["final"]:
+            meta = await self.frame()
+        figures.final_ms.append((time.perf_counter() - self.sent[k]) * 1000)
+
+
+async def _walk(url: str, scene: dict, width: int, height: int, temporal: bool, seconds: float, steps: int):
+    figures = WalkFigures(0, seconds, [], [], [], [], [], [], [])
+    async with websockets.connect(url, max_size=None) as ws:
+        walker = _Walker(ws, scene)
+        await ws.send(json.dumps({"type": "hello", "scene": scene["name"], "width": width, "height": height}))
+        await ws.send(json.dumps({"type": "mode", "temporal": temporal}))
+        await walker.until_final()
+        # ---- walk: a camera message every 1/RATE s, frames read as they come ----
+        messages = int(seconds * RATE)
+        await walker.walk(messages, figures)
+        await walker.until_final()
         # ---- single steps from rest ----
         for step in range(steps):
-            k = messages + step
-            await camera(k, 0.03 * messages - 0.05 * (step + 1))
-            while (meta := await frame())["camera_id"] != k:
-                pass
-            figures.step_ms.append((time.perf_counter() - sent[k]) * 1000)
-            while meta["phase"] != "refine":
-                meta = await frame()
-            figures.full_ms.append((time.perf_counter() - sent[k]) * 1000)
-            while not meta["final"]:
-                meta = await frame()
-            figures.final_ms.append((time.perf_counter() - sent[k]) * 1000)
+            await walker.step(messages + step, 0.03 * messages - 0.05 * (step + 1), figures)
     return figures
 
 
@@ -233,6 +247,53 @@ def _video_load(url: str, scene: dict, on: bool, seconds: float):
             time.sleep(0.05)
 
 
+def _row(
+    f: WalkFigures, width: int, height: int, temporal: bool, alone: float, rest_renders: int, video: VideoLoad
+) -> dict:
+    """One mode's figures, as ``rcp bench latency`` prints and returns them."""
+    side = (statistics.median(f.pixels) / (width * height)) ** 0.5 if f.pixels else 0.0
+    row = {
+        "width": width,
+        "height": height,
+        "temporal": temporal,
+        "alone_ms": round(alone, 1),
+        "fps": round(f.fps, 1),
+        "walk_size": f"{round(width * side)}x{round(height * side)}",
+        "latency_p50_ms": round(percentile(f.latencies_ms, 50), 1),
+        "latency_p95_ms": round(percentile(f.latencies_ms, 95), 1),
+        "render_p50_ms": round(percentile(f.render_ms, 50), 1),
+        "step_p50_ms": round(percentile(f.step_ms, 50), 1),
+        "full_p50_ms": round(percentile(f.full_ms, 50), 1),
+        "full_p95_ms": round(percentile(f.full_ms, 95), 1),
+        "final_p50_ms": round(percentile(f.final_ms, 50), 1),
+        "final_p95_ms": round(percentile(f.final_ms, 95), 1),
+        "rest_renders": rest_renders,
+        "video_alone_fps": round(video.alone_fps, 2),
+        "video_walking_fps": round(video.walking_fps, 2),
+    }
+    return row
+
+
+def _notes(rows: list[dict], width: int, height: int, seconds: float) -> None:
+    """What ``rcp bench latency``'s columns mean, printed under them."""
+    print(
+        f"window {width}x{height}. alone: one {width // 2}x{height // 2} walk frame's painting in this process "
+        "(per-frame: all iterations; temporal: one from the last frame). walk size: the median walk frame. "
+        "latency: camera message sent -> its frame received, while walking. render: the server's painting "
+        "time per walk frame. step: one camera message from rest -> its first frame; full: -> its painting "
+        f"at {width}x{height}; final: -> the refined one (4 spp or more). +REST: meanwhile a REST caller keeps "
+        f"asking for {REST_LOAD['width']}x{REST_LOAD['height']} paintings at {REST_LOAD['paint']['spp']} spp, "
+        f"one after another ({sum(r['rest_renders'] for r in rows)} done)."
+    )
+    video = rows[-1]
+    print(
+        f"+video: meanwhile a video job (POST /api/videos, {VIDEO_LOAD['width']}x{VIDEO_LOAD['height']}, the "
+        f"scene's painting, every frame from the canvas) paints on the same tile pool: "
+        f"{video['video_alone_fps']:.2f} frames/s alone ({seconds:.0f} s before the walk), "
+        f"{video['video_walking_fps']:.2f} frames/s during the walk and its steps; then it is cancelled."
+    )
+
+
 def latency(scene_name: str, seconds: float, steps: int) -> dict:
     with BackgroundServer() as server:
         # the server's scenes folder, loaded again here for the paintings timed alone
@@ -261,26 +322,7 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
                 _video_load(server.url, info, busy == "video", seconds) as video,
             ):
                 f = asyncio.run(_walk(server.ws_url, info, width, height, temporal, seconds, steps))
-            side = (statistics.median(f.pixels) / (width * height)) ** 0.5 if f.pixels else 0.0
-            row = {
-                "width": width,
-                "height": height,
-                "temporal": temporal,
-                "alone_ms": round(alone, 1),
-                "fps": round(f.fps, 1),
-                "walk_size": f"{round(width * side)}x{round(height * side)}",
-                "latency_p50_ms": round(percentile(f.latencies_ms, 50), 1),
-                "latency_p95_ms": round(percentile(f.latencies_ms, 95), 1),
-                "render_p50_ms": round(percentile(f.render_ms, 50), 1),
-                "step_p50_ms": round(percentile(f.step_ms, 50), 1),
-                "full_p50_ms": round(percentile(f.full_ms, 50), 1),
-                "full_p95_ms": round(percentile(f.full_ms, 95), 1),
-                "final_p50_ms": round(percentile(f.final_ms, 50), 1),
-                "final_p95_ms": round(percentile(f.final_ms, 95), 1),
-                "rest_renders": load.done if busy == "REST" else 0,
-                "video_alone_fps": round(video.alone_fps, 2),
-                "video_walking_fps": round(video.walking_fps, 2),
-            }
+            row = _row(f, width, height, temporal, alone, load.done if busy == "REST" else 0, video)
             rows.append(row)
             mode = ("temporal" if temporal else "per-frame") + (f"+{busy}" if busy else "")
             print(
@@ -289,20 +331,5 @@ def latency(scene_name: str, seconds: float, steps: int) -> dict:
                 f"{row['full_p50_ms']:8.1f} {row['full_p95_ms']:6.1f} {row['final_p50_ms']:9.1f} "
                 f"{row['final_p95_ms']:6.1f}"
             )
-        print(
-            f"window {width}x{height}. alone: one {width // 2}x{height // 2} walk frame's painting in this process "
-            "(per-frame: all iterations; temporal: one from the last frame). walk size: the median walk frame. "
-            "latency: camera message sent -> its frame received, while walking. render: the server's painting "
-            "time per walk frame. step: one camera message from rest -> its first frame; full: -> its painting "
-            f"at {width}x{height}; final: -> the refined one (4 spp or more). +REST: meanwhile a REST caller keeps "
-            f"asking for {REST_LOAD['width']}x{REST_LOAD['height']} paintings at {REST_LOAD['paint']['spp']} spp, "
-            f"one after another ({sum(r['rest_renders'] for r in rows)} done)."
-        )
-        video = rows[-1]
-        print(
-            f"+video: meanwhile a video job (POST /api/videos, {VIDEO_LOAD['width']}x{VIDEO_LOAD['height']}, the "
-            f"scene's painting, every frame from the canvas) paints on the same tile pool: "
-            f"{video['video_alone_fps']:.2f} frames/s alone ({seconds:.0f} s before the walk), "
-            f"{video['video_walking_fps']:.2f} frames/s during the walk and its steps; then it is cancelled."
-        )
+        _notes(rows, width, height, seconds)
         return {"scene": scene_name, "threads": server.settings.threads, "rows": rows}

@@ -423,16 +423,29 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 3, figsize=(16, 9))
-    # (a) the bottom-right corner of each painting, where lookups leave the screen
-    ax = axes[0, 0]
+    _corners(axes[0, 0], report, crops)
+    _edge_band(axes[0, 1], report, crops)
+    _convergence(axes[0, 2], report, crops)
+    _flicker(axes[1, 0], report, crops)
+    _shower_door(axes[1, 1], report, crops)
+    _large_lambdas(axes[1, 2], report, crops)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _corners(ax, report: dict, crops: dict) -> None:
+    """Panel (a): the bottom-right corner of each painting, where lookups leave the screen."""
     h, w = crops["raytrace"].shape[:2]
     ch, cw = h // 3, w // 4
     tiles = [crops[name][h - ch :, w - cw :] for name in ("raytrace", *EDGES)]
     ax.imshow(np.clip(np.concatenate([np.concatenate(tiles[:2], 1), np.concatenate(tiles[2:], 1)], 0), 0, 1))
     ax.set_title("bottom-right corner: raytrace | clamp\nwrap | mirror", fontsize=10)
     ax.axis("off")
-    # (b) edge band against inside, per edge mode
-    ax = axes[0, 1]
+
+
+def _edge_band(ax, report: dict, crops: dict) -> None:
+    """Panel (b): edge band against inside, per edge mode."""
     edges = report["edges"]
     x = np.arange(len(EDGES))
     for k, (label, name) in enumerate((("iteration2", "iteration 2"), ("final", "last iteration"))):
@@ -442,8 +455,10 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     ax.set_ylabel("mean |image - raytrace| per channel")
     ax.set_title("image method against ray tracing (same samples)", fontsize=10)
     ax.legend(fontsize=8)
-    # (c) convergence
-    ax = axes[0, 2]
+
+
+def _convergence(ax, report: dict, crops: dict) -> None:
+    """Panel (c): convergence."""
     for method, changes in report["convergence"].items():
         ax.plot(range(2, len(changes) + 2), changes, marker="o", ms=3, label=method)
     ax.set_yscale("log")
@@ -452,8 +467,10 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     ax.set_title("convergence", fontsize=10)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
-    # (d) flicker over the pan
-    ax = axes[1, 0]
+
+
+def _flicker(ax, report: dict, crops: dict) -> None:
+    """Panel (d): flicker over the pan."""
     temporal = report["temporal"]
     ax.plot(temporal["plain_change"], color="black", lw=1, ls=":", label="plain render's own change")
     for name, run in temporal["runs"].items():
@@ -465,8 +482,11 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     ax.set_ylabel("painting's change - plain's change")
     ax.set_title(f"flicker, pan {temporal['pixels_per_frame']:.1f} px/frame", fontsize=10)
     ax.legend(fontsize=7)
-    # (e) the shower door
-    ax = axes[1, 1]
+
+
+def _shower_door(ax, report: dict, crops: dict) -> None:
+    """Panel (e): the shower door."""
+    temporal = report["temporal"]
     names = list(temporal["runs"])
     x = np.arange(len(names))
     ax.bar(x - 0.2, [temporal["runs"][n]["smudge_with_scene"] for n in names], 0.4, label="carried with the scene")
@@ -475,8 +495,10 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     ax.set_ylabel(f"correlation of smudges, frames {temporal['lag']} apart")
     ax.set_title("shower door: do smudges stick to the scene?", fontsize=10)
     ax.legend(fontsize=8)
-    # (f) large lambdas
-    ax = axes[1, 2]
+
+
+def _large_lambdas(ax, report: dict, crops: dict) -> None:
+    """Panel (f): large lambdas."""
     lambdas = report["extremes"]["lambda_p"]
     keys = list(lambdas)
     values = [float(k) for k in keys]
@@ -502,9 +524,6 @@ def chart(report: dict, crops: dict, path: Path) -> None:
     ax.set_title("large lambdas", fontsize=10)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3, which="both")
-    fig.tight_layout()
-    fig.savefig(path, dpi=80)
-    plt.close(fig)
 
 
 def run(out: Path, quick: bool = False, noise_only: bool = False) -> dict:

@@ -5,15 +5,6 @@ from __future__ import annotations
 import pytest
 from helpers.wire import Walk
 
-from rcp_server.bench.harness import BackgroundServer
-
-
-@pytest.fixture(scope="session")
-def live_server():
-    """One real server per test process (settles fast, so refinement starts soon after the camera rests)."""
-    with BackgroundServer(settle_ms=80) as server:
-        yield server
-
 
 @pytest.fixture
 def walk_to():
