@@ -12,11 +12,11 @@
 // against the same schemas as the messages they become (protocol.js, messages.js): a bad one is left out and
 // named in the one notice the page shows.
 
-import { PROTOCOL } from "./protocol.js";
+import { PAINT } from "./protocol.js";
 import { checkValue, message, valueSchema } from "./messages.js";
 
-const PAINT = PROTOCOL.paint.properties;
-const OWN = PROTOCOL.paint.$defs.OwnPaintModel.properties;
+const SETTINGS = PAINT.properties;
+const OWN = PAINT.$defs.OwnPaintModel.properties;
 const PER = ["objects", "materials"];
 const SWITCHES = ["temporal", "animate", "collide", "gravity"];
 const CAMERA = ["eye", "look_at", "fov", "projection", "heading"];
@@ -136,12 +136,12 @@ export function decode(search) {
   // ---- painting settings ----
   for (const [name, text] of query.entries()) {
     if (name === "scene" || CAMERA.includes(name) || SWITCHES.includes(name) || PAGE.includes(name)) continue;
-    if (!(name in PAINT) || name === "type") {
+    if (!(name in SETTINGS) || name === "type") {
       problems.push(`'${name}' is no setting`);
       continue;
     }
-    const [value, why] = parsed(PAINT[name], text);
-    const problem = why ?? checkValue(PAINT[name], value) ?? (PER.includes(name) ? ownProblem(value) : null);
+    const [value, why] = parsed(SETTINGS[name], text);
+    const problem = why ?? checkValue(SETTINGS[name], value) ?? (PER.includes(name) ? ownProblem(value) : null);
     if (problem) problems.push(`${name} ${problem}`);
     else view.paint[name] = value;
   }

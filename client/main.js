@@ -7,7 +7,7 @@
 //
 // `window.rcp` exposes the state, the messages sent and the overlay's numbers, for the tests.
 
-import { ENGINE_DEFAULTS, PROTOCOL } from "./protocol.js";
+import { CAMERA, CLIENT, ENGINE_DEFAULTS, PAINT } from "./protocol.js";
 import { MESSAGES } from "./messages.js";
 import * as walkCamera from "./camera.js";
 import { Connection } from "./connection.js";
@@ -701,5 +701,5 @@ const vr = new VrSession($("enter-vr"), view360, {
   notice,
 });
 
-window.rcp = { state, sent, overlay, walk, connection, frames, panel, objects, path, canvas, uploads, view360, vr, collider, shareLink, pickMask, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+window.rcp = { state, sent, overlay, walk, connection, frames, panel, objects, path, canvas, uploads, view360, vr, collider, shareLink, pickMask, MESSAGES, PROTOCOL: { client: CLIENT, paint: PAINT, camera: CAMERA }, ENGINE_DEFAULTS };
 start();

@@ -4,7 +4,7 @@
 // a missing required field or a value out of range throws here, in the browser, instead of drifting
 // silently from rcp_server/service/protocol.py. The named builders below are the only senders.
 
-import { PROTOCOL } from "./protocol.js";
+import { CLIENT } from "./protocol.js";
 
 /** The schema alternatives of a property: `anyOf` (optional fields are `X | null`) or the schema itself. */
 function alternatives(schema) {
@@ -62,9 +62,9 @@ export function valueSchema(schema) {
   return alternatives(schema).find((s) => s.type !== "null") ?? schema;
 }
 
-/** A client message of `type` with `fields`, checked against PROTOCOL.client; throws when it does not fit. */
+/** A client message of `type` with `fields`, checked against CLIENT (protocol.js); throws when it does not fit. */
 export function message(type, fields = {}) {
-  const schema = PROTOCOL.client[type];
+  const schema = CLIENT[type];
   if (!schema) throw new Error(`the protocol has no client message '${type}'`);
   const given = Object.entries(fields).filter(([, value]) => value !== undefined); // undefined: left out
   const msg = { type, ...Object.fromEntries(given) };

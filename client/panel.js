@@ -2,7 +2,7 @@
 // a control, with the server's range and choices. PAINT_UI only adds words and a comfortable slider range;
 // a field the server adds later still appears (under "More"), with a generic control.
 
-import { PROTOCOL } from "./protocol.js";
+import { PAINT } from "./protocol.js";
 import { checkValue, valueSchema } from "./messages.js";
 
 // label, unit, the slider's range (the number box takes the server's whole range), step, log slider
@@ -139,7 +139,7 @@ function numberControl(name, schema, ui, emit) {
  * scene's default). Returns {setScene(defaults), show(overrides), fields}.
  */
 export function paintPanel(container, onChange) {
-  const properties = PROTOCOL.paint.properties;
+  const properties = PAINT.properties;
   const names = [...Object.keys(PAINT_UI).filter((n) => n in properties), ...Object.keys(properties).filter((n) => !(n in PAINT_UI))]
     .filter((n) => !["style", "objects", "materials"].includes(n)); // the style has its own picker (styles.js),
   // the settings per object and material theirs (objects.js)

@@ -5,7 +5,7 @@
 // checked against the paint schema of protocol.js when read back, so one saved by an older client, or
 // edited by hand, loses only the settings this server no longer takes.
 
-import { PROTOCOL } from "./protocol.js";
+import { PAINT } from "./protocol.js";
 import { checkValue } from "./messages.js";
 
 const STORE = "rcp.presets";
@@ -13,7 +13,7 @@ const $ = (id) => document.getElementById(id);
 
 /** The settings of `settings` that the paint schema takes (name -> value); others are dropped. */
 function valid(settings) {
-  const properties = PROTOCOL.paint.properties;
+  const properties = PAINT.properties;
   const kept = Object.entries(settings ?? {}).filter(
     ([name, value]) => name in properties && value !== null && checkValue(properties[name], value) === null,
   );
