@@ -6,7 +6,11 @@
 // The camera sent keeps `look_at` at the scene's own look distance ahead of the eye, so a focus depth
 // `z0` left at its default (the eye-to-look_at distance) stays the same while walking.
 
+import { CAMERA } from "./protocol.js";
+
 export const UP = [0, 1, 0];
+/** How far from the origin a camera's points may lie, per coordinate: the server's bound (protocol.js). */
+export const COORDINATE_LIMIT = Math.min(...CAMERA.properties.eye.prefixItems.map((item) => item.maximum));
 const PITCH_LIMIT = (89 * Math.PI) / 180; // looking straight up or down would make f parallel to up
 export const FOV_RANGE = [10, 120];
 
@@ -75,4 +79,14 @@ export function toCamera(walk) {
 export function sameCamera(a, b) {
   if (!a || !b) return false;
   return a.fov === b.fov && [0, 1, 2].every((k) => a.eye[k] === b.eye[k] && a.look_at[k] === b.look_at[k]);
+}
+
+/**
+ * The walk kept inside the space the server paints: the eye, and the look_at the scene's look distance ahead
+ * of it, within COORDINATE_LIMIT on every axis. Returns the walk itself when it is inside.
+ */
+export function keptInside(walk) {
+  const bound = COORDINATE_LIMIT - walk.distance;
+  if (walk.eye.every((x) => Math.abs(x) <= bound)) return walk;
+  return { ...walk, eye: walk.eye.map((x) => Math.max(-bound, Math.min(bound, x))) };
 }

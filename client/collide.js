@@ -51,6 +51,11 @@ export class Collider {
     }
   }
 
+  /** The server refused move `id`: no answer will come, so the next moves go. */
+  lost(id) {
+    if (id === this.flight) this.flight = null;
+  }
+
   /** The server's answer: the eye to walk on from, or null when it answers a move that no longer applies. */
   answer(msg) {
     if (msg.id !== this.flight) return null;

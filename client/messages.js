@@ -64,12 +64,12 @@ export function valueSchema(schema) {
 
 /** A client message of `type` with `fields`, checked against CLIENT (protocol.js); throws when it does not fit. */
 export function message(type, fields = {}) {
-  const schema = CLIENT[type];
+  const schema = Object.hasOwn(CLIENT, type) ? CLIENT[type] : null; // own names only: never `constructor`
   if (!schema) throw new Error(`the protocol has no client message '${type}'`);
   const given = Object.entries(fields).filter(([, value]) => value !== undefined); // undefined: left out
   const msg = { type, ...Object.fromEntries(given) };
   for (const [name, value] of Object.entries(msg)) {
-    const property = schema.properties[name];
+    const property = Object.hasOwn(schema.properties, name) ? schema.properties[name] : null;
     if (!property) throw new Error(`a '${type}' message has no field '${name}'`);
     const problem = checkValue(property, value);
     if (problem) throw new Error(`${type}.${name} ${problem} (got ${JSON.stringify(value)})`);

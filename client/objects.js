@@ -8,7 +8,7 @@ import { checkValue, valueSchema } from "./messages.js";
 
 const OWN = PAINT.$defs.OwnPaintModel.properties;
 const FIRST = ["mapping", "lambda_p", "eye_mapping", "lambda_e"]; // the rest follow in the schema's order
-const FIELDS = [...FIRST.filter((n) => n in OWN), ...Object.keys(OWN).filter((n) => !FIRST.includes(n))];
+const FIELDS = [...FIRST.filter((n) => Object.hasOwn(OWN, n)), ...Object.keys(OWN).filter((n) => !FIRST.includes(n))];
 
 function element(tag, attributes = {}, ...children) {
   const node = document.createElement(tag);

@@ -140,7 +140,7 @@ function numberControl(name, schema, ui, emit) {
  */
 export function paintPanel(container, onChange) {
   const properties = PAINT.properties;
-  const names = [...Object.keys(PAINT_UI).filter((n) => n in properties), ...Object.keys(properties).filter((n) => !(n in PAINT_UI))]
+  const names = [...Object.keys(PAINT_UI).filter((n) => Object.hasOwn(properties, n)), ...Object.keys(properties).filter((n) => !Object.hasOwn(PAINT_UI, n))]
     .filter((n) => !["style", "objects", "materials"].includes(n)); // the style has its own picker (styles.js),
   // the settings per object and material theirs (objects.js)
   const more = element("details", { class: "more" }, element("summary", { text: "More painting settings" }));
@@ -180,7 +180,7 @@ export function paintPanel(container, onChange) {
 
   function render(name) {
     const { control, row } = controls[name];
-    const changed = name in overrides;
+    const changed = Object.hasOwn(overrides, name);
     row.classList.toggle("changed", changed);
     control.show(changed ? overrides[name] : defaults[name]);
   }

@@ -15,7 +15,7 @@ const $ = (id) => document.getElementById(id);
 function valid(settings) {
   const properties = PAINT.properties;
   const kept = Object.entries(settings ?? {}).filter(
-    ([name, value]) => name in properties && value !== null && checkValue(properties[name], value) === null,
+    ([name, value]) => Object.hasOwn(properties, name) && value !== null && checkValue(properties[name], value) === null,
   );
   return Object.fromEntries(kept);
 }
