@@ -343,6 +343,7 @@ function switchScene(name) {
 }
 
 $("panel-toggle").addEventListener("click", togglePanel);
+$("o-retry").addEventListener("click", () => connection.start());
 $("scene").addEventListener("change", (event) => {
   event.target.blur(); // keys walk again
   switchScene(event.target.value);

@@ -55,9 +55,12 @@ export class Overlay {
       open: "connected",
       waiting: `${detail.why} · retry in ${detail.seconds?.toFixed(1)} s`,
       refused: `refused: ${detail.why}`,
+      held: `${detail.why} · ${detail.seconds} s`,
+      offered: detail.why,
       stopped: "stopped",
     };
     $("o-connection").textContent = words[state] ?? state;
+    $("o-retry").hidden = state !== "offered"; // the time the server asked for has passed
     $("overlay").dataset.connection = state;
   }
 
