@@ -1,3 +1,4 @@
+// @ts-check
 // The walk-through camera: a position, yaw and pitch, with world +y up (shared/MISSION.md conventions:
 // right-handed, y up, `fov` the vertical field of view in degrees).
 //
@@ -18,7 +19,7 @@ const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
 const length = (a) => Math.hypot(a[0], a[1], a[2]);
 
 /** A walk camera from a protocol camera ({eye, look_at, up, fov}): yaw and pitch from its view direction. */
-export function fromCamera({ eye, look_at, fov }) {
+export function fromCamera({ eye, look_at, fov = 60 }) {
   const d = sub(look_at, eye);
   const distance = length(d) || 1;
   const f = d.map((x) => x / distance);

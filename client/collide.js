@@ -1,3 +1,4 @@
+// @ts-check
 // Walking, not flying: with `collide` on, the walk's moves go to the server (`move`), which keeps the eye a
 // body's radius from every surface, slides it along walls and walks it up stairs (rcp_server/engine/collide.py),
 // and answers `moved` with where the eye ends. One move is in flight at a time: the moves made meanwhile add up

@@ -1,3 +1,4 @@
+// @ts-check
 // Share links: the page's address carries the view, so that opening it elsewhere shows the same scene, camera
 // and painting. main.js writes it as the user walks (history.replaceState, a few times a second at most) and
 // reads it once at start.

@@ -560,7 +560,7 @@ const page = {
 const receive = receiver(page);
 const updateAddress = addressKeeper(page);
 
-window.rcp = {
+/** @type {any} */ (window).rcp = {
   state, sent, overlay, walk, connection, frames, panel, objects, path, canvas, uploads, view360, vr, collider, pickMask,
   shareLink: () => shareLink(page),
   MESSAGES,

@@ -1,3 +1,4 @@
+// @ts-check
 // Client -> server messages, built and checked against the generated schemas of protocol.js.
 //
 // Every message the client sends goes through `message(type, fields)`: an unknown type, an unknown field,

@@ -1,3 +1,4 @@
+// @ts-check
 // Settings per object and per material. A click on the view (a press without a drag) asks the server what that
 // pixel shows (`pick`, answered by `picked`); the section then offers the settings an object or a material may
 // take (the OwnPaintModel schema of protocol.js: every field, with its range and choices) for it, and lists

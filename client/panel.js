@@ -1,3 +1,4 @@
+// @ts-check
 // The painting controls, built from the PaintModel schema of protocol.js: every field the server takes gets
 // a control, with the server's range and choices. PAINT_UI only adds words and a comfortable slider range;
 // a field the server adds later still appears (under "More"), with a generic control.

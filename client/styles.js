@@ -1,3 +1,4 @@
+// @ts-check
 // Styles and presets: the server's named looks (GET /api/styles) in a picker, and the user's own presets,
 // kept in this browser (localStorage): save the current painting settings under a name, apply, delete.
 //
@@ -9,6 +10,7 @@ import { PAINT } from "./protocol.js";
 import { checkValue } from "./messages.js";
 
 const STORE = "rcp.presets";
+/** @param {string} id @returns {any} */
 const $ = (id) => document.getElementById(id);
 
 /** The settings of `settings` that the paint schema takes (name -> value); others are dropped. */

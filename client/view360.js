@@ -1,3 +1,4 @@
+// @ts-check
 // The 360° view mode: the client asks for equirect paintings of the walk's position and looks around in the
 // newest one locally (panorama.js), at the display's rate, with no message to the server.
 //
