@@ -31,6 +31,7 @@ import { initialState, notifier } from "./state.js";
 import { receiver } from "./receive.js";
 import { save } from "./save.js";
 import { addressKeeper, copyLink, pageOptions, shareLink } from "./share.js";
+import { loadScenes, loadStyles } from "./lists.js";
 
 /** @param {string} id @returns {any} */
 const $ = (id) => document.getElementById(id);
@@ -290,16 +291,6 @@ function showPaint() {
   objects.show(state.paint);
 }
 
-async function loadStyles() {
-  try {
-    const response = await fetch("api/styles", { headers: authorization });
-    if (response.ok) return await response.json();
-  } catch {
-    // no styles: the picker stays empty, presets still work
-  }
-  return [];
-}
-
 function flushPaint() {
   if (Object.keys(paintChanges).length && state.scene && send(MESSAGES.paint(paintChanges))) {
     state.lastPaint = { changes: paintChanges, before: paintBefore }; // undone if the server refuses it
@@ -416,43 +407,7 @@ function toggle360(on) {
   return true;
 }
 
-// ---- start: the scene list, then the walk-through ----
-
-async function loadScenes() {
-  for (let wait = 500; ; wait = Math.min(wait * 2, 8000)) {
-    try {
-      const response = await fetch("api/scenes", { headers: authorization });
-      if (response.ok) return await response.json();
-      const starting = await startingFrom(response);
-      if (starting) {
-        // a first start: the kernels compile (rcp_server/service/startup.py); the server says how far, and when to ask again
-        $("o-connection").textContent = starting.text;
-        notice(starting.text, "info");
-        await new Promise((resolve) => setTimeout(resolve, starting.retryMs));
-        continue;
-      }
-      if (response.status === 401) {
-        $("o-connection").textContent = "needs a token: open /#token=…";
-        notice((await response.json()).detail);
-        return null;
-      }
-    } catch {
-      // the server is not up yet: try again
-    }
-    $("o-connection").textContent = "waiting for the server…";
-    await new Promise((resolve) => setTimeout(resolve, wait));
-  }
-}
-
-/** A 503 "starting" answer as {text: "starting: compiling kernels (3/14)", retryMs}, or null for any other. */
-async function startingFrom(response) {
-  if (response.status !== 503) return null;
-  const body = await response.json().catch(() => null);
-  if (body?.status !== "starting") return null;
-  const count = body.total ? ` (${body.done}/${body.total})` : "";
-  const retryMs = 1000 * Math.min(Math.max(Number(response.headers.get("retry-after")) || 1, 0.5), 5);
-  return { text: `starting: ${body.phase}${count}`, retryMs };
-}
+// ---- start: the scene list (lists.js), then the walk-through ----
 
 async function start() {
   if (matchMedia("(max-width: 700px)").matches) togglePanel();
@@ -463,7 +418,7 @@ async function start() {
   $("quality").value = state.quality;
   $("quality-value").textContent = state.quality;
   applySize();
-  state.scenes = await loadScenes();
+  state.scenes = await loadScenes(authorization, (text) => ($("o-connection").textContent = text), notice);
   if (state.scenes === null) return; // refused: retrying cannot help
   const names = state.scenes.map((s) => s.name);
   for (const scene of state.scenes) $("scene").append(new Option(`${scene.title} (${scene.name})`, scene.name));
@@ -486,7 +441,7 @@ async function start() {
   const problems = [...link.pageProblems, ...(link.scene ? link.problems : [])];
   if (problems.length) notice(linkNotice(problems)); // one notice for all of them
   if (!state.sceneName) return notice("the server has no scenes");
-  const styles = await loadStyles();
+  const styles = await loadStyles(authorization);
   state.styles = Object.fromEntries(styles.map((s) => [s.name, s]));
   stylesUi = stylesPanel(styles, { current: () => state.paint, apply: applyPaint, notice });
   connection.start();
