@@ -46,6 +46,8 @@ export function owns(table, name) {
 export function takeToken(href) {
   const url = new URL(href);
   const fragment = new URLSearchParams(url.hash.slice(1));
+  const given = url.searchParams.has(TOKEN) || fragment.has(TOKEN);
+  if (!given) return { token: null, address: url.pathname + url.search + url.hash }; // as it is, to the letter
   const token = url.searchParams.get(TOKEN) || fragment.get(TOKEN) || null;
   url.searchParams.delete(TOKEN);
   fragment.delete(TOKEN);
