@@ -1,3 +1,4 @@
+// @ts-check
 // The walk-through camera: a position, yaw and pitch, with world +y up (shared/MISSION.md conventions:
 // right-handed, y up, `fov` the vertical field of view in degrees).
 //
@@ -6,7 +7,11 @@
 // The camera sent keeps `look_at` at the scene's own look distance ahead of the eye, so a focus depth
 // `z0` left at its default (the eye-to-look_at distance) stays the same while walking.
 
+import { CAMERA } from "./protocol.js";
+
 export const UP = [0, 1, 0];
+/** How far from the origin a camera's points may lie, per coordinate: the server's bound (protocol.js). */
+export const COORDINATE_LIMIT = Math.min(...CAMERA.properties.eye.prefixItems.map((item) => item.maximum));
 const PITCH_LIMIT = (89 * Math.PI) / 180; // looking straight up or down would make f parallel to up
 export const FOV_RANGE = [10, 120];
 
@@ -14,7 +19,7 @@ const sub = (a, b) => [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
 const length = (a) => Math.hypot(a[0], a[1], a[2]);
 
 /** A walk camera from a protocol camera ({eye, look_at, up, fov}): yaw and pitch from its view direction. */
-export function fromCamera({ eye, look_at, fov }) {
+export function fromCamera({ eye, look_at, fov = 60 }) {
   const d = sub(look_at, eye);
   const distance = length(d) || 1;
   const f = d.map((x) => x / distance);
@@ -75,4 +80,14 @@ export function toCamera(walk) {
 export function sameCamera(a, b) {
   if (!a || !b) return false;
   return a.fov === b.fov && [0, 1, 2].every((k) => a.eye[k] === b.eye[k] && a.look_at[k] === b.look_at[k]);
+}
+
+/**
+ * The walk kept inside the space the server paints: the eye, and the look_at the scene's look distance ahead
+ * of it, within COORDINATE_LIMIT on every axis. Returns the walk itself when it is inside.
+ */
+export function keptInside(walk) {
+  const bound = COORDINATE_LIMIT - walk.distance;
+  if (walk.eye.every((x) => Math.abs(x) <= bound)) return walk;
+  return { ...walk, eye: walk.eye.map((x) => Math.max(-bound, Math.min(bound, x))) };
 }

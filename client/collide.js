@@ -1,3 +1,4 @@
+// @ts-check
 // Walking, not flying: with `collide` on, the walk's moves go to the server (`move`), which keeps the eye a
 // body's radius from every surface, slides it along walls and walks it up stairs (rcp_server/engine/collide.py),
 // and answers `moved` with where the eye ends. One move is in flight at a time: the moves made meanwhile add up
@@ -49,6 +50,11 @@ export class Collider {
       this.flight = id;
       this.pending = [0, 0, 0];
     }
+  }
+
+  /** The server refused move `id`: no answer will come, so the next moves go. */
+  lost(id) {
+    if (id === this.flight) this.flight = null;
   }
 
   /** The server's answer: the eye to walk on from, or null when it answers a move that no longer applies. */

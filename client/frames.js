@@ -1,3 +1,4 @@
+// @ts-check
 // Painted frames onto the canvas. Each arrives as a JPEG the size of the painting (smaller than the canvas
 // while walking) and is drawn scaled to the canvas. Only the newest frame is decoded: one that arrives
 // while another decodes replaces any frame still waiting, so a slow browser never falls behind. A frame smaller

@@ -1,3 +1,4 @@
+// @ts-check
 // Gamepads, in the standard mapping of the Gamepad API (https://w3c.github.io/gamepad/#remapping): the left
 // stick walks, the right stick looks, the triggers go down (left) and up (right), Y (button 3) resets the
 // camera. A stick's travel inside the dead zone counts as none; beyond it, the travel is rescaled from 0, so a

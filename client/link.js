@@ -1,3 +1,4 @@
+// @ts-check
 // Share links: the page's address carries the view, so that opening it elsewhere shows the same scene, camera
 // and painting. main.js writes it as the user walks (history.replaceState, a few times a second at most) and
 // reads it once at start.
@@ -8,20 +9,51 @@
 //   &style=ink&lambda_p=20&objects={"walls":{"lambda_p":0}}    every painting setting changed (paint schema)
 //   &width=480&height=270&quality=80&resolution=0.5            the page's own options, as given
 //
-// The token never goes in it (it stays in the fragment's place: sessionStorage, main.js). Values are checked
-// against the same schemas as the messages they become (protocol.js, messages.js): a bad one is left out and
-// named in the one notice the page shows.
+// The address is anyone's to write, so nothing in it is trusted: a name counts only as an own property of a
+// schema (never `in`, which finds `constructor` or `__proto__` on every object), no name of a prototype member
+// is taken even where a table's names are free, and every value is checked against the same schemas as the
+// messages it becomes (protocol.js, messages.js) before it is used: a bad one is left out and named in the one
+// notice the page shows. The token never goes in it: `takeToken` takes it out of the query or the fragment at
+// once (main.js keeps it for this tab only).
 
-import { PROTOCOL } from "./protocol.js";
+import { CLIENT, PAINT } from "./protocol.js";
 import { checkValue, message, valueSchema } from "./messages.js";
 
-const PAINT = PROTOCOL.paint.properties;
-const OWN = PROTOCOL.paint.$defs.OwnPaintModel.properties;
+const SETTINGS = PAINT.properties;
+const OWN = PAINT.$defs.OwnPaintModel.properties;
 const PER = ["objects", "materials"];
 const SWITCHES = ["temporal", "animate", "collide", "gravity"];
 const CAMERA = ["eye", "look_at", "fov", "projection", "heading"];
-export const PAGE = ["width", "height", "quality", "resolution"]; // read by main.js as ever
+const PAGE = ["width", "height", "quality", "resolution"];
+export const RESOLUTIONS = [1, 0.75, 0.5, 0.333]; // the page's painting size, as fractions of the window's
+const TOKEN = "token";
 const round = (x) => Math.round(x * 1e5) / 1e5;
+
+/** Names no table of the page takes: those of the members every object inherits. */
+const PROTOTYPE_NAMES = new Set([...Object.getOwnPropertyNames(Object.prototype), "prototype"]);
+
+/** Whether `name` is one of `table`'s own names (and names no prototype member). */
+export function owns(table, name) {
+  return !PROTOTYPE_NAMES.has(name) && Object.hasOwn(table, name);
+}
+
+/**
+ * The token of an address (the query's `token` or the fragment's), and the address without it: the page puts
+ * the latter in place at once (history.replaceState), so no link, bookmark or Referer carries it.
+ * @param {string} href
+ * @returns {{token: string | null, address: string}}
+ */
+export function takeToken(href) {
+  const url = new URL(href);
+  const fragment = new URLSearchParams(url.hash.slice(1));
+  const given = url.searchParams.has(TOKEN) || fragment.has(TOKEN);
+  if (!given) return { token: null, address: url.pathname + url.search + url.hash }; // as it is, to the letter
+  const token = url.searchParams.get(TOKEN) || fragment.get(TOKEN) || null;
+  url.searchParams.delete(TOKEN);
+  fragment.delete(TOKEN);
+  url.hash = fragment.toString();
+  return { token, address: url.pathname + url.search.replace(/%2C/g, ",") + url.hash };
+}
 
 /** The query string of a view: {scene, camera {eye, look_at, fov}, projection, heading, switches, paint, page}. */
 export function encode(view) {
@@ -79,9 +111,10 @@ function parsed(schema, text) {
 function ownProblem(table) {
   if (typeof table !== "object" || table === null || Array.isArray(table)) return "must be a table of names";
   for (const [name, settings] of Object.entries(table)) {
+    if (PROTOTYPE_NAMES.has(name)) return `'${name}' names no object`;
     if (typeof settings !== "object" || settings === null || Array.isArray(settings)) return `${name} must be a table`;
     for (const [field, value] of Object.entries(settings)) {
-      if (!(field in OWN)) return `${name} has no setting '${field}'`;
+      if (!owns(OWN, field)) return `${name} has no setting '${field}'`;
       const problem = checkValue(OWN[field], value);
       if (problem) return `${name}.${field} ${problem}`;
     }
@@ -89,14 +122,45 @@ function ownProblem(table) {
   return null;
 }
 
+/** The page's own options: width and height (a fixed painting size), quality and resolution, each checked. */
+function pageOptions(query, problems) {
+  const page = {};
+  const bounds = { width: CLIENT.hello.properties.width, height: CLIENT.hello.properties.height, quality: CLIENT.hello.properties.quality };
+  for (const name of ["width", "height", "quality"]) {
+    const text = query.get(name);
+    if (text === null) continue;
+    const value = text.trim() === "" ? NaN : Number(text);
+    const problem = checkValue(bounds[name], value);
+    if (problem) problems.push(`${name} ${problem}`);
+    else page[name] = value;
+  }
+  const [width, height] = [page.width !== undefined, page.height !== undefined];
+  if (width !== height) {
+    // one alone means nothing: the window's size is used (a bad other one has said so already)
+    if (!query.has(width ? "height" : "width")) problems.push("width and height go together");
+    delete page.width;
+    delete page.height;
+  }
+  if (query.has("resolution")) {
+    const value = Number(query.get("resolution"));
+    if (RESOLUTIONS.includes(value)) page.resolution = value;
+    else problems.push(`resolution must be one of ${RESOLUTIONS.join(", ")}`);
+  }
+  return page;
+}
+
 /**
- * The view of a query string: {scene, camera, projection, heading, switches, paint, problems}. A value that
- * would not pass as a message is left out, its problem kept (one line each) for the page's one notice.
+ * The view of a query string: {scene, camera, projection, heading, switches, paint, page, problems}. A value
+ * that would not pass as a message is left out, its problem kept (one line each) for the page's one notice;
+ * `pageProblems` are those of the page's own options, which hold whatever the scene.
  */
 export function decode(search) {
   const query = new URLSearchParams(search);
   const problems = [];
-  const view = { scene: query.get("scene"), camera: null, projection: null, heading: null, switches: {}, paint: {}, problems };
+  const pageProblems = [];
+  const scene = query.get("scene");
+  const view = { scene, camera: null, projection: null, heading: null, switches: {}, paint: {}, page: {}, problems, pageProblems };
+  view.page = pageOptions(query, pageProblems);
 
   // ---- the camera ----
   if (query.has("eye") || query.has("look_at")) {
@@ -135,13 +199,13 @@ export function decode(search) {
 
   // ---- painting settings ----
   for (const [name, text] of query.entries()) {
-    if (name === "scene" || CAMERA.includes(name) || SWITCHES.includes(name) || PAGE.includes(name)) continue;
-    if (!(name in PAINT) || name === "type") {
-      problems.push(`'${name}' is no setting`);
+    if (name === "scene" || name === TOKEN || CAMERA.includes(name) || SWITCHES.includes(name) || PAGE.includes(name)) continue;
+    if (!owns(SETTINGS, name) || name === "type") {
+      problems.push(`'${name.slice(0, 40)}' is no setting`);
       continue;
     }
-    const [value, why] = parsed(PAINT[name], text);
-    const problem = why ?? checkValue(PAINT[name], value) ?? (PER.includes(name) ? ownProblem(value) : null);
+    const [value, why] = parsed(SETTINGS[name], text);
+    const problem = why ?? checkValue(SETTINGS[name], value) ?? (PER.includes(name) ? ownProblem(value) : null);
     if (problem) problems.push(`${name} ${problem}`);
     else view.paint[name] = value;
   }

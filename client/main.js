@@ -1,13 +1,15 @@
-// The rcp walk-through: wires the connection, the frames, the walk controls, the panel and the overlay.
+// @ts-check
+// The rcp walk-through: wires the connection, the frames, the walk controls, the panel and the overlay. The
+// page's state is state.js's, the server's messages are received in receive.js, Save is save.js and the
+// address that always carries the view is share.js (written and read by link.js).
 // Query parameters: ?scene=NAME, ?width=W&height=H (a fixed painting size instead of the window's; the
-// Resolution setting scales either), ?quality=Q (JPEG quality), and the rest of the view (link.js): the page
-// keeps its address up to date as the user walks, so it is always a link to what it shows. A server with a
-// token (RCP_TOKEN) is opened as /#token=TOKEN: the fragment never reaches a server log or a Referer header,
-// and the page takes it out of its address (keeping it for this tab only), so a link never carries it.
+// Resolution setting scales either), ?quality=Q (JPEG quality), and the rest of the view (link.js). A server
+// with a token (RCP_TOKEN) is opened as /#token=TOKEN (or ?token=TOKEN): the page takes it out of its address at
+// once (keeping it for this tab only), so a link never carries it.
 //
 // `window.rcp` exposes the state, the messages sent and the overlay's numbers, for the tests.
 
-import { ENGINE_DEFAULTS, PROTOCOL } from "./protocol.js";
+import { CAMERA, CLIENT, ENGINE_DEFAULTS, PAINT } from "./protocol.js";
 import { MESSAGES } from "./messages.js";
 import * as walkCamera from "./camera.js";
 import { Connection } from "./connection.js";
@@ -24,40 +26,26 @@ import { View360, panoramaSize } from "./view360.js";
 import { VrSession } from "./vr.js";
 import { Collider } from "./collide.js";
 import { PickMask } from "./pickmask.js";
-import { decode as decodeLink, encode as encodeLink, linkNotice } from "./link.js";
+import { decode as decodeLink, encode as encodeLink, linkNotice, takeToken } from "./link.js";
+import { initialState, notifier } from "./state.js";
+import { receiver } from "./receive.js";
+import { save } from "./save.js";
+import { addressKeeper, copyLink, pageOptions, shareLink } from "./share.js";
+import { loadScenes, loadStyles } from "./lists.js";
 
+/** @param {string} id @returns {any} */
 const $ = (id) => document.getElementById(id);
-const query = new URLSearchParams(location.search);
-const token = new URLSearchParams(location.hash.slice(1)).get("token") ?? sessionStorage.getItem("rcp.token");
-if (token) {
-  sessionStorage.setItem("rcp.token", token); // a reload of this tab still has it; a copied address does not
-  history.replaceState(null, "", location.pathname + location.search);
-}
+// the token leaves the address before anything else reads it
+const given = takeToken(location.href);
+if (given.address !== location.pathname + location.search + location.hash) history.replaceState(null, "", given.address);
+const token = given.token ?? sessionStorage.getItem("rcp.token");
+if (token) sessionStorage.setItem("rcp.token", token); // a reload of this tab still has it; a copied address does not
 const link = decodeLink(location.search); // the view this address carries (applied once its scene is ready)
 const authorization = token ? { authorization: `Bearer ${token}` } : {};
 const canvas = $("view");
 
-const state = {
-  scenes: [], // SceneInfo of every scene (GET /api/scenes)
-  sceneName: query.get("scene"),
-  scene: null, // SceneInfo of the walk-through, from `ready`
-  defaults: {}, // the scene's painting settings, engine defaults filled in
-  paint: {}, // the painting settings the user changed (sent as `paint`), a style among them
-  styles: {}, // name -> StyleInfo (GET /api/styles)
-  temporal: false, // per-frame: every frame is the painting of its camera
-  animate: false,
-  quality: Number(query.get("quality")) || 80,
-  resolution: [1, 0.75, 0.5, 0.333].includes(Number(query.get("resolution"))) ? Number(query.get("resolution")) : 1,
-  // painting size as a fraction of the window's (or of ?width, ?height)
-  collide: link.switches.collide ?? true, // walking, not flying (collide.js)
-  gravity: link.switches.gravity ?? false,
-  size: [0, 0], // painting size in pixels: what `hello` and `view` ask for, what Save renders
-  cameraId: 0,
-  lastCamera: null, // the camera last sent (or the scene's, which the server starts from)
-  readies: 0, // `ready` messages received
-  messages: 0, // messages sent since the page opened (`sent` keeps only the last 500)
-  errors: [], // the last 50 problems shown to the user
-};
+const state = initialState(link);
+const notice = notifier(state, $("toast"));
 const sent = []; // the last 500 messages sent, for the tests
 
 const overlay = new Overlay();
@@ -83,7 +71,7 @@ wsUrl.protocol = wsUrl.protocol === "https:" ? "wss:" : "ws:";
 if (token) wsUrl.searchParams.set("token", token); // a browser's WebSocket cannot send headers
 const connection = new Connection(wsUrl.href, {
   onOpen: sendHello,
-  onMessage: receive,
+  onMessage: (msg) => receive(msg),
   onFrame: (meta, jpeg) => (view360.accepts(meta) ? view360 : frames).push(meta, jpeg),
   onState: (connectionState, detail) => overlay.connection(connectionState, detail),
 });
@@ -109,7 +97,6 @@ function sendCamera() {
   state.cameraId += 1;
   if (send(MESSAGES.camera(camera, state.cameraId))) {
     overlay.cameraSent(state.cameraId);
-    if (view360.active) view360.sent(state.cameraId);
     state.lastCamera = camera;
   }
 }
@@ -119,37 +106,7 @@ function sendHello() {
   send(MESSAGES.hello(state.sceneName, width, height, state.quality));
 }
 
-// ---- receiving ----
-
-function receive(msg) {
-  if (msg.type === "ready") ready(msg);
-  else if (msg.type === "error") refused(msg.message);
-  else if (msg.type === "picked") picked(msg);
-  else if (msg.type === "moved") {
-    const eye = collider.answer(msg);
-    if (eye && walk.walk) walk.walk = { ...walk.walk, eye };
-  }
-}
-
-function ready(msg) {
-  connection.healthy();
-  state.readies += 1;
-  const fresh = state.scene?.name !== msg.scene.name;
-  state.scene = msg.scene;
-  if (fresh) {
-    startScene(msg.scene);
-  } else {
-    // a reconnection: the server starts afresh, so restore the camera and settings we had
-    collider.flight = null; // its answer was lost with the connection
-    state.lastCamera = walkCamera.toCamera(walkCamera.fromCamera(msg.scene.camera));
-    if (view360.active) state.lastCamera = null; // the server starts from a flat view: send the panorama's
-    sendCamera();
-    // one field a message: a setting the server refuses does not take the others with it
-    for (const [name, value] of Object.entries(state.paint)) send(MESSAGES.paint({ [name]: value }));
-  }
-  const animate = state.scene.animated && state.animate;
-  if (msg.temporal !== state.temporal || msg.animate !== animate) send(MESSAGES.mode(state.temporal, animate));
-}
+// ---- a scene starts (receive.js receives the server's messages) ----
 
 function startScene(scene) {
   walk.place(scene.camera);
@@ -186,30 +143,10 @@ function applyLink() {
   }
 }
 
-// The server keeps its old settings when it refuses a paint message. Errors do not say which message they
-// answer, so one naming a field of the paint message just sent undoes that message in the panel too.
-let lastPaint = null; // {changes, before: state.paint as it was, at: ms}
-
-function refused(text) {
-  const fields = lastPaint && performance.now() - lastPaint.at < 5000 ? Object.keys(lastPaint.changes) : [];
-  if (fields.some((name) => text.includes(name))) {
-    for (const name of fields) {
-      if (name in lastPaint.before) state.paint[name] = lastPaint.before[name];
-      else delete state.paint[name];
-    }
-    panel.show(state.paint);
-    objects.show(state.paint);
-    lastPaint = null;
-    text = `Refused: ${text}`;
-  }
-  notice(text);
-}
-
 // ---- the painting's size ----
 
 function wantedFlatSize() {
-  const fixed = [Number(query.get("width")), Number(query.get("height"))];
-  const base = fixed[0] > 0 && fixed[1] > 0 ? fixed : [innerWidth, innerHeight];
+  const base = link.page.width !== undefined ? [link.page.width, link.page.height] : [innerWidth, innerHeight];
   return base.map((n) => Math.max(16, Math.min(4096, Math.round(n * state.resolution))));
 }
 
@@ -241,14 +178,15 @@ let lastTick = performance.now();
 let lastOverlay = 0;
 
 function tick(now) {
+  requestAnimationFrame(tick); // first: a frame's work that fails does not stop the walk
   advance(now);
-  requestAnimationFrame(tick);
 }
 
 /** One animation frame's work (a headset's frames call it too, vr.js). */
 function advance(now) {
   const dt = Math.min(0.1, Math.max(0, now - lastTick) / 1000);
   walk.step(dt);
+  keepInside();
   lastTick = Math.max(lastTick, now);
   if (walk.walk && state.scene && connection.state === "open") {
     collider.flush(walk.walk.eye, dt);
@@ -264,6 +202,21 @@ function advance(now) {
     overlay.walker(walk.pad, collider.enabled ? collider.body : null);
     $("hint").classList.toggle("away", walk.moved);
     updateAddress();
+  }
+}
+
+/** The walk stays where the server paints (the camera schema's bounds), said once each time it gets there. */
+function keepInside() {
+  if (!walk.walk) return;
+  const inside = walkCamera.keptInside(walk.walk);
+  if (inside !== walk.walk) {
+    walk.walk = inside;
+    collider.pending = [0, 0, 0]; // moves further out would only be undone
+    const limit = walkCamera.COORDINATE_LIMIT.toExponential().replace("+", "");
+    if (!state.atBound) notice(`The walk stops at the edge of the space painted here, ±${limit} scene units`);
+    state.atBound = true;
+  } else if (state.atBound && walk.walk.eye.every((x) => Math.abs(x) < 0.9 * walkCamera.COORDINATE_LIMIT)) {
+    state.atBound = false;
   }
 }
 
@@ -324,7 +277,7 @@ let stylesUi = null; // the Style section, once the styles are known
 
 /** Replace the user's painting settings by `settings` (a style and what is changed beside it). */
 function applyPaint(settings) {
-  for (const name of Object.keys(state.paint)) if (!(name in settings)) paintChanges[name] = null;
+  for (const name of Object.keys(state.paint)) if (!Object.hasOwn(settings, name)) paintChanges[name] = null;
   Object.assign(paintChanges, settings);
   state.paint = { ...settings };
   showPaint();
@@ -338,19 +291,9 @@ function showPaint() {
   objects.show(state.paint);
 }
 
-async function loadStyles() {
-  try {
-    const response = await fetch("api/styles", { headers: authorization });
-    if (response.ok) return await response.json();
-  } catch {
-    // no styles: the picker stays empty, presets still work
-  }
-  return [];
-}
-
 function flushPaint() {
   if (Object.keys(paintChanges).length && state.scene && send(MESSAGES.paint(paintChanges))) {
-    lastPaint = { changes: paintChanges, before: paintBefore, at: performance.now() };
+    state.lastPaint = { changes: paintChanges, before: paintBefore }; // undone if the server refuses it
   }
   paintChanges = {}; // not sent while disconnected: the reconnection restores state.paint
   paintBefore = { ...state.paint };
@@ -385,12 +328,13 @@ function switchScene(name) {
   state.sceneName = name;
   state.scene = null; // the `ready` that follows starts the scene afresh
   const url = new URL(location.href);
-  url.search = encodeLink({ scene: name, page: pageOptions() });
+  url.search = encodeLink({ scene: name, page: pageOptions(page) });
   history.replaceState(null, "", url);
   sendHello();
 }
 
 $("panel-toggle").addEventListener("click", togglePanel);
+$("o-retry").addEventListener("click", () => connection.start());
 $("scene").addEventListener("change", (event) => {
   event.target.blur(); // keys walk again
   switchScene(event.target.value);
@@ -421,10 +365,10 @@ $("resolution").addEventListener("change", (event) => {
   state.resolution = Number(event.target.value);
   applySize();
 });
-$("save").addEventListener("click", save);
+$("save").addEventListener("click", () => save(page, $("save")));
 $("copy-link").addEventListener("click", (event) => {
   event.target.blur();
-  copyLink();
+  copyLink(page, $("copy-link"), $("link-box"));
 });
 $("collide").addEventListener("change", (event) => {
   event.target.blur();
@@ -463,160 +407,7 @@ function toggle360(on) {
   return true;
 }
 
-// ---- Save: the same view, painted once more at full size with more samples, as a PNG download ----
-
-async function save() {
-  if (!state.scene) return;
-  const button = $("save");
-  const spp = state.paint.spp ?? state.defaults.spp ?? 1;
-  const paint = MESSAGES.paint({ ...state.paint, spp: Math.min(64, Math.max(4, 2 * spp)) }); // as refined at rest
-  delete paint.type;
-  const [width, height] = state.size;
-  const body = {
-    scene: state.scene.name,
-    width,
-    height,
-    camera: currentCamera(), // in the 360° view, the panorama
-    paint,
-    time: overlay.frame?.time ?? 0, // the moment shown, for animated scenes
-    format: "png",
-  };
-  button.disabled = true;
-  button.textContent = "Painting…";
-  try {
-    const response = await fetch("api/render", {
-      method: "POST",
-      headers: { "content-type": "application/json", ...authorization },
-      body: JSON.stringify(body),
-    });
-    if (!response.ok) {
-      const detail = (await response.json().catch(() => ({}))).detail;
-      throw new Error(typeof detail === "string" ? detail : (detail?.[0]?.msg ?? `HTTP ${response.status}`));
-    }
-    const link = document.createElement("a");
-    link.href = URL.createObjectURL(await response.blob());
-    const stamp = new Date().toISOString().slice(0, 19).replace(/[-:]/g, "").replace("T", "-");
-    link.download = `rcp-${state.scene.name}-${stamp}.png`;
-    link.click();
-    setTimeout(() => URL.revokeObjectURL(link.href), 30000);
-  } catch (error) {
-    notice(`Save failed: ${error.message}`);
-  } finally {
-    button.disabled = false;
-    button.textContent = "Save PNG";
-  }
-}
-
-// ---- share links: the address always carries the view (link.js) ----
-
-/** The page's own options, as its address gave them (Resolution as chosen). */
-function pageOptions() {
-  const page = {};
-  for (const name of ["width", "height"]) if (query.get(name)) page[name] = query.get(name);
-  if (state.quality !== 80) page.quality = state.quality;
-  if (state.resolution !== 1) page.resolution = state.resolution;
-  return page;
-}
-
-/** The address of the view shown: scene, camera, 360° view, switches, painting; never the token. */
-function shareLink() {
-  if (!state.scene || !walk.walk) return location.href;
-  const view = {
-    scene: state.scene.name,
-    camera: walkCamera.toCamera(walk.walk),
-    projection: view360.active ? "equirect" : null,
-    heading: view360.yaw0,
-    switches: {
-      temporal: state.temporal || undefined,
-      animate: state.animate || undefined,
-      collide: state.collide ? undefined : false,
-      gravity: state.gravity || undefined,
-    },
-    paint: state.paint,
-    page: pageOptions(),
-  };
-  return `${location.origin}${location.pathname}?${encodeLink(view)}`;
-}
-
-let shownAddress = "";
-/** Keep the address up to date (called a few times a second: replaceState is not for every frame). */
-function updateAddress() {
-  if (!state.scene || link.scene) return; // the link's own view is not applied yet
-  const address = shareLink();
-  if (address === shownAddress) return;
-  shownAddress = address;
-  history.replaceState(null, "", address);
-}
-
-async function copyLink() {
-  const address = shareLink();
-  try {
-    await navigator.clipboard.writeText(address);
-    notice("Link copied: it opens this view", "info");
-  } catch {
-    // no clipboard (an insecure origin, or refused): the address is selected for the user to copy
-    const box = $("link-box");
-    box.hidden = false;
-    box.value = address;
-    box.select();
-    notice("Copy the selected link", "info");
-  }
-  $("copy-link").dataset.copied = address;
-}
-
-// ---- messages to the user ----
-
-let toastTimer = 0;
-function notice(text, kind = "error") {
-  if (kind === "error") {
-    state.errors.push(text);
-    if (state.errors.length > 50) state.errors.shift();
-  }
-  const toast = $("toast");
-  toast.textContent = text;
-  toast.dataset.kind = kind;
-  toast.classList.add("shown");
-  clearTimeout(toastTimer);
-  toastTimer = setTimeout(() => toast.classList.remove("shown"), kind === "error" ? 7000 : 1500);
-}
-
-// ---- start: the scene list, then the walk-through ----
-
-async function loadScenes() {
-  for (let wait = 500; ; wait = Math.min(wait * 2, 8000)) {
-    try {
-      const response = await fetch("api/scenes", { headers: authorization });
-      if (response.ok) return await response.json();
-      const starting = await startingFrom(response);
-      if (starting) {
-        // a first start: the kernels compile (rcp_server/service/startup.py); the server says how far, and when to ask again
-        $("o-connection").textContent = starting.text;
-        notice(starting.text, "info");
-        await new Promise((resolve) => setTimeout(resolve, starting.retryMs));
-        continue;
-      }
-      if (response.status === 401) {
-        $("o-connection").textContent = "needs a token: open /#token=…";
-        notice((await response.json()).detail);
-        return null;
-      }
-    } catch {
-      // the server is not up yet: try again
-    }
-    $("o-connection").textContent = "waiting for the server…";
-    await new Promise((resolve) => setTimeout(resolve, wait));
-  }
-}
-
-/** A 503 "starting" answer as {text: "starting: compiling kernels (3/14)", retryMs}, or null for any other. */
-async function startingFrom(response) {
-  if (response.status !== 503) return null;
-  const body = await response.json().catch(() => null);
-  if (body?.status !== "starting") return null;
-  const count = body.total ? ` (${body.done}/${body.total})` : "";
-  const retryMs = 1000 * Math.min(Math.max(Number(response.headers.get("retry-after")) || 1, 0.5), 5);
-  return { text: `starting: ${body.phase}${count}`, retryMs };
-}
+// ---- start: the scene list (lists.js), then the walk-through ----
 
 async function start() {
   if (matchMedia("(max-width: 700px)").matches) togglePanel();
@@ -627,7 +418,7 @@ async function start() {
   $("quality").value = state.quality;
   $("quality-value").textContent = state.quality;
   applySize();
-  state.scenes = await loadScenes();
+  state.scenes = await loadScenes(authorization, (text) => ($("o-connection").textContent = text), notice);
   if (state.scenes === null) return; // refused: retrying cannot help
   const names = state.scenes.map((s) => s.name);
   for (const scene of state.scenes) $("scene").append(new Option(`${scene.title} (${scene.name})`, scene.name));
@@ -647,9 +438,10 @@ async function start() {
     if (wanted?.startsWith("u-")) notice(`The uploaded scene of this link has expired; showing the ${state.sceneName} scene`);
     else if (wanted) notice(`no scene '${wanted}' here; showing another`);
   }
-  if (link.scene && link.problems.length) notice(linkNotice(link.problems)); // one notice for all of them
+  const problems = [...link.pageProblems, ...(link.scene ? link.problems : [])];
+  if (problems.length) notice(linkNotice(problems)); // one notice for all of them
   if (!state.sceneName) return notice("the server has no scenes");
-  const styles = await loadStyles();
+  const styles = await loadStyles(authorization);
   state.styles = Object.fromEntries(styles.map((s) => [s.name, s]));
   stylesUi = stylesPanel(styles, { current: () => state.paint, apply: applyPaint, notice });
   connection.start();
@@ -682,6 +474,19 @@ const path = pathPanel($("path"), {
   authorization,
   notice,
 });
+// a film's Cancel counts once a job: a second click while the first is answered would cancel it again, and the
+// panel would finish the job twice
+let cancelledJob = null;
+$("path")
+  .querySelector('[data-path="cancel"]')
+  .addEventListener(
+    "click",
+    (event) => {
+      if (path.job !== null && path.job === cancelledJob) event.stopImmediatePropagation();
+      cancelledJob = path.job;
+    },
+    { capture: true },
+  );
 
 // ---- VR: the stereo panorama in a headset, where the browser has one (vr.js) ----
 
@@ -701,5 +506,20 @@ const vr = new VrSession($("enter-vr"), view360, {
   notice,
 });
 
-window.rcp = { state, sent, overlay, walk, connection, frames, panel, objects, path, canvas, uploads, view360, vr, collider, shareLink, pickMask, MESSAGES, PROTOCOL, ENGINE_DEFAULTS };
+// ---- what the other modules are given: the page's parts, and what they may ask of it ----
+
+const page = {
+  state, link, authorization, connection, collider, walk, view360, panel, objects, overlay,
+  send, sendCamera, currentCamera, startScene, picked, notice,
+};
+const receive = receiver(page);
+const updateAddress = addressKeeper(page);
+
+/** @type {any} */ (window).rcp = {
+  state, sent, overlay, walk, connection, frames, panel, objects, path, canvas, uploads, view360, vr, collider, pickMask,
+  shareLink: () => shareLink(page),
+  MESSAGES,
+  PROTOCOL: { client: CLIENT, paint: PAINT, camera: CAMERA },
+  ENGINE_DEFAULTS,
+};
 start();

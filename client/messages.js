@@ -1,10 +1,11 @@
+// @ts-check
 // Client -> server messages, built and checked against the generated schemas of protocol.js.
 //
 // Every message the client sends goes through `message(type, fields)`: an unknown type, an unknown field,
 // a missing required field or a value out of range throws here, in the browser, instead of drifting
 // silently from rcp_server/service/protocol.py. The named builders below are the only senders.
 
-import { PROTOCOL } from "./protocol.js";
+import { CLIENT } from "./protocol.js";
 
 /** The schema alternatives of a property: `anyOf` (optional fields are `X | null`) or the schema itself. */
 function alternatives(schema) {
@@ -62,14 +63,14 @@ export function valueSchema(schema) {
   return alternatives(schema).find((s) => s.type !== "null") ?? schema;
 }
 
-/** A client message of `type` with `fields`, checked against PROTOCOL.client; throws when it does not fit. */
+/** A client message of `type` with `fields`, checked against CLIENT (protocol.js); throws when it does not fit. */
 export function message(type, fields = {}) {
-  const schema = PROTOCOL.client[type];
+  const schema = Object.hasOwn(CLIENT, type) ? CLIENT[type] : null; // own names only: never `constructor`
   if (!schema) throw new Error(`the protocol has no client message '${type}'`);
   const given = Object.entries(fields).filter(([, value]) => value !== undefined); // undefined: left out
   const msg = { type, ...Object.fromEntries(given) };
   for (const [name, value] of Object.entries(msg)) {
-    const property = schema.properties[name];
+    const property = Object.hasOwn(schema.properties, name) ? schema.properties[name] : null;
     if (!property) throw new Error(`a '${type}' message has no field '${name}'`);
     const problem = checkValue(property, value);
     if (problem) throw new Error(`${type}.${name} ${problem} (got ${JSON.stringify(value)})`);

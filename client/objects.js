@@ -1,14 +1,15 @@
+// @ts-check
 // Settings per object and per material. A click on the view (a press without a drag) asks the server what that
 // pixel shows (`pick`, answered by `picked`); the section then offers the settings an object or a material may
 // take (the OwnPaintModel schema of protocol.js: every field, with its range and choices) for it, and lists
 // every override, each removable. Overrides travel as the `objects` and `materials` of a paint message.
 
-import { PROTOCOL } from "./protocol.js";
+import { PAINT } from "./protocol.js";
 import { checkValue, valueSchema } from "./messages.js";
 
-const OWN = PROTOCOL.paint.$defs.OwnPaintModel.properties;
+const OWN = PAINT.$defs.OwnPaintModel.properties;
 const FIRST = ["mapping", "lambda_p", "eye_mapping", "lambda_e"]; // the rest follow in the schema's order
-const FIELDS = [...FIRST.filter((n) => n in OWN), ...Object.keys(OWN).filter((n) => !FIRST.includes(n))];
+const FIELDS = [...FIRST.filter((n) => Object.hasOwn(OWN, n)), ...Object.keys(OWN).filter((n) => !FIRST.includes(n))];
 
 function element(tag, attributes = {}, ...children) {
   const node = document.createElement(tag);

@@ -1,9 +1,13 @@
+// @ts-check
 // The overlay of live numbers: frames shown per second, latency (camera message sent -> the first frame
 // showing that camera drawn, median of the last 31), the last frame's size, scale, render time, phase,
 // iteration and samples, and the connection's state.
 
 const LATENCY_SAMPLES = 31;
+/** @param {string} id @returns {any} */
 const $ = (id) => document.getElementById(id);
+/** The overlay's rows of a class. @param {string} selector @returns {NodeListOf<HTMLElement>} */
+const rows = (selector) => document.querySelectorAll(`#overlay ${selector}`);
 
 function median(values) {
   if (!values.length) return null;
@@ -55,17 +59,20 @@ export class Overlay {
       open: "connected",
       waiting: `${detail.why} · retry in ${detail.seconds?.toFixed(1)} s`,
       refused: `refused: ${detail.why}`,
+      held: `${detail.why} · ${detail.seconds} s`,
+      offered: detail.why,
       stopped: "stopped",
     };
     $("o-connection").textContent = words[state] ?? state;
+    $("o-retry").hidden = state !== "offered"; // the time the server asked for has passed
     $("overlay").dataset.connection = state;
   }
 
   /** The walker's rows: the gamepad in use (null: none) and the body that keeps it clear (null: collide off). */
   walker(pad, body) {
-    for (const row of document.querySelectorAll("#overlay .pad-row")) row.hidden = pad === null;
+    for (const row of rows(".pad-row")) row.hidden = pad === null;
     if (pad !== null) $("o-pad").textContent = pad.length > 28 ? `${pad.slice(0, 27)}…` : pad;
-    for (const row of document.querySelectorAll("#overlay .body-row")) row.hidden = !body;
+    for (const row of rows(".body-row")) row.hidden = !body;
     if (body) {
       const size = (x) => Number(x.toPrecision(2));
       if (body.radius === 0) $("o-body").textContent = "nothing to walk into";
@@ -79,10 +86,10 @@ export class Overlay {
   update(now) {
     while (this.shownAt.length && this.shownAt[0] < now - 1000) this.shownAt.shift();
     const latency = median(this.latencies);
-    $("o-fps").textContent = this.shownAt.length;
+    $("o-fps").textContent = String(this.shownAt.length);
     $("o-latency").textContent = latency === null ? "–" : `${Math.round(latency)} ms`;
-    $("o-frames").textContent = this.frames;
-    for (const row of document.querySelectorAll("#overlay .view-row")) row.hidden = this.view === null;
+    $("o-frames").textContent = String(this.frames);
+    for (const row of rows(".view-row")) row.hidden = this.view === null;
     if (this.view) {
       const drawnAt = this.view.drawnAt;
       while (drawnAt.length && drawnAt[0] < now - 1000) drawnAt.shift();

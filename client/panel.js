@@ -1,8 +1,9 @@
+// @ts-check
 // The painting controls, built from the PaintModel schema of protocol.js: every field the server takes gets
 // a control, with the server's range and choices. PAINT_UI only adds words and a comfortable slider range;
 // a field the server adds later still appears (under "More"), with a generic control.
 
-import { PROTOCOL } from "./protocol.js";
+import { PAINT } from "./protocol.js";
 import { checkValue, valueSchema } from "./messages.js";
 
 // label, unit, the slider's range (the number box takes the server's whole range), step, log slider
@@ -139,8 +140,8 @@ function numberControl(name, schema, ui, emit) {
  * scene's default). Returns {setScene(defaults), show(overrides), fields}.
  */
 export function paintPanel(container, onChange) {
-  const properties = PROTOCOL.paint.properties;
-  const names = [...Object.keys(PAINT_UI).filter((n) => n in properties), ...Object.keys(properties).filter((n) => !(n in PAINT_UI))]
+  const properties = PAINT.properties;
+  const names = [...Object.keys(PAINT_UI).filter((n) => Object.hasOwn(properties, n)), ...Object.keys(properties).filter((n) => !Object.hasOwn(PAINT_UI, n))]
     .filter((n) => !["style", "objects", "materials"].includes(n)); // the style has its own picker (styles.js),
   // the settings per object and material theirs (objects.js)
   const more = element("details", { class: "more" }, element("summary", { text: "More painting settings" }));
@@ -180,7 +181,7 @@ export function paintPanel(container, onChange) {
 
   function render(name) {
     const { control, row } = controls[name];
-    const changed = name in overrides;
+    const changed = Object.hasOwn(overrides, name);
     row.classList.toggle("changed", changed);
     control.show(changed ? overrides[name] : defaults[name]);
   }

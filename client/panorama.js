@@ -1,3 +1,4 @@
+// @ts-check
 // The 360° view: the newest equirect painting, looked at from inside, drawn with WebGL2 at the display's rate.
 //
 // One full-screen triangle; each pixel turns its screen position into a direction and looks the direction
@@ -112,7 +113,8 @@ export class PanoramaView {
   constructor(canvas) {
     this.canvas = canvas;
     // xrCompatible: the same context draws into a headset's layer (vr.js)
-    const gl = canvas.getContext("webgl2", { alpha: false, antialias: false, xrCompatible: true });
+    const options = { alpha: false, antialias: false, xrCompatible: true };
+    const gl = /** @type {WebGL2RenderingContext | null} */ (canvas.getContext("webgl2", options));
     if (!gl) throw new Error("this browser has no WebGL2");
     this.gl = gl;
     const program = gl.createProgram();
@@ -164,6 +166,9 @@ export class PanoramaView {
   /**
    * Draw the panorama into the bound framebuffer's `viewport` ([x, y, width, height]) as seen through
    * `panoFromClip`; `eye` "left" or "right" samples that eye's half of a top-bottom painting.
+   * @param {Float32Array | number[]} panoFromClip
+   * @param {[number, number, number, number]} viewport
+   * @param {"left" | "right"} [eye]
    */
   draw(panoFromClip, viewport, eye = "left") {
     const gl = this.gl;
@@ -174,6 +179,7 @@ export class PanoramaView {
       return;
     }
     const stereo = this.layout.stereo === "top-bottom";
+    /** @type {[number, number]} */
     const rows = stereo ? [eye === "right" ? 0.5 : 0, 0.5] : [0, 1];
     gl.useProgram(this.program);
     gl.bindVertexArray(this.vao);

@@ -1,3 +1,4 @@
+// @ts-check
 // A pick answers on the view: the picked object's pixels (the server's `picked` mask) are tinted blue and outlined
 // in white, in a canvas laid over the painting, which fades out after a moment.
 

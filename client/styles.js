@@ -1,3 +1,4 @@
+// @ts-check
 // Styles and presets: the server's named looks (GET /api/styles) in a picker, and the user's own presets,
 // kept in this browser (localStorage): save the current painting settings under a name, apply, delete.
 //
@@ -5,17 +6,18 @@
 // checked against the paint schema of protocol.js when read back, so one saved by an older client, or
 // edited by hand, loses only the settings this server no longer takes.
 
-import { PROTOCOL } from "./protocol.js";
+import { PAINT } from "./protocol.js";
 import { checkValue } from "./messages.js";
 
 const STORE = "rcp.presets";
+/** @param {string} id @returns {any} */
 const $ = (id) => document.getElementById(id);
 
 /** The settings of `settings` that the paint schema takes (name -> value); others are dropped. */
 function valid(settings) {
-  const properties = PROTOCOL.paint.properties;
+  const properties = PAINT.properties;
   const kept = Object.entries(settings ?? {}).filter(
-    ([name, value]) => name in properties && value !== null && checkValue(properties[name], value) === null,
+    ([name, value]) => Object.hasOwn(properties, name) && value !== null && checkValue(properties[name], value) === null,
   );
   return Object.fromEntries(kept);
 }

@@ -1,3 +1,4 @@
+// @ts-check
 // Your own scenes: drop a model on the page (or pick one), watch it upload, then walk through it.
 //
 // POST api/scenes with the file (XMLHttpRequest, for its upload progress); the answer describes the new
@@ -19,8 +20,8 @@ export class Uploader {
     this.handlers = handlers;
     this.group = document.createElement("optgroup");
     this.group.label = "Your scenes";
-    this.input = document.getElementById("upload-file");
-    this.progress = document.getElementById("upload-progress");
+    this.input = /** @type {HTMLInputElement} */ (document.getElementById("upload-file"));
+    this.progress = /** @type {HTMLProgressElement} */ (document.getElementById("upload-progress"));
     this.status = document.getElementById("upload-status");
     this.busy = false;
     this.uploads = 0; // finished uploads (the tests watch it)
@@ -47,7 +48,7 @@ export class Uploader {
 
   list(scene) {
     if (!this.group.parentNode) this.select.append(this.group);
-    if (![...this.group.children].some((option) => option.value === scene.name)) {
+    if (![...this.group.querySelectorAll("option")].some((option) => option.value === scene.name)) {
       this.group.append(new Option(`${scene.title} (yours)`, scene.name));
     }
   }

@@ -1,3 +1,4 @@
+// @ts-check
 // Walk frames scaled up to the canvas with their edges kept sharp: an edge-aware upscale in WebGL2, after AMD
 // FidelityFX Super Resolution 1's EASU (ffx_fsr1.h, FsrEasuF; MIT licence), ported to GLSL.
 //

@@ -1,3 +1,4 @@
+// @ts-check
 // The 360° view mode: the client asks for equirect paintings of the walk's position and looks around in the
 // newest one locally (panorama.js), at the display's rate, with no message to the server.
 //
@@ -5,13 +6,13 @@
 // was entered; looking around (drag, arrows, wheel) changes only the walk's yaw, pitch and fov, which the
 // panorama's camera leaves out, so the camera sent stays the same and nothing is sent. Walking moves the eye:
 // a new camera, and the server paints the panorama again (smaller while moving, refined at rest, as ever).
-// A painting's layout (mono, or stereo top-bottom for a headset, vr.js) is known by the camera id it shows.
+// A frame names its projection and stereo layout (mono, or top-bottom for a headset, vr.js): a panorama is
+// shown here, in its layout.
 
 import * as walkCamera from "./camera.js";
 import { PanoramaView, dot } from "./panorama.js";
 
 export const PANORAMA_FOV = 60; // the fov sent with a panorama: equirect ignores it; fixed, so zooming sends nothing
-const LAYOUTS_KEPT = 64; // camera ids remembered: far more than the frames in flight
 // A headset's pair: the right eye smudges as the left one where both see the same point, so the two eyes do not
 // fight (`rcp bench projection --width 508` on the village: 1.8% of pixels in rivalry instead of 4.5%).
 const PAIR_EYES = "shared";
@@ -38,7 +39,6 @@ export class View360 {
     this.presenting = false; // a headset draws the panorama (vr.js): the flat view waits
     this.stereo = "mono"; // "top-bottom" while a headset shows it
     this.yaw0 = 0; // the panorama camera's heading (radians, camera.js convention)
-    this.layouts = new Map(); // camera id -> the stereo layout of the panoramas painted of it
     this.newest = null; // {meta, jpeg} not yet decoded
     this.decoding = false;
     this.shownKey = ""; // what the canvas shows, to draw only when the view or the panorama changed
@@ -91,15 +91,9 @@ export class View360 {
     return { ...level, projection: "equirect", stereo: this.stereo, ...pair };
   }
 
-  /** Camera `id` was sent: its paintings are panoramas in the current layout. */
-  sent(id) {
-    this.layouts.set(id, this.stereo);
-    if (this.layouts.size > LAYOUTS_KEPT) this.layouts.delete(this.layouts.keys().next().value);
-  }
-
-  /** Whether the frame `meta` describes is a panorama (of a camera this mode sent). */
+  /** Whether the frame `meta` describes is a panorama (shown here, not in the flat view). */
   accepts(meta) {
-    return this.layouts.has(meta.camera_id);
+    return meta.projection === "equirect";
   }
 
   /** A panorama arrived: decode the newest only (one arriving meanwhile replaces any still waiting). */
@@ -115,7 +109,7 @@ export class View360 {
       this.newest = null;
       try {
         const bitmap = await createImageBitmap(new Blob([jpeg], { type: "image/jpeg" }));
-        this.pano.show(bitmap, this.layouts.get(meta.camera_id) ?? "mono");
+        this.pano.show(bitmap, meta.stereo);
         bitmap.close();
         this.handlers.shown(meta);
       } catch (error) {

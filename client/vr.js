@@ -1,3 +1,4 @@
+// @ts-check
 // VR: the stereo panorama in a headset (WebXR `immersive-vr`). The button shows wherever the browser says it
 // supports such a session. In the headset the client asks for stereo top-bottom equirect paintings (left eye
 // on top, view360.js) and each eye's view samples its own half (panorama.js); the head turns at the
@@ -27,10 +28,13 @@ export function eyeFromClip(view) {
   return multiply(XR_TO_PANO, invert(multiply([...view.projectionMatrix], rotation)));
 }
 
+/** WebXR, where the browser has it (not yet in TypeScript's DOM types). @returns {any} */
+const xr = () => /** @type {any} */ (navigator).xr;
+
 export class VrSession {
   /**
    * @param {HTMLButtonElement} button  "Enter VR": shown only where an immersive-vr session is supported
-   * @param {View360} view360           the 360° view whose panorama and renderer the headset uses
+   * @param {import("./view360.js").View360} view360           the 360° view whose panorama and renderer the headset uses
    * @param {object} actions            enter(): the 360° view on (false if it cannot be); stereo(layout);
    *                                    advance(now): one frame's walking and sending; speed(): units a second;
    *                                    move(delta world vector); notice(text)
@@ -52,7 +56,7 @@ export class VrSession {
 
   async detect() {
     try {
-      this.button.hidden = !(await navigator.xr?.isSessionSupported("immersive-vr"));
+      this.button.hidden = !(await xr()?.isSessionSupported("immersive-vr"));
     } catch {
       this.button.hidden = true; // blocked by a permissions policy, say
     }
@@ -61,10 +65,10 @@ export class VrSession {
   async start() {
     if (!this.actions.enter()) return;
     try {
-      const session = await navigator.xr.requestSession("immersive-vr");
-      const gl = this.view360.pano.gl;
+      const session = await xr().requestSession("immersive-vr");
+      const gl = /** @type {any} */ (this.view360.pano.gl); // WebXR's makeXRCompatible: not in TypeScript's DOM types
       await gl.makeXRCompatible();
-      session.updateRenderState({ baseLayer: new XRWebGLLayer(session, gl) });
+      session.updateRenderState({ baseLayer: new (/** @type {any} */ (window).XRWebGLLayer)(session, gl) });
       this.space = await session.requestReferenceSpace("local");
       this.session = session;
       session.addEventListener("end", () => this.ended());

@@ -1,3 +1,4 @@
+// @ts-check
 // Walk-through input: keys, mouse, wheel and touch move a walk camera (camera.js), stepped once an
 // animation frame. Keys are physical (`event.code`), so WASD sits under the same fingers on any layout.
 //

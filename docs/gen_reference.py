@@ -9,9 +9,11 @@ and nothing is copied by hand:
 - ``<!-- reference: paint -->``: every painting setting;
 - ``<!-- reference: camera -->``: every camera field;
 - ``<!-- reference: environment -->``: every ``RCP_`` setting, or ``<!-- reference: environment max_videos ... -->``
-  for those named (a guide page shows the limits of its subject).
+  for those named (a guide page shows the limits of its subject);
+- ``<!-- reference: websocket -->``: every WebSocket message both ways, from the same JSON schemas
+  (``service/protocol.py``: :func:`schemas`) that ``tools/gen_protocol.py`` writes into the client.
 
-``python docs/gen_reference.py`` prints the three tables.
+``python docs/gen_reference.py`` prints the tables.
 """
 
 from __future__ import annotations
@@ -25,10 +27,11 @@ from typing import Any, get_args, get_origin
 from pydantic.fields import FieldInfo
 
 from rcp_server.camera.camera import CAMERA_FIELDS, CameraField
+from rcp_server.service.protocol import schemas
 from rcp_server.service.settings import REPOSITORY, Settings
 from rcp_server.settings.params import PAINT_SETTINGS, PER_PIXEL, PaintSetting
 
-MARKER = re.compile(r"^<!-- reference: (paint|camera|environment)((?: [a-z_]+)*) -->$", re.MULTILINE)
+MARKER = re.compile(r"^<!-- reference: (paint|camera|environment|websocket)((?: [a-z_]+)*) -->$", re.MULTILINE)
 ENV_PREFIX = Settings.model_config.get("env_prefix", "")
 
 
@@ -78,6 +81,66 @@ def environment_table(fields: Mapping[str, FieldInfo], names: Iterable[str] | No
     return "\n".join(rows)
 
 
+SIDES = {
+    "client": ("Client to server", "A field left out takes its default; a message that does not fit gets an `error`."),
+    "server": ("Server to client", "Every field is sent."),
+}
+
+
+def websocket_reference(every: Mapping[str, Any]) -> str:
+    """A section per side and a table per message: field, what it takes, its default, what it is."""
+    out = []
+    for side, (title, note) in SIDES.items():
+        out += [f"## {title}", "", note, ""]
+        for kind, schema in every[side].items():
+            out += [f"### `{kind}`", "", _sentence(schema.get("description", "")), ""]
+            required = set(schema.get("required", ()))
+            rows = ["| field | takes | default | what |", "|---|---|---|---|"]
+            for name, field in schema["properties"].items():
+                if name == "type":
+                    continue
+                if side == "server" or name in required:
+                    default = "required" if side == "client" else ""
+                else:
+                    default = _value(field.get("default"))
+                about = field.get("description", "")
+                rows.append(f"| `{name}` | {cell(_takes(field, schema))} | {default} | {cell(about)} |")
+            out += [*rows, ""] if len(rows) > 2 else ["Only its `type`.", ""]
+    return "\n".join(out).rstrip()
+
+
+def _sentence(text: str) -> str:
+    return " ".join(text.replace("``", "`").split())
+
+
+def _takes(field: Mapping[str, Any], schema: Mapping[str, Any]) -> str:
+    """What a JSON schema takes, as a reader says it: ``integer (>= 1, <= 4096)``, ``one of `a`, `b` ``."""
+    if "$ref" in field:
+        name = field["$ref"].rsplit("/", 1)[-1]
+        return {"CameraSpec": "a camera", "OwnPaintModel": "painting settings"}.get(name, f"a {name}")
+    if "const" in field:
+        return f"`{field['const']}`"
+    if "enum" in field:
+        return "one of " + _names(field["enum"])
+    if "anyOf" in field:
+        kinds = [_takes(k, schema) for k in field["anyOf"]]
+        return " or ".join(k for k in kinds if k != "null") + (" or null" if "null" in kinds else "")
+    kind = field.get("type", "any value")
+    if kind in ("integer", "number"):
+        bounds = {k: field.get(v) for k, v in (("ge", "minimum"), ("gt", "exclusiveMinimum"), ("le", "maximum"))}
+        return _bounds(kind, **bounds, lt=field.get("exclusiveMaximum"))
+    if kind == "array":
+        items = field.get("prefixItems")
+        if items:
+            first = items[0]
+            bounds = {k: first.get(v) for k, v in (("ge", "minimum"), ("le", "maximum"))}
+            return _bounds(f"{len(items)} numbers", **bounds) + (" each" if any(bounds.values()) else "")
+        return f"a list of {_takes(field['items'], schema)}" if "items" in field else "a list"
+    if kind == "object" and isinstance(field.get("additionalProperties"), dict):
+        return f"a table of names to {_takes(field['additionalProperties'], schema)}"
+    return {"object": "a table", "string": "text"}.get(kind, kind)
+
+
 def expand(markdown: str) -> str:
     """``markdown`` with each reference marker replaced by its table, from the declarations as they are now."""
 
@@ -87,6 +150,8 @@ def expand(markdown: str) -> str:
             return paint_table(PAINT_SETTINGS.values())
         if kind == "camera":
             return camera_table(CAMERA_FIELDS.values())
+        if kind == "websocket":
+            return websocket_reference(schemas())
         return environment_table(Settings.model_fields, names or None)
 
     return MARKER.sub(table, markdown)
@@ -151,4 +216,4 @@ def cell(text: str) -> str:
 
 if __name__ == "__main__":
     print(paint_table(PAINT_SETTINGS.values()), camera_table(CAMERA_FIELDS.values()), sep="\n\n")
-    print(environment_table(Settings.model_fields), sep="\n\n")
+    print(environment_table(Settings.model_fields), websocket_reference(schemas()), sep="\n\n")

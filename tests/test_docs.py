@@ -86,3 +86,19 @@ def test_the_site_builds_strictly(tmp_path):
     scene_files = (tmp_path / "site" / "guide" / "scene-files" / "index.html").read_text()
     assert "Still life" in scene_files  # examples/scene.toml, included
     assert (tmp_path / "site" / "gallery" / "default.jpg").is_file()
+
+
+def test_the_websocket_page_holds_every_message_and_field_of_the_schemas():
+    from rcp_server.service.protocol import schemas
+
+    every = schemas()
+    page = gen.expand((ROOT / "docs" / "websocket.md").read_text())
+    assert "<!-- reference:" not in page
+    headings = re.findall(r"^### `([a-z]+)`$", page, re.MULTILINE)
+    assert headings == [*every["client"], *every["server"]] and len(every["client"]) == 7
+    sections = re.split(r"^### ", page, flags=re.MULTILINE)[1:]
+    for section, schema in zip(sections, [*every["client"].values(), *every["server"].values()], strict=True):
+        assert _first_column(section) == [name for name in schema["properties"] if name != "type"]
+    # the bounds the client's schema carries are the page's too
+    takes = gen.cell("3 numbers (>= -1e9, <= 1e9) each")
+    assert f"| `eye` | {takes} | required |" in gen.websocket_reference(every)

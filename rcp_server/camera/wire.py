@@ -12,8 +12,10 @@ from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from .camera import CAMERA_FIELDS, COORDINATE_LIMIT, Camera, CameraField
 
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-Vec3 = tuple[Finite, Finite, Finite]  # how far a camera may stand is the engine's rule (camera.camera_faults)
+# how far a camera may stand is the engine's rule (camera.camera_faults), said here too so that the schema a
+# client reads (client/protocol.js) carries it
+Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-COORDINATE_LIMIT, le=COORDINATE_LIMIT)]
+Vec3 = tuple[Coordinate, Coordinate, Coordinate]
 
 
 class _Model(BaseModel):

@@ -24,6 +24,7 @@ SCALES = (1.0, 0.875, 0.75, 0.625, 0.5, 0.375, 0.25)  # walk-frame sizes, as fra
 FIRST_SCALE = 0.5  # the walk-frame size before any painting has been timed
 REFINE_SPP = 4  # once at rest, the second refinement takes at least this many samples per pixel
 MAX_REFINE_SPP = 64  # ... and at most this many: past it the image no longer visibly changes
+REFINE_TIMES = 2  # ... and between the two, this many times the painting's own (protocol.RefineRule tells clients)
 WALK_SHARE = 0.8  # of the frame budget, for painting a walk frame; encoding and sending take the rest
 WALK_QUALITY = 70  # the most JPEG quality a walk frame is sent with: fewer bytes while the eye is moving
 SOON = 0.005  # seconds: the shortest wait for rest, so a wait that is due still yields to the receiver
@@ -142,7 +143,7 @@ class Planner:
         (the pixels of both eyes of a stereo pair count)."""
         params = view.params
         affordable = self.max_work // (view.width * view.height * view.eyes * params.iterations)
-        more = max(params.spp, min(MAX_REFINE_SPP, max(REFINE_SPP, 2 * params.spp), affordable))
+        more = max(params.spp, min(MAX_REFINE_SPP, max(REFINE_SPP, REFINE_TIMES * params.spp), affordable))
         return [params.spp] if more == params.spp else [params.spp, more]
 
     def walk_scale(self, view: View) -> float:

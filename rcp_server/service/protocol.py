@@ -2,8 +2,8 @@
 
 WebSocket messages are JSON text tagged by ``type``; each frame is a ``frame`` text message followed by
 one binary message with its JPEG. The browser client mirrors these models through ``client/protocol.js``,
-which is generated from this module (``python -m rcp_server.service.protocol > client/protocol.js``) and
-checked by a test, so the two sides cannot drift apart.
+which ``tools/gen_protocol.py`` generates from :func:`schemas` (and the documentation's WebSocket reference
+from the same), checked by a test, so the two sides cannot drift apart.
 """
 
 from __future__ import annotations
@@ -13,11 +13,14 @@ from typing import Annotated, Any, Literal, get_args
 
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
-from ..camera.wire import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
+from ..camera.camera import PROJECTIONS, STEREO
+from ..camera.wire import CameraSpec as CameraModel
+from ..camera.wire import Coordinate  # a camera on the wire is a camera in a scene file
 from ..media.camerapath import PathSpec
 from ..scene.scenefile import SCENE_NAME
-from ..settings.params import PAINT_SETTINGS, PER, PER_PIXEL, PaintParams, PaintSetting
+from ..settings.params import PAINT_SETTINGS, PER, PER_PIXEL, PaintSetting
 from ..settings.styles import STYLE, STYLES
+from .planner import MAX_REFINE_SPP, REFINE_SPP, REFINE_TIMES
 
 Size = Annotated[int, Field(ge=1, le=4096)]
 Quality = Annotated[int, Field(ge=1, le=100)]
@@ -232,7 +235,6 @@ class PickMessage(_Model):
     y: Annotated[int, Field(ge=0, le=4095)]
 
 
-Coordinate = Annotated[float, Field(allow_inf_nan=False, ge=-1e9, le=1e9)]
 Vector = tuple[Coordinate, Coordinate, Coordinate]
 
 
@@ -259,7 +261,18 @@ client_message: TypeAdapter[Any] = TypeAdapter(ClientMessage)
 # ---- WebSocket, server -> client ----
 
 
+class RefineRule(BaseModel):
+    """How a view at rest is refined (``service/planner.py``): its own samples per pixel, then
+    ``min(most, max(least, times * spp))`` where the server's work limit allows; what Save asks for too."""
+
+    least: int = REFINE_SPP
+    most: int = MAX_REFINE_SPP
+    times: int = REFINE_TIMES
+
+
 class Ready(BaseModel):
+    """The answer to ``hello``: the scene, the canvas and the switches the walk starts with."""
+
     type: Literal["ready"] = "ready"
     scene: SceneInfo
     width: int
@@ -267,13 +280,15 @@ class Ready(BaseModel):
     quality: int
     temporal: bool
     animate: bool
+    refine: RefineRule = RefineRule()
 
 
 class Frame(BaseModel):
     """Sent before the binary JPEG it describes: the painting of camera ``camera_id`` at ``width`` x
     ``height`` with ``paint`` (what ``POST /api/render`` gives for the same, up to the JPEG). ``phase``:
     ``walk`` while the camera moves (reduced in size and samples), ``refine`` once it rests; ``final`` when
-    no further refinement follows; ``temporal``: it continues the last frame instead."""
+    no further refinement follows; ``temporal``: it continues the last frame instead; ``projection`` and
+    ``stereo``: the camera's, so the client knows how to show the picture (both eyes of a pair in one image)."""
 
     type: Literal["frame"] = "frame"
     seq: int
@@ -291,11 +306,39 @@ class Frame(BaseModel):
     camera_id: int | None
     time: float
     dropped: int  # frames rendered but never sent, because a newer one replaced them
+    projection: Literal[PROJECTIONS] = "perspective"  # type: ignore[valid-type]
+    stereo: Literal[STEREO] = "mono"  # type: ignore[valid-type]
+
+
+ClientType = Literal["hello", "camera", "paint", "mode", "view", "pick", "move"]
 
 
 class Error(BaseModel):
+    """A refusal or a failure, in one line. ``answers``: the type of the client message refused (null: none, e.g.
+    a painting that failed, or a message whose type cannot be read); ``id``: that message's ``id``, if it had one
+    (``camera``, ``move``)."""
+
     type: Literal["error"] = "error"
     message: str
+    answers: ClientType | None = None
+    id: int | None = None
+
+    @classmethod
+    def answering(cls, text: str | None, message: str) -> Error:
+        """The error ``message`` answering the client's message ``text`` (raw JSON, perhaps invalid): its type and
+        id are named when they can be read."""
+        try:
+            sent = json.loads(text) if text else None
+        except ValueError:
+            sent = None
+        if not isinstance(sent, dict):
+            return cls(message=message)
+        kind, ident = sent.get("type"), sent.get("id")
+        return cls(
+            message=message,
+            answers=kind if kind in get_args(ClientType) else None,
+            id=ident if type(ident) is int and ident >= 0 else None,
+        )
 
 
 class PickMask(BaseModel):
@@ -331,94 +374,16 @@ class Moved(BaseModel):
     standing: bool
 
 
+CLIENT_MESSAGES = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage, MoveMessage)
+SERVER_MESSAGES = (Ready, Frame, Error, Picked, Moved)
+
+
 def schemas() -> dict[str, Any]:
-    """The JSON schema of every message, by side and type, and of the painting settings (``paint``): what
-    ``client/protocol.js`` exports as ``PROTOCOL``."""
+    """The JSON schema of every message, by side and type, of the painting settings (``paint``) and of a camera
+    (``camera``): what ``tools/gen_protocol.py`` writes into ``client/protocol.js`` and the WebSocket reference."""
     return {
-        "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in _CLIENT},
-        "server": {m.model_fields["type"].default: m.model_json_schema() for m in (Ready, Frame, Error, Picked, Moved)},
+        "client": {get_args(m.model_fields["type"].annotation)[0]: m.model_json_schema() for m in CLIENT_MESSAGES},
+        "server": {m.model_fields["type"].default: m.model_json_schema() for m in SERVER_MESSAGES},
         "paint": PaintModel.model_json_schema(),
+        "camera": CameraModel.model_json_schema(),
     }
-
-
-class _Js:
-    """A JavaScript expression in the generated module: a constant's name, or an object spread over one."""
-
-    def __init__(self, base: str, changes: dict[str, Any] | None = None):
-        self.base, self.changes = base, changes
-
-
-def _shared(value: Any, base: Any, name: str) -> Any:
-    """``value`` with whatever equals ``base`` written as a reference to the constant ``name`` that holds it: all
-    of it, or an object spread over it with the keys that differ (``{...PAINT, "title": "PaintMessage"}``)."""
-    if value == base:
-        return _Js(name)
-    if isinstance(value, dict) and isinstance(base, dict) and base.keys() <= value.keys():
-        changes = {k: _shared(v, base.get(k), f"{name}[{json.dumps(k)}]") for k, v in value.items() if v != base.get(k)}
-        return _Js(name, changes)
-    return value
-
-
-def _js(value: Any, indent: int = 0) -> str:
-    """``value`` as JavaScript: JSON (``indent=1``, sorted keys), with :class:`_Js` expressions in place."""
-    pad, inner = " " * indent, " " * (indent + 1)
-    if isinstance(value, _Js):
-        if value.changes is None:
-            return value.base
-        entries = [f"...{value.base}"] + [
-            f"{json.dumps(k)}: {_js(v, indent + 1)}" for k, v in sorted(value.changes.items())
-        ]
-        return "{\n" + ",\n".join(inner + e for e in entries) + "\n" + pad + "}"
-    if isinstance(value, dict) and value:
-        entries = [f"{json.dumps(k)}: {_js(v, indent + 1)}" for k, v in sorted(value.items())]
-        return "{\n" + ",\n".join(inner + e for e in entries) + "\n" + pad + "}"
-    if isinstance(value, list) and value:
-        return "[\n" + ",\n".join(inner + _js(v, indent + 1) for v in value) + "\n" + pad + "]"
-    return json.dumps(value)
-
-
-def client_module() -> str:
-    """``client/protocol.js``: the JSON schema of every message, for the browser to build and check against,
-    and the engine's painting defaults (``null``: derived per view), for the settings a scene leaves out.
-
-    The painting settings' schemas are written once (``PAINT_PROPERTIES``) and referenced wherever a schema
-    holds them again: the settings an object or material may set (``OWN_PAINT``), the paint schema (``PAINT``)
-    and the ``paint`` message, which is the paint schema and its ``type``."""
-    every = schemas()
-    paint = every["paint"]
-    properties = paint["properties"]
-    own = paint["$defs"]["OwnPaintModel"]
-    own_js = {
-        **own,
-        "properties": {
-            k: _Js(f"PAINT_PROPERTIES[{json.dumps(k)}]") if v == properties.get(k) else v
-            for k, v in own["properties"].items()
-        },
-    }
-    paint_js = {
-        **paint,
-        "$defs": {**paint["$defs"], "OwnPaintModel": _Js("OWN_PAINT")},
-        "properties": _Js("PAINT_PROPERTIES"),
-    }
-    protocol = {**every, "paint": _Js("PAINT")}
-    protocol["client"] = {**every["client"], "paint": _shared(every["client"]["paint"], paint, "PAINT")}
-    defaults = json.dumps(PaintParams().settings(), indent=1)
-    return (
-        "// Generated by `python -m rcp_server.service.protocol > client/protocol.js`; do not edit.\n"
-        "// The painting settings' JSON schemas, once (rcp_server/settings/params.py, through service/protocol.py).\n"
-        f"const PAINT_PROPERTIES = {_js(properties)};\n"
-        "// The settings an object or a material may set for itself.\n"
-        f"const OWN_PAINT = {_js(own_js)};\n"
-        "// The painting settings of a request or a message.\n"
-        f"const PAINT = {_js(paint_js)};\n"
-        "// The JSON schemas of the WebSocket messages (rcp_server/service/protocol.py).\n"
-        f"export const PROTOCOL = {_js(protocol)};\n"
-        "// The engine's painting settings (rcp_server/settings/params.py), for those a scene leaves out.\n"
-        f"export const ENGINE_DEFAULTS = {defaults};\n"
-    )
-
-
-_CLIENT = (Hello, CameraMessage, PaintMessage, ModeMessage, ViewMessage, PickMessage, MoveMessage)
-
-if __name__ == "__main__":
-    print(client_module(), end="")

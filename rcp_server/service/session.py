@@ -167,11 +167,11 @@ class Session:
             else:
                 self._apply(msg)
         except ValidationError as exc:
-            self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
+            self._note(protocol.Error.answering(text, f"bad message: {one_line(exc)}"))
         except (CameraError, ValueError) as exc:
-            self._note(protocol.Error(message=str(exc)))
+            self._note(protocol.Error.answering(text, str(exc)))
         except Exception:  # a fault of ours: this message is lost, the session is not
-            self._note(protocol.Error(message=fault_message(report_fault(f"session message {text[:200]!r}"))))
+            self._note(protocol.Error.answering(text, fault_message(report_fault(f"session message {text[:200]!r}"))))
 
     def _apply(self, msg) -> None:
         if isinstance(msg, protocol.Hello):
@@ -370,6 +370,8 @@ class Session:
             camera_id=job.camera_id,
             time=plan.time,
             dropped=0,
+            projection=job.camera.projection,
+            stereo=job.camera.stereo,
         )
         self._post_frame(meta, frame.jpeg)
 

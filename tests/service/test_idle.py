@@ -115,7 +115,7 @@ def test_a_websocket_that_never_says_hello_is_closed_and_holds_no_place(walk_to)
         walker = walk_to(server)  # the only walk-through place: the silent socket does not hold it
         walker.send(type="hello", scene="sky", width=32, height=18)
         assert walker.next()["type"] == "ready"
-        assert silent.next(BOUND_S) == {"type": "error", "message": "no hello within 1 s"}
+        assert silent.next(BOUND_S) == {"type": "error", "message": "no hello within 1 s", "answers": None, "id": None}
         with pytest.raises(ConnectionClosed) as closed:
             silent.next(BOUND_S)
         assert closed.value.rcvd.code == 1008 and 0.9 < time.monotonic() - clock < BOUND_S
@@ -146,4 +146,6 @@ def test_the_walk_through_places_go_to_those_that_say_hello_first(walk_to):
         assert second.next() == {
             "type": "error",
             "message": "the server is at its limit of 1 walk-throughs; try again later",
+            "answers": "hello",
+            "id": None,
         }

@@ -52,5 +52,6 @@ def test_bad_moves_are_one_line_errors(live_server, walk):
         {"delta": [0, 0, 0]},
     ):
         walk.send(type="move", id=1, **bad)
-        message = answer(walk, "error")["message"]
-        assert message.startswith("bad message: ") and "\n" not in message
+        error = answer(walk, "error")
+        assert error["message"].startswith("bad message: ") and "\n" not in error["message"]
+        assert (error["answers"], error["id"]) == ("move", 1)  # the client knows which move will not be answered

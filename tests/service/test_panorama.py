@@ -68,11 +68,14 @@ def test_the_walk_through_paints_a_panorama_and_refuses_a_size_it_cannot_take(wa
     walk.send(type="camera", id=1, projection="equirect", **CAMERA)
     error = walk.next()
     assert error["type"] == "error" and "2 x height" in error["message"]
+    assert (error["answers"], error["id"]) == ("camera", 1)  # the error names the message it refuses
     walk.send(type="view", width=64, height=32)
     walk.until_final()
     walk.send(type="camera", id=2, projection="equirect", stereo="top-bottom", ipd=0.3, **CAMERA)
     meta, image = walk.until_final()[-1]
     assert meta["camera_id"] == 2 and (meta["width"], meta["height"]) == (64, 64) and image.shape == (64, 64, 3)
+    assert (meta["projection"], meta["stereo"]) == ("equirect", "top-bottom")  # the frame says how to show it
     # a view the panorama cannot take is refused too
     walk.send(type="view", width=64, height=36)
-    assert "2 x height" in walk.next()["message"]
+    refused = walk.next()
+    assert "2 x height" in refused["message"] and (refused["answers"], refused["id"]) == ("view", None)

@@ -125,9 +125,12 @@ def test_a_method_render_does_not_take_gets_405_with_post_allowed(server):
 
 
 def test_a_camera_whose_view_direction_would_overflow_is_refused(server):
-    """Past about 1e154 the camera's norms would overflow to inf: coordinates are bounded at 1e9."""
+    """Past about 1e154 the camera's norms would overflow to inf: coordinates are bounded at 1e9, in the schema
+    (the OpenAPI schema and the client's both carry the bound)."""
     scene = sorted(server.app.state.service.scenes)[0]
     for camera in ({"eye": [1e308, 0, 0], "look_at": [-1e308, 0, 0]}, {"eye": [1e200, 0, 0], "look_at": [0, 0, 1]}):
         body = {"scene": scene, "width": 16, "height": 16, "camera": camera}
         response = httpx.post(f"{server.url}/api/render", json=body, headers=AUTH, timeout=TIMEOUT)
-        assert response.status_code == 422 and "1e+09" in response.json()["detail"]
+        detail = response.json()["detail"]
+        assert response.status_code == 422 and "less than or equal to 1000000000" in detail[0]["msg"]
+        assert detail[0]["loc"] == ["body", "camera", "eye", 0]
