@@ -12,17 +12,14 @@ from urllib.parse import quote
 
 import pytest
 import uvicorn
+from helpers.browser import SIZE, WAIT_MS, fresh_page, needs_chromium, sent, wait_final
 from starlette.applications import Starlette
 from starlette.routing import WebSocketRoute
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camera.camera import COORDINATE_LIMIT
 
-from .conftest import CHROMIUM
-from .test_client import SIZE, WAIT_MS, browser, sent, wait_final  # noqa: F401 (browser: a fixture)
-from .test_client_share import fresh_page
-
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"no Chromium at {CHROMIUM} (CI installs it)")
+pytestmark = needs_chromium
 
 PROTOTYPE_NAMES = ("constructor", "toString", "valueOf", "hasOwnProperty", "__proto__", "isPrototypeOf")
 

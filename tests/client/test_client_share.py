@@ -8,7 +8,17 @@ from __future__ import annotations
 import json
 
 import numpy as np
-from helpers.browser import SIZE, WAIT_MS, canvas, click_view, client, needs_chromium, set_slider, wait_final
+from helpers.browser import (
+    SIZE,
+    WAIT_MS,
+    canvas,
+    click_view,
+    client,
+    fresh_page,
+    needs_chromium,
+    set_slider,
+    wait_final,
+)
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.picking import object_pixels
@@ -17,17 +27,6 @@ from rcp_server.service.session import pick_mask
 pytestmark = needs_chromium
 
 CAMERA_KEYS = ("eye", "look_at", "up", "fov")
-
-
-def fresh_page(browser, url: str, **options):  # noqa: F811
-    """A new browser context (nothing remembered) opened at ``url``; returns (context, page, console errors)."""
-    context = browser.new_context(viewport={"width": 1024, "height": 576}, **options)
-    page = context.new_page()
-    problems: list[str] = []
-    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
-    page.on("pageerror", lambda e: problems.append(str(e)))
-    page.goto(url)
-    return context, page, problems
 
 
 def test_a_link_reopens_the_same_view_and_picture_in_a_fresh_browser(browser, live_server, tmp_path):  # noqa: F811

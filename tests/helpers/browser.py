@@ -130,3 +130,14 @@ def data_url_image(url: str) -> np.ndarray:
     """A data URL's PNG as (height, width, 3) float64."""
     data = base64.b64decode(url.split(",", 1)[1])
     return np.asarray(Image.open(io.BytesIO(data)).convert("RGB")).astype(np.float64)
+
+
+def fresh_page(browser, url: str, **options):
+    """A new browser context (nothing remembered) opened at ``url``; returns (context, page, console errors)."""
+    context = browser.new_context(viewport={"width": 1024, "height": 576}, **options)
+    page = context.new_page()
+    problems: list[str] = []
+    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.goto(url)
+    return context, page, problems
