@@ -1,6 +1,7 @@
 """The documentation: its reference is generated from the declarations (every painting setting, camera field and
 ``RCP_`` setting, and a new one as soon as it is declared), and the site builds with ``mkdocs build --strict``."""
 
+import html
 import importlib.util
 import re
 import subprocess
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 from pydantic import Field, create_model
 
+import rcp_server
 from rcp_server.camera.camera import CAMERA_FIELDS
 from rcp_server.service.settings import Settings
 from rcp_server.settings.params import PAINT_SETTINGS
@@ -86,3 +88,14 @@ def test_the_site_builds_strictly(tmp_path):
     scene_files = (tmp_path / "site" / "guide" / "scene-files" / "index.html").read_text()
     assert "Still life" in scene_files  # examples/scene.toml, included
     assert (tmp_path / "site" / "gallery" / "default.jpg").is_file()
+    api = (tmp_path / "site" / "api" / "index.html").read_text()  # every public name, from its docstring
+    for name in rcp_server.__all__:
+        assert f'id="rcp_server.{name}"' in api, name
+        assert _first_line(getattr(rcp_server, name).__doc__) in html.unescape(re.sub(r"<[^>]+>", "", api)), name
+    assert ":class:`" not in api and ":data:`" not in api  # Sphinx roles read as code or links
+
+
+def _first_line(docstring: str | None) -> str:
+    """A docstring's first line as the page shows it: code without its backticks, roles without their names."""
+    assert docstring, "a public name without a docstring"
+    return re.sub(r":[a-z]+:|`", "", docstring.strip().splitlines()[0])
