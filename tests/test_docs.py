@@ -3,6 +3,7 @@
 
 import html
 import importlib.util
+import json
 import re
 import subprocess
 import sys
@@ -20,8 +21,8 @@ from rcp_server.settings.params import PAINT_SETTINGS
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _generator():
-    spec = importlib.util.spec_from_file_location("gen_reference", ROOT / "docs" / "gen_reference.py")
+def _generator(name: str = "gen_reference"):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "docs" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -29,6 +30,7 @@ def _generator():
 
 
 gen = _generator()
+figures = _generator("gen_figures")
 
 
 def _first_column(table: str) -> list[str]:
@@ -70,6 +72,20 @@ def test_a_guide_page_names_only_variables_that_exist():
         gen.expand("<!-- reference: environment max_pixels max_brushes -->")
     for page in (ROOT / "docs").rglob("*.md"):  # every marker in the pages expands
         assert "<!-- reference:" not in gen.expand(page.read_text()), page
+
+
+def test_the_figures_pages_headline_tables_are_made_from_what_the_benchmarks_wrote(tmp_path):
+    for name, header in (("accuracy", "| scene | method | spp |"), ("stability", "| probe | ray traced |")):
+        page = figures.expand((ROOT / "docs" / "figures" / f"{name}.md").read_text())
+        assert "<!-- figures:" not in page and header in page
+    run = json.loads((ROOT / "docs" / "accuracy.json").read_text())
+    table = figures.accuracy_table(run)
+    for point in run["points"]:
+        if point["scale"] == 1.0 and point["spp"] == 1:
+            assert f"| `{point['scene']}` | {point['method']} | 1 | {point['ms']:.1f} | {point['psnr']:.2f} |" in table
+    run["points"][0]["psnr"] = 99.0  # a new run of the benchmark, a new page
+    (tmp_path / "accuracy.json").write_text(json.dumps(run))
+    assert "| 99.00 |" in figures.expand("<!-- figures: accuracy -->", docs=tmp_path)
 
 
 def test_the_site_builds_strictly(tmp_path):
