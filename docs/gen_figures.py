@@ -44,7 +44,7 @@ def accuracy_table(run: dict[str, Any]) -> str:
             )
         floor = scene["reference_floor"]
         rows.append(
-            f"| `{name}` | reference at {scene['reference_spp'] // 2} spp | {scene['reference_spp'] // 2} | "
+            f"| `{name}` | reference, half its samples | {scene['reference_spp'] // 2} | "
             f"| {floor['psnr']:.2f} | {floor['ssim']:.3f} | {floor['psnr_edge']:.2f} | |"
         )
     return "\n".join(rows)
