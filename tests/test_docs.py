@@ -88,6 +88,19 @@ def test_the_figures_pages_headline_tables_are_made_from_what_the_benchmarks_wro
     assert "| 99.00 |" in figures.expand("<!-- figures: accuracy -->", docs=tmp_path)
 
 
+def test_every_figures_page_leads_with_its_figures_and_says_where_they_were_measured():
+    """A headline table or chart first, then the command and the machine; nothing of how the project was built."""
+    for page in (ROOT / "docs" / "figures").glob("*.md"):
+        if page.name == "index.md":
+            continue
+        text = page.read_text()
+        first = text.split("\n\n")[1]  # the block after the title
+        assert first.startswith(("|", "<!-- figures:", "![")), page.name
+        assert "`rcp bench " in text and "AMD EPYC" in text, page.name
+        said = re.search(r"\b(?:this|last|the|a) round\b|\btoday\b|\bbuilt on\b|build machine", text, re.IGNORECASE)
+        assert said is None, f"{page.name}: {said and said.group(0)}"
+
+
 def test_the_site_builds_strictly(tmp_path):
     """``mkdocs build --strict``: every link, anchor, included file and image resolves, the hook runs."""
     done = subprocess.run(
