@@ -1,7 +1,9 @@
 """The documentation: its reference is generated from the declarations (every painting setting, camera field and
 ``RCP_`` setting, and a new one as soon as it is declared), and the site builds with ``mkdocs build --strict``."""
 
+import html
 import importlib.util
+import json
 import re
 import subprocess
 import sys
@@ -11,6 +13,7 @@ from pathlib import Path
 import pytest
 from pydantic import Field, create_model
 
+import rcp_server
 from rcp_server.camera.camera import CAMERA_FIELDS
 from rcp_server.service.settings import Settings
 from rcp_server.settings.params import PAINT_SETTINGS
@@ -18,8 +21,8 @@ from rcp_server.settings.params import PAINT_SETTINGS
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _generator():
-    spec = importlib.util.spec_from_file_location("gen_reference", ROOT / "docs" / "gen_reference.py")
+def _generator(name: str = "gen_reference"):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "docs" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
@@ -27,6 +30,7 @@ def _generator():
 
 
 gen = _generator()
+figures = _generator("gen_figures")
 
 
 def _first_column(table: str) -> list[str]:
@@ -70,6 +74,33 @@ def test_a_guide_page_names_only_variables_that_exist():
         assert "<!-- reference:" not in gen.expand(page.read_text()), page
 
 
+def test_the_figures_pages_headline_tables_are_made_from_what_the_benchmarks_wrote(tmp_path):
+    for name, header in (("accuracy", "| scene | method | spp |"), ("stability", "| probe | ray traced |")):
+        page = figures.expand((ROOT / "docs" / "figures" / f"{name}.md").read_text())
+        assert "<!-- figures:" not in page and header in page
+    run = json.loads((ROOT / "docs" / "accuracy.json").read_text())
+    table = figures.accuracy_table(run)
+    for point in run["points"]:
+        if point["scale"] == 1.0 and point["spp"] == 1:
+            assert f"| `{point['scene']}` | {point['method']} | 1 | {point['ms']:.1f} | {point['psnr']:.2f} |" in table
+    run["points"][0]["psnr"] = 99.0  # a new run of the benchmark, a new page
+    (tmp_path / "accuracy.json").write_text(json.dumps(run))
+    assert "| 99.00 |" in figures.expand("<!-- figures: accuracy -->", docs=tmp_path)
+
+
+def test_every_figures_page_leads_with_its_figures_and_says_where_they_were_measured():
+    """A headline table or chart first, then the command and the machine; nothing of how the project was built."""
+    for page in (ROOT / "docs" / "figures").glob("*.md"):
+        if page.name == "index.md":
+            continue
+        text = page.read_text()
+        first = text.split("\n\n")[1]  # the block after the title
+        assert first.startswith(("|", "<!-- figures:", "![")), page.name
+        assert "`rcp bench " in text and "AMD EPYC" in text, page.name
+        said = re.search(r"\b(?:this|last|the|a) round\b|\btoday\b|\bbuilt on\b|build machine", text, re.IGNORECASE)
+        assert said is None, f"{page.name}: {said and said.group(0)}"
+
+
 def test_the_site_builds_strictly(tmp_path):
     """``mkdocs build --strict``: every link, anchor, included file and image resolves, the hook runs."""
     done = subprocess.run(
@@ -86,6 +117,11 @@ def test_the_site_builds_strictly(tmp_path):
     scene_files = (tmp_path / "site" / "guide" / "scene-files" / "index.html").read_text()
     assert "Still life" in scene_files  # examples/scene.toml, included
     assert (tmp_path / "site" / "gallery" / "default.jpg").is_file()
+    api = (tmp_path / "site" / "api" / "index.html").read_text()  # every public name, from its docstring
+    for name in rcp_server.__all__:
+        assert f'id="rcp_server.{name}"' in api, name
+        assert _first_line(getattr(rcp_server, name).__doc__) in html.unescape(re.sub(r"<[^>]+>", "", api)), name
+    assert ":class:`" not in api and ":data:`" not in api  # Sphinx roles read as code or links
 
 
 def test_the_websocket_page_holds_every_message_and_field_of_the_schemas():
@@ -102,3 +138,9 @@ def test_the_websocket_page_holds_every_message_and_field_of_the_schemas():
     # the bounds the client's schema carries are the page's too
     takes = gen.cell("3 numbers (>= -1e9, <= 1e9) each")
     assert f"| `eye` | {takes} | required |" in gen.websocket_reference(every)
+
+
+def _first_line(docstring: str | None) -> str:
+    """A docstring's first line as the page shows it: code without its backticks, roles without their names."""
+    assert docstring, "a public name without a docstring"
+    return re.sub(r":[a-z]+:|`", "", docstring.strip().splitlines()[0])

@@ -50,12 +50,17 @@ __all__ = [
 
 @dataclass
 class PaintResult:
+    """What :func:`paint` returns: the last iteration's ``state`` (pass it as ``previous`` to continue in
+    temporal mode), ``stage_seconds`` (thread time by stage, summed over tiles and iterations) and, when
+    ``keep_iterations`` was asked, ``iterations``: each iteration's image, (h, w, 3) float32 in [0, 1]."""
+
     state: PaintState
     stage_seconds: dict[str, float]  # summed over tiles (thread time), all iterations
     iterations: list[np.ndarray] = field(default_factory=list)  # (h, w, 3) per iteration when kept
 
     @property
     def image(self) -> np.ndarray:
+        """The painting, (h, w, 3) float32 in [0, 1]."""
         return self.state.image()
 
 
