@@ -23,7 +23,7 @@ from .media.camerapath import PathError, PathFrame, load_path
 from .painting.loop import PaintState, paint
 from .painting.sequence import paint_sequence
 from .scene.scene import Scene
-from .scene.scenefile import SceneError, load_environment, load_scene, one_line, scene_names
+from .scene.scenefile import SceneError, load_environment, load_scene, scene_names
 from .service.store import DataFolderError
 from .settings.params import PAINT_SETTINGS, PER, PaintParams
 from .settings.styles import STYLE, STYLES
