@@ -18,6 +18,7 @@ from ..camera.camera import Camera
 from ..painting.loop import default_threads
 from ..scene.untrusted import Limits
 from ..settings.params import PaintParams
+from .memory import default_memory_bytes
 
 REPOSITORY = Path(__file__).resolve().parent.parent.parent
 CLIENT_DIR = REPOSITORY / "client"
@@ -75,6 +76,15 @@ class Settings(BaseSettings):
         8,
         ge=1,
         description="WebSocket walk-throughs at once; one more gets an error and close 1013 (the client retries)",
+    )
+    memory_bytes: int = Field(
+        default_factory=default_memory_bytes,
+        ge=16 << 20,
+        description="the memory the paintings' per-pixel buffers may take together, by their declared bytes a pixel "
+        "(memory.py): a walk-through holds its share from its hello until it closes, a REST render while it paints; "
+        "a walk that does not fit is refused in one line with the largest size that would, a render gets 503 and "
+        "Retry-After (422 if it can never fit) (default: half the memory the machine or container has left as the "
+        "server starts, at least 256 MB)",
     )
     # ---- one request ----
     max_pixels: int = Field(4096 * 2160, ge=1, description="width x height of one image or frame; more is a 422")
