@@ -209,8 +209,15 @@ class Session:
         self._changed()
 
     def _held(self, painting: Asked) -> PaintParams:
-        """The settings of a painting once the walk holds the memory it takes (memory.py), or ``NoRoom``."""
-        return admit(self.service.memory, self, painting).params
+        """The settings of a painting once the walk holds the memory it takes (memory.py), or ``NoRoom``; a walk
+        that takes less from now on drops its buffers, and their memory goes back to the system."""
+        memory, held = self.service.memory, self.service.memory.held(self)
+        params = admit(memory, self, painting).params
+        if memory.held(self) < held:  # the kept state stays: a temporal walk goes on from it
+            workspace, self.workspace = self.workspace, Workspace()
+            workspace.close()
+            self.service.give_back.after(workspace)
+        return params
 
     def _answer(
         self, scene: Scene, camera: Camera, msg: protocol.MoveMessage | protocol.PickMessage

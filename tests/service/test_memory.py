@@ -121,15 +121,7 @@ def walk_to_final(url: str, width: int, height: int) -> None:
     """A walk that paints until its refinement's last frame at full size, then closes."""
     with connect(url, max_size=None, open_timeout=60) as ws:
         ws.send(json.dumps({"type": "hello", "scene": "default", "width": width, "height": height}))
-        while True:
-            message = ws.recv(300)
-            if isinstance(message, bytes):
-                continue
-            said = json.loads(message)
-            assert said["type"] != "error", said
-            if said["type"] == "frame" and said["final"]:
-                ws.recv(300)
-                return
+        to_final(ws)
 
 
 def test_resident_memory_comes_back_after_walks_of_a_million_pixels_close(tmp_path):
@@ -160,3 +152,37 @@ def test_resident_memory_comes_back_after_walks_of_a_million_pixels_close(tmp_pa
         print(figures)
         assert max(peak) > before + 2 * MARGIN_MB, figures  # the walks did take memory
         assert after <= before + MARGIN_MB, figures
+
+
+def test_a_walk_that_shrinks_gives_its_larger_buffers_back(tmp_path):
+    """One walk, open throughout: small, then 1920x1080, then small again; its memory goes back near where the
+    small walk had it."""
+    with rcp_serve(tmp_path) as served, connect(served.ws_url, max_size=None, open_timeout=60) as ws:
+        ws.send(json.dumps({"type": "hello", "scene": "default", "width": 320, "height": 180}))
+        to_final(ws)
+        time.sleep(1)
+        before = served.sample().rss_mb
+        ws.send(json.dumps({"type": "view", "width": 1920, "height": 1080}))
+        to_final(ws)
+        large = served.sample().rss_mb
+        ws.send(json.dumps({"type": "view", "width": 320, "height": 180}))
+        to_final(ws)
+        deadline = time.monotonic() + 60
+        while (after := served.sample().rss_mb) > before + MARGIN_MB and time.monotonic() < deadline:
+            time.sleep(0.5)
+        figures = f"{before:.0f} MB small, {large:.0f} MB large, {after:.0f} MB small again"
+        print(figures)
+        assert large > before + 2 * MARGIN_MB and after <= before + MARGIN_MB, figures
+
+
+def to_final(ws) -> dict:
+    """Reads a walk's messages up to its refinement's last frame; that frame's description."""
+    while True:
+        message = ws.recv(300)
+        if isinstance(message, bytes):
+            continue
+        said = json.loads(message)
+        assert said["type"] != "error", said
+        if said["type"] == "frame" and said["final"]:
+            ws.recv(300)
+            return said
