@@ -23,7 +23,7 @@ from .media.camerapath import PathError, PathFrame, load_path
 from .painting.loop import PaintState, paint
 from .painting.sequence import paint_sequence
 from .scene.scene import Scene
-from .scene.scenefile import SceneError, load_environment, load_scene, one_line, scene_names
+from .scene.scenefile import SceneError, load_environment, load_scene, scene_names
 from .service.store import DataFolderError
 from .settings.params import PAINT_SETTINGS, PER, PaintParams
 from .settings.styles import STYLE, STYLES
@@ -335,13 +335,13 @@ def _compile() -> None:
     from pydantic import ValidationError
 
     from .painting import warmup
-    from .service.settings import Settings
+    from .service.settings import Settings, setting_error
     from .service.state import load_scenes
 
     try:
         folder = Settings().scenes  # the scenes `rcp serve` serves (RCP_SCENES): each compiles what it calls
     except ValidationError as exc:
-        raise UsageError(f"bad setting: {one_line(exc)}") from None
+        raise UsageError(setting_error(exc)) from None
     clock = time.monotonic()
     scenes = load_scenes(folder)
     warmup.warm(scenes.values())
@@ -352,13 +352,13 @@ def _serve(args: argparse.Namespace) -> None:
     from pydantic import ValidationError
 
     from .service.server import Server
-    from .service.settings import Settings
+    from .service.settings import Settings, setting_error
 
     given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
     try:
         settings = Settings(**given)
     except ValidationError as exc:
-        raise UsageError(f"bad setting: {one_line(exc)}") from None
+        raise UsageError(setting_error(exc, {name: f"--{name}" for name in given})) from None
     logging.getLogger("rcp").setLevel(logging.INFO)
     for handler in logging.getLogger().handlers:
         handler.setFormatter(logging.Formatter("rcp: %(levelname)s: %(message)s"))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import signal
 import socket
 import threading
 import time
@@ -111,10 +112,15 @@ def connect(address: str | None = None, num_cpus: int | None = None, **local_opt
     options: dict[str, Any] = {"log_to_driver": False, "configure_logging": False}
     if address is None:
         options |= {"include_dashboard": False, "num_cpus": num_cpus, **local_options}
+    # ray.init puts its own SIGTERM handler in place (exit status 15) on the main thread: the caller's stays
+    stop = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
     try:
         ray.init(address=address, **options)
     except Exception as exc:  # Ray's own errors are many and long: the first line says enough
         raise ClusterError(f"cannot start Ray{f' at {address}' if address else ''}: {first_line(exc)}") from None
+    finally:
+        if callable(stop):  # one the caller set (rcp serve's: a stop asked for is exit 0), not the default
+            signal.signal(signal.SIGTERM, stop)
     return True
 
 

@@ -131,6 +131,15 @@ class Workspace:
         self._lock = threading.Lock()
         self._free: list[TileBuffers] = []
         self._results: dict[tuple, list[PaintState]] = {}
+        self.closed = False
+
+    def close(self) -> None:
+        """Drop every buffer now (a walk that ended): those a painting in progress uses go with it, once it stops;
+        nothing is kept from then on."""
+        with self._lock:
+            self.closed = True
+            self._free.clear()
+            self._results.clear()
 
     @contextmanager
     def tile_buffers(self, capacity: int, spp: int, masked: bool, channels: frozenset[str]) -> Iterator[TileBuffers]:
@@ -155,7 +164,8 @@ class Workspace:
             yield buffers
         finally:
             with self._lock:
-                self._free.append(buffers)
+                if not self.closed:
+                    self._free.append(buffers)
 
     def idle(self) -> list[TileBuffers]:
         """The tile buffers not lent now."""
@@ -166,6 +176,8 @@ class Workspace:
         """A state of ``region`` recording color and ``channels`` to paint into, whose arrays are not ``keep``'s."""
         key = (region, channels)
         with self._lock:
+            if self.closed:  # a painting that began as its walk ended: its own result, dropped with it
+                return PaintState.empty(region, channels)
             pair = self._results.setdefault(key, [])
             if len(self._results) > 2:  # another size or other settings: the oldest go
                 del self._results[next(iter(self._results))]

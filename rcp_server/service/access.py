@@ -49,7 +49,9 @@ def admits(settings: Settings, headers: Headers, query: QueryParams) -> bool:
     if settings.token is None:
         return True
     given = presented(headers, query)
-    return given is not None and secrets.compare_digest(given.encode(), settings.token.get_secret_value().encode())
+    if not given or not settings.token.get_secret_value():  # an empty token is no token, given or set
+        return False
+    return secrets.compare_digest(given.encode(), settings.token.get_secret_value().encode())
 
 
 async def require_token(

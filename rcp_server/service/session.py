@@ -36,8 +36,9 @@ from ..scene.walking import walk
 from ..settings.params import PaintParams
 from ..util import images
 from . import protocol
-from .asked import asked, check
+from .asked import Asked, asked, check
 from .faults import fault_message, report_fault
+from .memory import admit
 from .planner import Plan, Planner, View, frame_quality
 from .state import Service
 
@@ -125,6 +126,10 @@ class Session:
     def close(self) -> None:
         """End the walk-through's painting: one still in flight stops at its next iteration."""
         self.closed = True
+        self.state, workspace, self.workspace = None, self.workspace, Workspace()  # its buffers go once unused
+        workspace.close()
+        self.service.memory.release(self)
+        self.service.give_back.after(workspace)  # to the system, once its last painting has stopped
         if self.service.walks is not None:
             self.service.walks.leave(self)
 
@@ -181,7 +186,7 @@ class Session:
         elif isinstance(msg, protocol.CameraMessage):
             camera = camera_of(msg)
             # another projection or stereo layout is another painting: checked as the hello was (both eyes)
-            self.params = check(self.settings, self.scene, camera, self.width, self.height, self.overrides).params
+            self.params = self._held(check(self.settings, self.scene, camera, self.width, self.height, self.overrides))
             kind = (camera.projection, camera.stereo)
             if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
                 self.state = self.kept = None  # another kind of picture: the recursion starts again
@@ -192,16 +197,27 @@ class Session:
             overrides = {**self.overrides, **msg.changes()}
             overrides = {k: v for k, v in overrides.items() if v is not None}
             # refuse now, keep the old settings
-            self.params = check(self.settings, self.scene, self.camera, self.width, self.height, overrides).params
+            self.params = self._held(check(self.settings, self.scene, self.camera, self.width, self.height, overrides))
             self.overrides = overrides
         elif isinstance(msg, protocol.ModeMessage):
             self.temporal = self.temporal if msg.temporal is None else msg.temporal
             self.animate = self.animate if msg.animate is None else msg.animate
         elif isinstance(msg, protocol.ViewMessage):
             width, height = msg.width or self.width, msg.height or self.height
-            self.params = check(self.settings, self.scene, self.camera, width, height, self.overrides).params
+            self.params = self._held(check(self.settings, self.scene, self.camera, width, height, self.overrides))
             self.width, self.height, self.quality = width, height, msg.quality or self.quality
         self._changed()
+
+    def _held(self, painting: Asked) -> PaintParams:
+        """The settings of a painting once the walk holds the memory it takes (memory.py), or ``NoRoom``; a walk
+        that takes less from now on drops its buffers, and their memory goes back to the system."""
+        memory, held = self.service.memory, self.service.memory.held(self)
+        params = admit(memory, self, painting).params
+        if memory.held(self) < held:  # the kept state stays: a temporal walk goes on from it
+            workspace, self.workspace = self.workspace, Workspace()
+            workspace.close()
+            self.service.give_back.after(workspace)
+        return params
 
     def _answer(
         self, scene: Scene, camera: Camera, msg: protocol.MoveMessage | protocol.PickMessage
@@ -224,7 +240,7 @@ class Session:
     def _hello(self, msg: protocol.Hello) -> None:
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
             raise ValueError(busy_message(self.settings.max_sessions))
-        painting = asked(self.service, msg.scene, None, msg.width, msg.height, {})
+        painting = admit(self.service.memory, self, asked(self.service, msg.scene, None, msg.width, msg.height, {}))
         if self.scene is None and self.service.walks is not None:  # a place on Ray, while it has room
             try:
                 self.service.walks.admit(self, painting.params, painting.scene)

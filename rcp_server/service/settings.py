@@ -6,16 +6,19 @@ Every limit a caller can run into is here, with a default that keeps one 2-core 
 from __future__ import annotations
 
 import os
+import socket
 from pathlib import Path
 from typing import Annotated
 
-from pydantic import Field, SecretStr, field_validator
+from pydantic import Field, SecretStr, ValidationError, ValidationInfo, field_validator
+from pydantic_core import PydanticUseDefault
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from ..camera.camera import Camera
 from ..painting.loop import default_threads
 from ..scene.untrusted import Limits
 from ..settings.params import PaintParams
+from .memory import default_memory_bytes
 
 REPOSITORY = Path(__file__).resolve().parent.parent.parent
 CLIENT_DIR = REPOSITORY / "client"
@@ -31,7 +34,7 @@ class Settings(BaseSettings):
     """Every ``RCP_`` setting, each declared once with its default, bounds and description (the reference page of
     the documentation is generated from these declarations: ``docs/gen_reference.py``)."""
 
-    model_config = SettingsConfigDict(env_prefix="RCP_")
+    model_config = SettingsConfigDict(env_prefix="RCP_", allow_inf_nan=False)
 
     host: str = Field(
         "127.0.0.1", description="the address to listen on: loopback only unless asked (the container sets 0.0.0.0)"
@@ -73,6 +76,15 @@ class Settings(BaseSettings):
         8,
         ge=1,
         description="WebSocket walk-throughs at once; one more gets an error and close 1013 (the client retries)",
+    )
+    memory_bytes: int = Field(
+        default_factory=default_memory_bytes,
+        ge=16 << 20,
+        description="the memory the paintings' per-pixel buffers may take together, by their declared bytes a pixel "
+        "(memory.py): a walk-through holds its share from its hello until it closes, a REST render while it paints; "
+        "a walk that does not fit is refused in one line with the largest size that would, a render gets 503 and "
+        "Retry-After (422 if it can never fit) (default: half the memory the machine or container has left as the "
+        "server starts, at least 256 MB)",
     )
     # ---- one request ----
     max_pixels: int = Field(4096 * 2160, ge=1, description="width x height of one image or frame; more is a 422")
@@ -202,10 +214,64 @@ class Settings(BaseSettings):
         2 << 30, ge=64 << 20, description="the sandboxed reader of one upload: address space it may add; more is a 422"
     )
 
+    @field_validator("*", mode="before")
+    @classmethod
+    def _empty_is_the_default(cls, value, info: ValidationInfo):
+        """An empty value (``RCP_DATA=``, often a variable of a deployment left unset) means the setting's default,
+        never the working directory (``Path("")`` is ``.``); an empty token is refused: unset, there is none."""
+        if isinstance(value, str) and not value.strip():
+            if info.field_name == "token":
+                raise ValueError("empty: leave it unset for a server without a token, or give one")
+            raise PydanticUseDefault()
+        return value
+
     @field_validator("cors_origins", "allowed_hosts", mode="before")
     @classmethod
     def _comma_separated(cls, value):
         return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
+
+    @field_validator("token")
+    @classmethod
+    def _presentable(cls, value: SecretStr | None) -> SecretStr | None:
+        """A token a caller can send as it is: no white space at its ends (a Bearer header loses it), no control
+        characters (a header cannot carry them)."""
+        text = None if value is None else value.get_secret_value()
+        if text is not None and (text != text.strip() or any(ord(c) < 32 or ord(c) == 127 for c in text)):
+            raise ValueError("white space at an end or a control character: no caller could present it")
+        return value
+
+    @field_validator("scenes", "client")
+    @classmethod
+    def _a_folder(cls, value: Path, info: ValidationInfo) -> Path:
+        if not value.is_dir():
+            raise ValueError("not a folder" if value.exists() else "no such folder")
+        if info.field_name == "client" and not (value / "index.html").is_file():
+            raise ValueError("no index.html in it: not the client's folder")
+        return value
+
+    @field_validator("data")
+    @classmethod
+    def _a_folder_or_none_yet(cls, value: Path) -> Path:
+        if value.exists() and not value.is_dir():  # a missing one is made at start-up (store.py)
+            raise ValueError("not a folder")
+        return value
+
+    @field_validator("host")
+    @classmethod
+    def _an_address_here(cls, value: str) -> str:
+        """A name that resolves to addresses of this machine: each one the server will listen on takes a socket
+        (port 0 here: whether the port is free is the server's to find out)."""
+        try:
+            found = socket.getaddrinfo(value, None, socket.AF_UNSPEC, socket.SOCK_STREAM, 0, socket.AI_PASSIVE)
+        except (socket.gaierror, UnicodeError) as exc:
+            raise ValueError(f"does not resolve ({getattr(exc, 'strerror', None) or exc})") from None
+        for family, kind, proto, _, address in found:
+            with socket.socket(family, kind, proto) as probe:
+                try:
+                    probe.bind((address[0], 0, *address[2:]))
+                except OSError as exc:
+                    raise ValueError(f"not an address of this machine ({exc.strerror or exc})") from None
+        return value
 
     def upload_limits(self, room_bytes: int | None = None) -> Limits:
         """What the sandbox lets one upload take; ``room_bytes``, the memory the uploaded scenes have left."""
@@ -235,3 +301,18 @@ class Settings(BaseSettings):
                 f"more than the {self.max_work:,} one painting may take: ask for fewer pixels, samples or iterations"
             )
         return size
+
+
+def setting_error(exc: ValidationError, flags: dict[str, str] | None = None) -> str:
+    """The first bad setting of ``exc`` in one line, named as its variable (``RCP_SCENES=/nope: no such
+    folder``), or as the command-line option that gave it when ``flags`` maps the setting to one (``--host``);
+    never the token's value."""
+    errors = exc.errors()
+    field = str(errors[0]["loc"][0]) if errors[0]["loc"] else ""
+    flag = (flags or {}).get(field)
+    name, equals = (flag, " ") if flag else (f"RCP_{field.upper()}", "=")
+    value = errors[0].get("input")
+    shown = f"{equals}{str(value)[:80]}" if field != "token" and isinstance(value, str | int | float | Path) else ""
+    message = errors[0]["msg"].removeprefix("Value error, ")
+    more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
+    return " ".join(f"{name}{shown}: {message}{more}".split())  # one line, whatever the value held

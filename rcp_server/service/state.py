@@ -20,6 +20,7 @@ from ..scene.scene import Scene, material_names, object_names
 from ..scene.scenefile import SceneError, load_scene, scene_names
 from ..settings.params import PaintParams
 from . import protocol
+from .memory import Budget, GiveBack, default_memory_bytes
 from .settings import Settings
 from .startup import Startup
 from .store import Store
@@ -63,6 +64,8 @@ class Service:
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
     startup: Startup = field(default_factory=Startup)  # ready once the scenes are loaded and the kernels compiled
+    memory: Budget = field(default_factory=lambda: Budget(default_memory_bytes()))  # the paintings' (memory.py)
+    give_back: GiveBack = field(default_factory=GiveBack)  # the memory of walks that closed, to the system
     closed: bool = False
     _closing: threading.Lock = field(default_factory=threading.Lock)  # the start's last steps, or the close
 
@@ -81,7 +84,7 @@ class Service:
                 cluster.start(settings.ray_join_s)
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
-            return cls(settings, {}, {}, workshop, videos, store, cluster)
+            return cls(settings, {}, {}, workshop, videos, store, cluster, memory=Budget(settings.memory_bytes))
         except BaseException:
             for opened in (workshop, cluster, store):
                 if opened is not None:
@@ -183,6 +186,7 @@ class Service:
         if self.cluster is not None:
             self.cluster.close()
         self.workshop.close()
+        self.give_back.close()
         self.uploads.flush()
         self.store.close()
 

@@ -69,6 +69,8 @@ class FairPool(Executor):
                 future.set_result(fn(*args))
             except BaseException as exc:  # handed to whoever waits on the future
                 future.set_exception(exc)
+            # an idle thread would otherwise keep its last tile's task, and with it that whole painting's buffers
+            del future, fn, args
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
         for _ in self._threads:

@@ -10,6 +10,7 @@ import signal
 import socket
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -442,3 +443,32 @@ def test_a_registered_mapping_paints_on_ray_as_on_threads(painter, busy_scene):
         np.testing.assert_array_equal(frames, threaded(busy_scene, params))
     finally:
         unregister_mapping("test-swirl")
+
+
+def _children(pid: int) -> list[str]:
+    """The command names of a process's children (``/proc``)."""
+    names = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text()
+        except OSError:  # gone meanwhile
+            continue
+        name, rest = fields[fields.index("(") + 1 : fields.rindex(")")], fields[fields.rindex(")") + 2 :].split()
+        if int(rest[1]) == pid:
+            names.append(name)
+    return names
+
+
+@pytest.mark.parametrize("joined", [False, True])
+def test_rcp_serve_exits_0_on_sigterm_with_ray_joined_or_not(tmp_path, joined):
+    """``ray.init`` puts its own SIGTERM handler in place (exit status 15): ``rcp serve`` keeps its own, and a
+    stop asked for is a clean exit, 0, with Ray's runtime stopped with it."""
+    from rcp_server.bench.harness import rcp_serve
+
+    settings = {"ray_address": "local", "ray_walks": "0"} if joined else {}
+    with rcp_serve(tmp_path, **settings) as served:
+        if joined:  # a local Ray runtime of the server's own
+            assert {"raylet", "gcs_server"} <= set(_children(served.process.pid)), _children(served.process.pid)
+        served.process.send_signal(signal.SIGTERM)
+        assert served.process.wait(120) == 0, served.log.read_text()[-2000:]
+    assert "Traceback" not in served.log.read_text()

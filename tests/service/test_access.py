@@ -19,8 +19,8 @@ DOCS = ["/openapi.json", "/docs", "/redoc", "/docs/oauth2-redirect"]
 
 
 @pytest.fixture(scope="module")
-def guarded():
-    with BackgroundServer(token=TOKEN, scenes="/nonexistent-scenes-folder") as server:
+def guarded(tmp_path_factory):
+    with BackgroundServer(token=TOKEN, scenes=tmp_path_factory.mktemp("no-scenes")) as server:
         yield server
 
 

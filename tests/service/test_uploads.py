@@ -299,11 +299,11 @@ def test_another_walk_through_keeps_getting_frames_while_hostile_files_are_read(
     assert set(answers) == {422} and read_during >= 3 and frames >= 3, (answers, read_during, frames)
 
 
-def test_uploads_off_token_and_idle_time():
-    with BackgroundServer(uploads=False, scenes="/nonexistent-scenes-folder") as off:
+def test_uploads_off_token_and_idle_time(tmp_path):
+    with BackgroundServer(uploads=False, scenes=tmp_path) as off:
         refused = upload(off, "box.glb", files.glb())
         assert refused.status_code == 403 and "RCP_UPLOADS=0" in refused.json()["detail"]
-    with BackgroundServer(token="sesame", upload_idle_s=1.0, scenes="/nonexistent-scenes-folder") as guarded:
+    with BackgroundServer(token="sesame", upload_idle_s=1.0, scenes=tmp_path) as guarded:
         assert upload(guarded, "box.glb", files.glb()).status_code == 401
         auth = {"authorization": "Bearer sesame"}
         made = upload(guarded, "box.glb", files.glb(), headers=auth)

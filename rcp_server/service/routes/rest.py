@@ -15,6 +15,7 @@ from ...util import images
 from .. import protocol
 from ..access import admits
 from ..asked import RenderAsked
+from ..memory import NoRoom, painting_bytes
 from ..state import ServiceDep
 from ..workshop import Busy
 from . import SCENE_BODY
@@ -81,7 +82,7 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
         return images.encode(image, fmt, body.quality)
 
     try:
-        with workshop.admission():
+        with workshop.admission(), service.memory.reserved(painting_bytes(params, *size), size, "this render"):
             watcher = asyncio.create_task(_hang_up(request, gone))
             try:
                 return Response(await workshop.run(job), media_type=media_type)
@@ -89,6 +90,8 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
                 watcher.cancel()
     except Busy as busy:
         raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
+    except NoRoom as full:  # the memory the paintings may take (RCP_MEMORY_BYTES)
+        raise HTTPException(full.status, str(full), headers=full.headers) from None
     except ClusterError as exc:  # Ray does not answer, or lost a worker: the operator's to mend, the caller waits
         log.error("a render on Ray failed: %s", exc)
         raise HTTPException(503, str(exc), headers={"Retry-After": str(CLUSTER_RETRY_S)}) from None
