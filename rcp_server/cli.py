@@ -267,7 +267,9 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
     if args.save_iterations is not None and args.ray is not None:
         raise UsageError("--save-iterations paints here: leave out --ray")
     if args.path is not None:
-        path = load_path(args.path, base, args.fps)
+        path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
+        if path.track is not None and args.ray is not None:
+            raise UsageError("--ray paints one painting for a whole path: a path that keys its painting paints here")
         fps, count = path.fps, path.frame_count
         shots = (frame._replace(scene_time=frame.scene_time + args.time) for frame in path.frames())
     else:

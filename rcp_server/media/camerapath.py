@@ -32,8 +32,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass, replace
 from typing import Annotated, Any, NamedTuple
 
 import numpy as np
@@ -44,6 +44,8 @@ from scipy.spatial.transform import Rotation, RotationSpline
 from ..camera.camera import Camera, CameraError, camera_faults
 from ..camera.wire import camera_fields
 from ..scene.scenefile import one_line
+from ..settings.params import PaintParams
+from .keyedpaint import Looks, PaintKey, PaintTrack
 
 MAX_FRAMES = 100_000
 """The most frames one path may give (over an hour at 24 fps): a bound on what a path file can ask for."""
@@ -78,6 +80,8 @@ KeyframeSpec = create_model(  # type: ignore[call-overload]  # its camera is dec
     t=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)], ...),
     **camera_fields(optional=CARRIED),
     scene_time=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] | None, None),
+    paint=(dict[str, Any] | None, None),
+    fade=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)] | None, None),
 )
 
 
@@ -114,7 +118,15 @@ class PathSpec(_Model):
         times: list[float] = []
         cameras: list[Camera] = []
         scene_times: list[float] = []
+        paints: list[PaintKey] = []
         for k, key in enumerate(keyframes):
+            if key.fade is not None and (key.paint is None or k == 0 or key.fade > key.t - keyframes[k - 1].t):
+                raise PathError(
+                    f"keyframes.{k}.fade: a fade belongs to a keyframe with a paint table, and lasts at most "
+                    "the time since the keyframe before"
+                )
+            if key.paint is not None:
+                paints.append(PaintKey(key.t, key.paint, key.fade or 0.0))
             carried.update({name: value for name in ("up", "fov") if (value := getattr(key, name)) is not None})
             try:
                 cameras.append(Camera(key.eye, key.look_at, **carried))
@@ -125,7 +137,8 @@ class PathSpec(_Model):
             else:
                 scene_times.append(key.t if k == 0 else scene_times[-1] + key.t - times[-1])
             times.append(key.t)
-        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop)
+        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop, tuple(paints))
+        path.with_painting(PaintParams())  # the settings checked (the scene's objects, when it paints)
         if path.frame_count > MAX_FRAMES:
             raise PathError(
                 f"keyframes: {path.duration:g} s at {self.fps:g} fps is {path.frame_count:,} frames, "
@@ -166,12 +179,14 @@ def load_path(file, scene_camera: Camera, fps: float | None = None) -> CameraPat
 
 
 class PathFrame(NamedTuple):
-    """One frame of a path: its index, seconds along the path, the camera, and the scene's time."""
+    """One frame of a path: its index, seconds along the path, the camera, the scene's time, and the painting
+    that its path keys (``keyedpaint.Looks``; empty: the film's own)."""
 
     index: int  # type: ignore[assignment]  # the frame's number, in place of tuple.index (which nobody calls)
     t: float
     camera: Camera
     scene_time: float
+    looks: Looks = ()
 
 
 def _centripetal_knots(points: np.ndarray) -> np.ndarray:
@@ -218,6 +233,22 @@ class CameraPath:
     cameras: tuple[Camera, ...]
     scene_times: tuple[float, ...]
     loop: bool = False
+    paints: tuple[PaintKey, ...] = ()  # the keyframes' paint tables, in increasing t
+    track: PaintTrack | None = None  # the painting along the path, over a film's own (:meth:`with_painting`)
+
+    def with_painting(self, base: PaintParams, check: Callable[[PaintParams], None] | None = None) -> CameraPath:
+        """This path painting its keyed settings over ``base`` (the film's painting; unchanged if it keys none):
+        its frames then carry their :data:`Looks`. ``check`` (a scene's ``check_names``) refuses what the scene
+        cannot paint. Raises :class:`PathError` naming the keyframe."""
+        if not self.paints:
+            return self
+        try:
+            track = PaintTrack.build(base, self.paints, check)
+        except ValueError as exc:
+            k, _, reason = str(exc).partition(": ")
+            key = [t for t in self.times].index(self.paints[int(k)].t)
+            raise PathError(f"keyframes.{key}.paint: {reason}") from None
+        return replace(self, track=track)
 
     @property
     def end(self) -> float:
@@ -272,7 +303,8 @@ class CameraPath:
         for first in range(start, stop, 1024):
             chunk = times[first : min(stop, first + 1024)]
             for n, (t, camera, scene_time) in enumerate(zip(chunk, *self.at(chunk), strict=True)):
-                yield PathFrame(first + n, float(t), camera, scene_time)
+                looks = self.track.at(min(float(t), self.end)) if self.track is not None else ()
+                yield PathFrame(first + n, float(t), camera, scene_time, looks)
 
     def at(self, t: np.ndarray) -> tuple[list[Camera], list[float]]:
         """Cameras and scene times at seconds ``t (m,)`` along the path (held before the first keyframe)."""
@@ -300,7 +332,18 @@ class CameraPath:
             {"t": t, **asdict(c), "scene_time": s}
             for t, c, s in zip(self.times, self.cameras, self.scene_times, strict=True)
         ]
-        return json.dumps({"fps": self.fps, "keyframes": keyframes, "loop": self.loop})
+        return json.dumps({"fps": self.fps, "keyframes": self.keyed(keyframes), "loop": self.loop})
+
+    def keyed(self, keyframes: list[dict]) -> list[dict]:
+        """``keyframes`` (one dict a keyframe, written out) with their ``paint`` and ``fade`` as given."""
+        by_time = {key.t: key for key in self.paints}
+        for keyframe in keyframes:
+            key = by_time.get(keyframe["t"])
+            if key is not None:
+                keyframe["paint"] = dict(key.settings)
+                if key.fade:
+                    keyframe["fade"] = key.fade
+        return keyframes
 
 
 @dataclass(frozen=True)

@@ -24,6 +24,7 @@ from ..settings.params import PaintParams
 from . import protocol
 from .settings import Settings
 from .state import Service, ServiceDep
+from .videos import job_work
 
 
 class Refusal(ValueError):
@@ -119,9 +120,31 @@ async def video_asked(body: protocol.VideoRequest, service: ServiceDep) -> Video
         except PathError as exc:
             raise Refusal(str(exc)) from None
         frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
-        return VideoAsked(frame, path)
+        return VideoAsked(frame, keyed(service, path, frame, body.temporal))
     except Refusal as refusal:
         raise http_error(refusal) from None
+
+
+def keyed(service: Service, path: CameraPath, frame: Asked, temporal: int | None) -> CameraPath:
+    """``path`` painting what its keyframes key over the film's painting, checked against the scene and the
+    work a video may take (its most costly painting on every frame, twice where it cross-fades)."""
+    try:
+        path = path.with_painting(frame.params, frame.scene.check_names)
+    except PathError as exc:
+        raise Refusal(str(exc)) from None
+    if path.track is None:
+        return path
+    if service.videos.painter is not None:
+        raise Refusal("this server paints films on Ray, one painting a film: a path that keys its painting cannot")
+    paintings = path.track.paintings()
+    work = max(job_work(frame.width, frame.height, p, temporal, path.frame_count) for p in paintings)
+    work *= 2 if path.track.fades else 1
+    if work > service.settings.max_video_work:
+        raise Refusal(
+            f"its keyed painting takes up to {work:,} rays, more than the {service.settings.max_video_work:,} one "
+            "video may take: key fewer iterations or samples, or ask for fewer frames or pixels"
+        )
+    return path
 
 
 async def scene_named(body: protocol.PathRequest, service: ServiceDep) -> Scene:
