@@ -19,7 +19,7 @@ from .camera.camera import CAMERA_FIELDS, Camera, CameraError
 from .cluster.painter import ClusterError
 from .engine.kernels.embree import EmbreeMissing
 from .media import video
-from .media.camerapath import PathError, PathFrame, load_path
+from .media.camerapath import CAMERA_PREFIX, PathError, PathFrame, load_path, motion_path
 from .painting.loop import PaintState, paint
 from .painting.sequence import paint_sequence
 from .scene.scene import Scene
@@ -123,9 +123,9 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--frames", type=positive_int, default=1, help="number of frames")
     s.add_argument(
         "--path",
-        type=Path,
         metavar="JSON",
-        help="a camera path (keyframes; the client saves them): one frame every 1/fps along it",
+        help="a camera path (keyframes; the client saves them): one frame every 1/fps along it; or camera:NAME, "
+        "an animated camera of the model (a glTF's)",
     )
     s.add_argument("--fps", type=finite, help="frames per second of scene time (default 24, or the path's)")
     s.add_argument(
@@ -267,7 +267,11 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
     if args.save_iterations is not None and args.ray is not None:
         raise UsageError("--save-iterations paints here: leave out --ray")
     if args.path is not None:
-        path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
+        if args.path.startswith(CAMERA_PREFIX):
+            distance = float(np.linalg.norm(np.subtract(base.look_at, base.eye)))
+            path = motion_path(args.path, scene.motions, args.fps, distance)
+        else:
+            path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
         if path.track is not None and args.ray is not None:
             raise UsageError("--ray paints one painting for a whole path: a path that keys its painting paints here")
         fps, count = path.fps, path.frame_count

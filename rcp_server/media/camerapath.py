@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass, replace
 from typing import Annotated, Any, NamedTuple
 
@@ -43,6 +43,7 @@ from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..camera.camera import Camera, CameraError, camera_faults
 from ..camera.wire import camera_fields
+from ..scene.motion import CameraMotion
 from ..scene.scenefile import one_line
 from ..settings.params import PaintParams
 from .keyedpaint import Looks, PaintKey, PaintTrack
@@ -471,3 +472,49 @@ def _view_matrix(camera: Camera) -> np.ndarray:
     """The camera's orientation, (3, 3): columns right, up and backward (``-f``), a proper rotation."""
     r, u, f = camera.basis()
     return np.stack([r, u, -f], axis=1)
+
+
+# ---- a path from an animated camera (a glTF's) ----
+
+CAMERA_PREFIX = "camera:"
+"""How a path names a scene's animated camera in place of a file or keyframes: ``camera:NAME``."""
+
+
+def motion_path(ref: str, motions: Mapping[str, CameraMotion], fps: float | None, distance: float) -> CameraPath:
+    """The path of the animated camera ``ref`` (``camera:NAME``) among a scene's ``motions``: one keyframe a frame,
+    every ``1 / fps`` seconds (default 24) from 0 to the animation's end, each the animation's camera at that time
+    (looking at ``distance`` along its view, the depth mapping's default focus), the scene's clock with it. The
+    path's curves pass through their keyframes, so every frame is the animation's camera. :class:`PathError` in
+    one line for an unknown name or an animation too long for a path."""
+    name = ref.removeprefix(CAMERA_PREFIX)
+    motion = motions.get(name)
+    if motion is None:
+        have = ", ".join(repr(n) for n in list(motions)[:12]) or "none"
+        raise PathError(f"{ref}: the scene has no animated camera {name!r} (it has: {have})")
+    fps = 24.0 if fps is None else fps
+    if not 0 < fps <= MAX_FPS:
+        raise PathError(f"{ref}: fps must be more than 0 and at most {MAX_FPS:g}, got {fps:g}")
+    count = math.floor(motion.duration * fps + 1e-9) + 1
+    if count < 2:
+        raise PathError(f"{ref}: its animation lasts {motion.duration:g} s, less than one frame at {fps:g} fps")
+    if count > MAX_KEYFRAMES:
+        raise PathError(
+            f"{ref}: {motion.duration:g} s at {fps:g} fps is {count:,} frames, more than the {MAX_KEYFRAMES:,} "
+            "keyframes a path may have"
+        )
+    times = np.arange(count) / fps
+    eye, forward, up, fov = motion.at(times)
+    try:
+        cameras = tuple(
+            Camera(_triple(e), _triple(e + distance * f), _triple(u), float(v))
+            for e, f, u, v in zip(eye, forward, up, fov, strict=True)
+        )
+    except CameraError as exc:
+        raise PathError(f"{ref}: {exc}") from None
+    path = CameraPath(fps, tuple(map(float, times)), cameras, tuple(map(float, times)))
+    path.check()
+    return path
+
+
+def _triple(v: np.ndarray) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))

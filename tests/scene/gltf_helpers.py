@@ -113,3 +113,31 @@ class GltfBuilder:
         binary = bytes(self.binary) + b"\0" * (-len(self.binary) % 4)
         body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(binary), 0x004E4942) + binary
         return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+    def keys(self, values, kind: str) -> int:
+        """An accessor of float keys (times as ``SCALAR``, with the min and max glTF asks of them)."""
+        array = np.asarray(values, np.float32).reshape(len(values), -1)
+        index = self._accessor(array if kind != "SCALAR" else array.ravel(), kind)
+        if kind == "SCALAR":
+            self.gltf["accessors"][index]["min"] = [float(array.min())]
+            self.gltf["accessors"][index]["max"] = [float(array.max())]
+        return index
+
+    def animate(self, name: str, channels) -> None:
+        """An animation of ``channels``: ``(target, path, times, values, interpolation)``, target a node index,
+        or ``("camera", k)`` for camera k's ``yfov`` through ``KHR_animation_pointer``."""
+        animation: dict = {"name": name, "channels": [], "samplers": []}
+        for target, path, times, values, interpolation in channels:
+            kind = {"translation": "VEC3", "scale": "VEC3", "rotation": "VEC4", "yfov": "SCALAR"}[path]
+            sampler = {"input": self.keys(times, "SCALAR"), "output": self.keys(values, kind),
+                       "interpolation": interpolation}  # fmt: skip
+            animation["samplers"].append(sampler)
+            if isinstance(target, tuple):
+                pointer = {"KHR_animation_pointer": {"pointer": f"/cameras/{target[1]}/perspective/yfov"}}
+                spec = {"path": "pointer", "extensions": pointer}
+                if "KHR_animation_pointer" not in self.gltf.setdefault("extensionsUsed", []):
+                    self.gltf["extensionsUsed"].append("KHR_animation_pointer")
+            else:
+                spec = {"node": target, "path": path}
+            animation["channels"].append({"sampler": len(animation["samplers"]) - 1, "target": spec})
+        self._list("animations").append(animation)
