@@ -1189,6 +1189,14 @@ export const PROTOCOL = {
        "title": "Materials",
        "type": "array"
       },
+      "motions": {
+       "default": [],
+       "items": {
+        "type": "string"
+       },
+       "title": "Motions",
+       "type": "array"
+      },
       "name": {
        "title": "Name",
        "type": "string"

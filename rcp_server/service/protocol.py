@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal, get_args
 from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, create_model
 
 from ..camera.wire import CameraSpec as CameraModel  # a camera on the wire is a camera in a scene file
-from ..media.camerapath import PathSpec
+from ..media.camerapath import MAX_FPS, PathSpec
 from ..scene.scenefile import SCENE_NAME
 from ..settings.params import PAINT_SETTINGS, PER, PER_PIXEL, PaintParams, PaintSetting
 from ..settings.styles import STYLE, STYLES
@@ -96,13 +96,21 @@ class RenderRequest(_Model):
     quality: Quality = 92
 
 
+class CameraPathRef(_Model):
+    """A model's animated camera as a path (``camerapath.motion_path``): its name (``SceneInfo.motions``), and
+    the frames a second it is sampled at."""
+
+    camera: Annotated[str, Field(min_length=1, max_length=80)]
+    fps: Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_FPS)] = 24.0
+
+
 class VideoRequest(_Model):
     """``POST /api/videos``: a camera path (the format of ``camerapath.py``) painted into an MP4; the size and
     painting settings as for a still; ``temporal``: after the first frame, each frame runs this many
     iterations from the previous frame's painting (absent: every frame starts again from grey)."""
 
     scene: SceneName
-    path: PathSpec
+    path: PathSpec | CameraPathRef
     width: Size = 640
     height: Size = 360
     paint: PaintModel = PaintModel()
@@ -129,7 +137,7 @@ class PathRequest(_Model):
     """``POST /api/paths``: the cameras of a path's frames, for a client to play the path back as it will render."""
 
     scene: SceneName
-    path: PathSpec
+    path: PathSpec | CameraPathRef
 
 
 class PathCameras(BaseModel):
@@ -154,6 +162,7 @@ class SceneInfo(BaseModel):
     title: str
     camera: CameraModel
     viewpoints: list[Viewpoint] = []
+    motions: list[str] = []  # its animated cameras (a glTF's), each a path: {"camera": name} (CameraPathRef)
     paint: dict  # the scene's painting settings that differ from the engine's (client/protocol.js)
     objects: list[str] = []  # what settings per object are called by (the object channel's index)
     materials: list[str] = []  # the named materials, likewise

@@ -221,6 +221,7 @@ def scene_info(scene: Scene) -> protocol.SceneInfo:
         title=scene.title,
         camera=spec_of(scene.camera),
         viewpoints=[protocol.Viewpoint(name=name, camera=spec_of(c)) for name, c in scene.viewpoints.items()],
+        motions=list(scene.motions),
         paint=scene.paint.non_defaults(),
         objects=object_names(scene.objects),
         materials=material_names(scene.objects),

@@ -3,70 +3,32 @@ the animation's at that time; animations too long, too dense or not finite are r
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
-from gltf_helpers import GltfBuilder, quaternion
+from gltf_helpers import EYES, FOVS, PARENT, PARENT_TURN, animated_camera, expected_camera
 from PIL import Image
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Rotation
 
 from rcp_server.cli import main
 from rcp_server.media.camerapath import PathError, motion_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import SceneError, load_scene, mesh_scene
 
-WALL = [[-3, -2, -2], [3, -2, -2], [3, 2, -2], [-3, 2, -2]]
-TIMES = [0.0, 1.0, 2.5]
-EYES = [[0, 0, 5], [1, 0.5, 4], [-1, 0, 3]]
-TURNS = [quaternion((0, 1, 0), 0), quaternion((0, 1, 0), 20), quaternion((1, 0, 0), -15)]
-FOVS = [math.radians(50), math.radians(40), math.radians(30)]
-PARENT = (0.5, -0.25, 0.0)  # the camera's parent node stands here, turned 10 degrees about y
-PARENT_TURN = quaternion((0, 1, 0), 10)
 
-
-def _animated(tmp_path, channels=None, name="shot.glb"):
-    """A wall, a still camera "Still", and a camera "Shot" under a parent node, moved and zoomed."""
-    b = GltfBuilder()
-    b.quad(WALL, material=b.material(pbrMetallicRoughness={"baseColorFactor": [0.8, 0.3, 0.1, 1]}))
-    b.camera("Still", (0, 0, 6))
-    shot = b.camera("Shot", EYES[0], TURNS[0])
-    b.gltf["scenes"][0]["nodes"].remove(shot)
-    b.gltf["nodes"].append({"translation": list(PARENT), "rotation": PARENT_TURN, "children": [shot]})
-    b.gltf["scenes"][0]["nodes"].append(len(b.gltf["nodes"]) - 1)
-    b.animate(
-        "Action",
-        channels
-        or [
-            (shot, "translation", TIMES, EYES, "LINEAR"),
-            (shot, "rotation", TIMES, TURNS, "LINEAR"),
-            (("camera", 1), "yfov", TIMES, FOVS, "LINEAR"),
-        ],
-    )
-    path = tmp_path / name
-    path.write_bytes(b.glb())
+def written(tmp_path, channels=None):
+    path = tmp_path / "shot.glb"
+    path.write_bytes(animated_camera(channels).glb())
     return path
 
 
-def _expected(t: np.ndarray):
-    """The animation's camera at ``t``, computed apart: numpy's lines, scipy's slerp, the parent's matrix."""
-    eye_local = np.stack([np.interp(t, TIMES, np.asarray(EYES)[:, k]) for k in range(3)], axis=1)
-    turn = Slerp(TIMES, Rotation.from_quat(TURNS))(np.clip(t, TIMES[0], TIMES[-1]))
-    parent = Rotation.from_quat(PARENT_TURN)
-    eye = parent.apply(eye_local) + PARENT
-    forward = (parent * turn).apply([0, 0, -1])
-    up = (parent * turn).apply([0, 1, 0])
-    return eye, forward, up, np.degrees(np.interp(t, TIMES, FOVS))
-
-
 def test_every_frame_of_the_path_is_the_animations_camera_at_its_time(tmp_path):
-    scene = load_scene(str(_animated(tmp_path)))
+    scene = load_scene(str(written(tmp_path)))
     assert list(scene.motions) == ["Shot"]  # the still camera has no motion
     path = motion_path("camera:Shot", scene.motions, 10, 2.0)
     frames = list(path.frames())
     assert len(frames) == 26 and frames[-1].t == pytest.approx(2.5)
     t = np.array([f.t for f in frames])
-    eye, forward, up, fov = _expected(t)
+    eye, forward, up, fov = expected_camera(t)
     cameras = [f.camera for f in frames]
     np.testing.assert_allclose([c.eye for c in cameras], eye, atol=1e-6)
     np.testing.assert_allclose([c.basis()[2] for c in cameras], forward, atol=1e-6)
@@ -76,24 +38,24 @@ def test_every_frame_of_the_path_is_the_animations_camera_at_its_time(tmp_path):
     # the motion itself between frames too (what any fps samples)
     between = np.linspace(-0.5, 3.0, 71)
     got = scene.motions["Shot"].at(between)
-    for g, e in zip(got, _expected(between), strict=True):
+    for g, e in zip(got, expected_camera(between), strict=True):
         np.testing.assert_allclose(g, e, atol=1e-6)
 
 
 def test_rcp_render_paints_the_animated_camera_by_name(tmp_path):
-    model = _animated(tmp_path)
+    model = written(tmp_path)
     out = tmp_path / "frames"
     args = ["-q", "render", str(model), "--path", "camera:Shot", "--fps", "2", "--width", "32", "--height", "24"]
     assert main([*args, "--out", f"{out}/"]) == 0
-    written = sorted(out.glob("frame_*.png"))
-    assert len(written) == 6
+    frames = sorted(out.glob("frame_*.png"))
+    assert len(frames) == 6
     scene = mesh_scene(model)
     path = motion_path(
         "camera:Shot", scene.motions, 2, float(np.linalg.norm(np.subtract(scene.camera.look_at, scene.camera.eye)))
     )
     last = list(path.frames())[-1]
     expected = paint(scene, last.camera, 32, 24, scene.paint, time=last.scene_time).image
-    got = np.asarray(Image.open(written[-1]).convert("RGB")).astype(float) / 255
+    got = np.asarray(Image.open(frames[-1]).convert("RGB")).astype(float) / 255
     assert np.abs(got - expected).max() <= 1 / 255 + 1e-6
     assert main([*args, "--path", "camera:Nope", "--out", f"{out}/"]) == 2
 
@@ -106,7 +68,7 @@ def test_a_cubic_spline_and_a_step_are_read_as_gltf_defines_them(tmp_path):
         (2, "translation", [0.0, 2.0], cubic, "CUBICSPLINE"),
         (("camera", 1), "yfov", [0.0, 1.0], FOVS[:2], "STEP"),
     ]
-    scene = load_scene(str(_animated(tmp_path, channels)))
+    scene = load_scene(str(written(tmp_path, channels)))
     motion = scene.motions["Shot"]
     eye, _, _, fov = motion.at([1.0, 0.5, 1.0])
     # Hermite at s = 1/2 with span 2: (a + b) / 2 + 2 / 8 * (out_a - in_b) = (1, 1, 5) in the parent's space
@@ -126,7 +88,7 @@ def test_a_cubic_spline_and_a_step_are_read_as_gltf_defines_them(tmp_path):
     ],
 )
 def test_hostile_animations_are_refused_in_one_line(tmp_path, times, values, said):
-    model = _animated(tmp_path, [(2, "translation", times, values, "LINEAR")])
+    model = written(tmp_path, [(2, "translation", times, values, "LINEAR")])
     with pytest.raises(SceneError) as caught:
         load_scene(str(model))
     message = str(caught.value)
@@ -134,7 +96,7 @@ def test_hostile_animations_are_refused_in_one_line(tmp_path, times, values, sai
 
 
 def test_a_path_refuses_an_animation_it_cannot_hold(tmp_path):
-    scene = load_scene(str(_animated(tmp_path, [(2, "translation", [0.0, 399.0], EYES[:2], "LINEAR")])))
+    scene = load_scene(str(written(tmp_path, [(2, "translation", [0.0, 399.0], EYES[:2], "LINEAR")])))
     assert len(list(motion_path("camera:Shot", scene.motions, 24, 2.0).frames())) == 399 * 24 + 1
     with pytest.raises(PathError, match=r"^camera:Shot: 399 s at 30 fps is 11,971 frames, more than the 10,000"):
         motion_path("camera:Shot", scene.motions, 30, 2.0)
