@@ -41,7 +41,10 @@ class FramePainter(Protocol):
 
 
 def frame_params(params: PaintParams, temporal: int | None, index: int) -> PaintParams:
-    """The settings of frame ``index``: all iterations from ``I_0``, or ``temporal`` from the previous frame."""
+    """The settings of frame ``index``: all iterations from ``I_0``, or ``temporal`` from the previous frame;
+    with ``boil = k``, the seed moved on by one every ``k`` frames (the noise and the jitter boil)."""
+    if params.boil:
+        params = replace(params, seed=(params.seed + index // params.boil) % 2**31)
     return params if not temporal or index == 0 else replace(params, iterations=temporal)
 
 
