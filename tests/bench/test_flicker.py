@@ -20,8 +20,8 @@ W, H = 64, 40
 
 
 def pan(scene, end=(0.3, 0.05, -0.2), frames=9):
-    spec = {"fps": 8, "keyframes": [{"t": 0, "eye": [0, 0, 0], "look_at": [0, 0, -1]},
-                                    {"t": (frames - 1) / 8, "eye": list(end), "look_at": [end[0] - 0.1, end[1], -1]}]}  # fmt: skip
+    last = {"t": (frames - 1) / 8, "eye": list(end), "look_at": [end[0] - 0.1, end[1], -1]}
+    spec = {"fps": 8, "keyframes": [{"t": 0, "eye": [0, 0, 0], "look_at": [0, 0, -1]}, last]}
     return list(parse_path(spec).resolve(scene.camera).frames())
 
 
