@@ -118,6 +118,30 @@ class VideoRequest(_Model):
     format: Literal["mp4"] = "mp4"
 
 
+class PrintRequest(_Model):
+    """``POST /api/prints``: a still at print size (up to 16384 a side, painted in bands into a PNG) of an eye's
+    image of ``width x height``; ``alpha``: 0 where the plain image sees no geometry; ``bits``: 8 or 16."""
+
+    scene: SceneName
+    width: Annotated[int, Field(ge=1, le=16384)] = 4096
+    height: Annotated[int, Field(ge=1, le=16384)] = 2304
+    camera: CameraModel | None = None
+    paint: PaintModel = PaintModel()
+    time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] = 0.0
+    alpha: bool = False
+    bits: Literal[8, 16] = 8
+
+
+class PrintStatus(BaseModel):
+    """A print job: ``queued``, ``running``, then ``done`` (its PNG ready), ``failed`` or ``cancelled``."""
+
+    id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    rows: int
+    done_rows: int
+    message: str
+
+
 class VideoCreated(BaseModel):
     id: str
     frames: int

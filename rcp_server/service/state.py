@@ -20,6 +20,7 @@ from ..scene.scene import Scene, material_names, object_names
 from ..scene.scenefile import SceneError, load_scene, scene_names
 from ..settings.params import PaintParams
 from . import protocol
+from .prints import Prints
 from .settings import Settings
 from .startup import Startup
 from .store import Store
@@ -60,6 +61,7 @@ class Service:
     store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
     cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
     walks: Walks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
+    prints: Prints | None = None  # stills at print size, painted in the background (opened with the service)
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
     startup: Startup = field(default_factory=Startup)  # ready once the scenes are loaded and the kernels compiled
@@ -81,7 +83,9 @@ class Service:
                 cluster.start(settings.ray_join_s)
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
-            return cls(settings, {}, {}, workshop, videos, store, cluster)
+            service = cls(settings, {}, {}, workshop, videos, store, cluster)
+            service.prints = Prints(settings, workshop, store.folder / "prints", videos.disk_used)
+            return service
         except BaseException:
             for opened in (workshop, cluster, store):
                 if opened is not None:
@@ -178,6 +182,8 @@ class Service:
             session.close()
         self.workshop.stop()  # the video jobs' paintings stop at their next tile
         self.videos.close()
+        if self.prints is not None:
+            self.prints.close()
         if self.walks is not None:
             self.walks.close()
         if self.cluster is not None:
