@@ -128,7 +128,7 @@ class PrintRequest(_Model):
     camera: CameraModel | None = None
     paint: PaintModel = PaintModel()
     time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] = 0.0
-    alpha: bool = False
+    alpha: StrictBool = False  # true or false, not 0 or "yes"
     bits: Literal[8, 16] = 8
 
 
