@@ -11,6 +11,11 @@ and for the first one the scene camera's. ``scene_time`` (seconds of the scene's
 the scene's clock then runs on with ``t`` from the previous keyframe's (so a path that gives none has
 ``scene_time = t``).
 
+``ease`` (``[in, out]``, each 0 to 1, default 0) slows the camera into and out of a keyframe: between keyframes
+``k`` and ``k + 1`` the curves are read at ``t_k + f(s) (t_{k+1} - t_k)``, ``s`` the fraction of the segment gone
+and ``f`` the cubic from 0 to 1 whose slope is ``1 - out_k`` at its start and ``1 - in_{k+1}`` at its end (1:
+the camera comes to rest there). The painting's keys follow the same eased time; the scene's clock does not.
+
 Frames are taken every ``1 / fps`` seconds from ``t = 0`` to the last keyframe's ``t``, both included (the
 last one when it falls on that grid). With ``loop``, the path closes: after the last keyframe it returns to
 the first keyframe's view over one mean keyframe interval, every curve is periodic, and the frames stop just
@@ -58,6 +63,9 @@ MIN_GAP = 1e-3
 highest fps lasts 4 ms), and a curve's slopes through them overflow."""
 
 
+Unit = Annotated[float, Field(allow_inf_nan=False, ge=0, le=1)]
+
+
 class PathError(ValueError):
     """A camera path that cannot be used; the message is one line naming the bad field."""
 
@@ -82,6 +90,7 @@ KeyframeSpec = create_model(  # type: ignore[call-overload]  # its camera is dec
     **camera_fields(optional=CARRIED),
     scene_time=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] | None, None),
     paint=(dict[str, Any] | None, None),
+    ease=(tuple[Unit, Unit] | None, None),
     fade=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)] | None, None),
 )
 
@@ -120,6 +129,7 @@ class PathSpec(_Model):
         cameras: list[Camera] = []
         scene_times: list[float] = []
         paints: list[PaintKey] = []
+        eases = tuple(tuple(key.ease) if key.ease is not None else (0.0, 0.0) for key in keyframes)
         for k, key in enumerate(keyframes):
             if key.fade is not None and (key.paint is None or k == 0 or key.fade > key.t - keyframes[k - 1].t):
                 raise PathError(
@@ -138,7 +148,8 @@ class PathSpec(_Model):
             else:
                 scene_times.append(key.t if k == 0 else scene_times[-1] + key.t - times[-1])
             times.append(key.t)
-        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop, tuple(paints))
+        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop, tuple(paints),
+                          eases=eases if any(any(e) for e in eases) else ())  # fmt: skip
         path.with_painting(PaintParams())  # the settings checked (the scene's objects, when it paints)
         if path.frame_count > MAX_FRAMES:
             raise PathError(
@@ -236,6 +247,23 @@ class CameraPath:
     loop: bool = False
     paints: tuple[PaintKey, ...] = ()  # the keyframes' paint tables, in increasing t
     track: PaintTrack | None = None  # the painting along the path, over a film's own (:meth:`with_painting`)
+    eases: tuple[tuple[float, float], ...] = ()  # (in, out) of each keyframe, or () for none
+
+    def timing(self, t: np.ndarray) -> np.ndarray:
+        """Seconds ``t (m,)`` as the curves read them: each segment's time eased by its keyframes (see the
+        module's docstring); ``t`` itself without eases."""
+        t = np.asarray(t, dtype=np.float64)
+        if not self.eases:
+            return t
+        times = np.asarray(self.times)
+        k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
+        span = times[k + 1] - times[k]
+        s = np.clip((t - times[k]) / span, 0.0, 1.0)
+        leave = 1.0 - np.array([e[1] for e in self.eases])[k]  # the speed leaving key k
+        arrive = 1.0 - np.array([e[0] for e in self.eases])[k + 1]  # and arriving at key k + 1
+        eased = (s**3 - 2 * s**2 + s) * leave + (-2 * s**3 + 3 * s**2) + (s**3 - s**2) * arrive
+        inside = (t > times[0]) & (t < times[-1])
+        return np.where(inside, times[k] + eased * span, t)
 
     def with_painting(self, base: PaintParams, check: Callable[[PaintParams], None] | None = None) -> CameraPath:
         """This path painting its keyed settings over ``base`` (the film's painting; unchanged if it keys none):
@@ -282,8 +310,8 @@ class CameraPath:
             raise PathError(f"keyframes: no smooth path passes through them ({' '.join(str(exc).split())})") from None
         times = self.frame_times()
         with np.errstate(all="ignore"):
-            eye, look_at, up = curves.view(times)
-            fov, scene_time = curves.fov(times), curves.scene_time(times)
+            eye, look_at, up = curves.view(self.timing(times))
+            fov, scene_time = curves.fov(self.timing(times)), curves.scene_time(times)
         bad, reason = camera_faults(eye, look_at, up, fov)
         if reason is None and not np.isfinite(scene_time).all():
             bad, reason = ~np.isfinite(scene_time), "its scene_time is not a finite number"
@@ -304,15 +332,17 @@ class CameraPath:
         for first in range(start, stop, 1024):
             chunk = times[first : min(stop, first + 1024)]
             for n, (t, camera, scene_time) in enumerate(zip(chunk, *self.at(chunk), strict=True)):
-                looks = self.track.at(min(float(t), self.end)) if self.track is not None else ()
+                eased = float(self.timing(np.array([min(float(t), self.end)]))[0])
+                looks = self.track.at(eased) if self.track is not None else ()
                 yield PathFrame(first + n, float(t), camera, scene_time, looks)
 
     def at(self, t: np.ndarray) -> tuple[list[Camera], list[float]]:
         """Cameras and scene times at seconds ``t (m,)`` along the path (held before the first keyframe)."""
-        t = np.clip(np.asarray(t, dtype=np.float64), self.times[0], self.end)
+        raw = np.clip(np.asarray(t, dtype=np.float64), self.times[0], self.end)
+        t = self.timing(raw)
         curves = self._curves()
         eye, look_at, up = curves.view(t)
-        fov, scene_time = curves.fov(t), curves.scene_time(t)
+        fov, scene_time = curves.fov(t), curves.scene_time(raw)  # the scene's clock is not eased
         held = {name: getattr(self.cameras[0], name) for name in HELD}  # the same in every keyframe
         cameras = [
             Camera(tuple(e), tuple(a), tuple(u), float(f), **held)
@@ -336,8 +366,11 @@ class CameraPath:
         return json.dumps({"fps": self.fps, "keyframes": self.keyed(keyframes), "loop": self.loop})
 
     def keyed(self, keyframes: list[dict]) -> list[dict]:
-        """``keyframes`` (one dict a keyframe, written out) with their ``paint`` and ``fade`` as given."""
+        """``keyframes`` (one dict a keyframe, written out) with their ``paint``, ``fade`` and ``ease`` as given."""
         by_time = {key.t: key for key in self.paints}
+        for keyframe, ease in zip(keyframes, self.eases, strict=False):
+            if any(ease):
+                keyframe["ease"] = list(ease)
         for keyframe in keyframes:
             key = by_time.get(keyframe["t"])
             if key is not None:

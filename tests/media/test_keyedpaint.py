@@ -126,3 +126,21 @@ def test_keyed_paintings_that_cannot_paint_are_refused_in_one_line_naming_the_ke
         path_of([base[0], {**base[1], "paint": {"lambda_p": 1.0}, "fade": 1.5}], busy_scene)
     with pytest.raises(PathError, match=r"^keyframes\.1\.fade: a fade belongs to a keyframe with a paint table"):
         path_of([base[0], {**base[1], "fade": 0.5}], busy_scene)
+
+
+def test_ease_slows_the_camera_into_and_out_of_its_keys(busy_scene):
+    plain = [key(0, 0.0), key(2, -2.0), key(4, -4.0)]
+    eased = [{**plain[0], "ease": [0, 1]}, {**plain[1], "ease": [1, 0.5]}, plain[2]]
+    a, b = path_of(plain, busy_scene), path_of(eased, busy_scene)
+    t = np.array([0.0, 0.05, 1.0, 1.95, 2.0, 2.05, 3.0, 4.0])
+    za = np.array([c.eye[2] for c in a.at(t)[0]])
+    zb = np.array([c.eye[2] for c in b.at(t)[0]])
+    np.testing.assert_allclose(zb[[0, 4, 7]], [0.0, -2.0, -4.0], atol=1e-9)  # through every key at its time
+    np.testing.assert_allclose(zb[2], za[2], atol=1e-9)  # a segment eased at both ends: its middle in time
+    assert abs(zb[1]) < 0.1 * abs(za[1]) and abs(zb[3] + 2) < 0.1 * abs(za[3] + 2)  # at rest by its keys
+    assert abs(zb[5] + 2) < abs(za[5] + 2)  # half an ease out of the second
+    assert np.all(np.diff([c.eye[2] for c in b.at(np.linspace(0, 4, 81))[0]]) <= 1e-12)  # never back
+    assert json.loads(b.to_json())["keyframes"][1]["ease"] == [1, 0.5]
+    assert "ease" not in json.loads(a.to_json())["keyframes"][1]
+    with pytest.raises(PathError, match=r"keyframes\.1\.ease"):
+        path_of([plain[0], {**plain[1], "ease": [0, 2]}], busy_scene)
