@@ -127,7 +127,7 @@ class PrintRequest(_Model):
     height: Annotated[int, Field(ge=1, le=16384)] = 2304
     camera: CameraModel | None = None
     paint: PaintModel = PaintModel()
-    time: Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] = 0.0
+    time: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0, le=1e6)] = 0.0
     alpha: StrictBool = False  # true or false, not 0 or "yes"
     bits: Literal[8, 16] = 8
 
