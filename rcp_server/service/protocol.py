@@ -45,7 +45,8 @@ def _wire(declared: PaintSetting) -> tuple[Any, Any]:
         kind = StrictBool  # true or false, not "yes" or 1
     else:
         bounds = {k: v for k in ("ge", "gt", "le") if (v := getattr(declared, k)) is not None}
-        kind = Annotated[declared.kind, Field(allow_inf_nan=False, **bounds)]
+        # strict: a number, not true or false (a float setting still takes a whole number)
+        kind = Annotated[declared.kind, Field(strict=True, allow_inf_nan=False, **bounds)]
     return kind | None, Field(None, description=declared.help)
 
 
