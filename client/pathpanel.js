@@ -14,6 +14,7 @@
 // change can be undone and redone (path/history.js).
 
 import { keyEditor } from "./path/editor.js";
+import { motionChooser } from "./path/motions.js";
 import { History } from "./path/history.js";
 import { timeline } from "./path/timeline.js";
 
@@ -101,6 +102,7 @@ export function pathPanel(root, hooks) {
     $("clear").disabled = count === 0;
     line.draw();
     editor.draw();
+    motions.draw();
   }
 
   // ---- the timeline, the selected keyframe, undo ----
@@ -170,6 +172,18 @@ export function pathPanel(root, hooks) {
     undoing.append(b);
   }
   line.scrub.after(undoing);
+  const motions = motionChooser(tools, {
+    scene: hooks.scene,
+    fps: () => Number($("fps").value) || 24,
+    call,
+    take: (keys) => {
+      history.record();
+      path.keyframes = keys;
+      selected = -1;
+      show();
+    },
+    notice: hooks.notice,
+  });
 
   function button(text, title, action) {
     const b = document.createElement("button");

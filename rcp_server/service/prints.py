@@ -1,6 +1,6 @@
 """Print jobs (``/api/prints``): a still at print size (``media/prints.py``) painted in the background on the
 workshop's background lane, band by band, into a PNG of the data folder, then fetched; with progress (rows
-painted), cancel, and the limits of films: its work within ``RCP_MAX_VIDEO_WORK``, its file within what
+painted), cancel, and limits: its work within ``RCP_MAX_PRINT_WORK``, its file within what
 ``RCP_VIDEO_DISK_BYTES`` leaves after the videos and the prints kept or under way. A finished print is kept
 ``RCP_VIDEO_KEEP_S`` seconds. Prints are not resumed after a restart: the folder is emptied as the server
 starts.
@@ -89,10 +89,10 @@ class Prints:
         the work limit, 422; or the disk, 507) or :class:`Busy` (the queue full)."""
         prints.check_print(width, height, params, bits)
         work = print_work(width, height, params, alpha)
-        if work > self.settings.max_video_work:
+        if work > self.settings.max_print_work:
             raise VideoRefused(
                 f"{width}x{height} pixels x {params.spp} spp x their iterations is {work:,} rays, more than the "
-                f"{self.settings.max_video_work:,} one print may take (RCP_MAX_VIDEO_WORK)"
+                f"{self.settings.max_print_work:,} one print may take (RCP_MAX_PRINT_WORK)"
             )
         self.sweep()
         job_id = new_video_id()

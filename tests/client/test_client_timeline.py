@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 
 from rcp_server.media.camerapath import parse_path
@@ -133,3 +134,23 @@ def test_scrubbing_shows_the_paths_camera_at_that_time(page, live_server):
     page.wait_for_function(
         f"rcp.overlay.frame && Math.abs(rcp.state.lastCamera.eye[2] - ({expected.eye[2]})) < 1e-3", timeout=WAIT_MS
     )
+
+
+def test_an_uploaded_models_animated_camera_becomes_the_path(page):
+    from scene.gltf_helpers import animated_camera, expected_camera
+
+    glb = animated_camera().glb()
+    page.set_input_files("#upload-file", files=[{"name": "Shot.glb", "mimeType": "model/gltf-binary", "buffer": glb}])
+    page.wait_for_function("rcp.state.scene?.uploaded === true", timeout=WAIT_MS)
+    assert page.evaluate("rcp.state.scene.motions") == ["Shot"]
+    page.locator("#path [data-path=fps]").fill("4")
+    page.locator("#path [data-path=motion]").focus()
+    page.locator("#path [data-path=use-motion]").click()
+    page.wait_for_function("rcp.path.path.keyframes.length === 11", timeout=WAIT_MS)  # 0 to 2.5 s at 4 fps
+    taken = keys(page)
+    eye, *_, fov = expected_camera([k["t"] for k in taken])
+    assert [k["t"] for k in taken] == [k / 4 for k in range(11)]
+    np.testing.assert_allclose([k["eye"] for k in taken], eye, atol=1e-6)
+    assert [k["fov"] for k in taken] == pytest.approx(fov.tolist(), abs=1e-5)  # the file holds float32 radians
+    page.locator("#path [data-path=undo]").click()
+    assert keys(page) == []

@@ -26,7 +26,7 @@ def scenes(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def server(scenes):
-    with BackgroundServer(scenes=scenes, max_video_work=1 << 26, video_disk_bytes=64 << 20) as live:
+    with BackgroundServer(scenes=scenes, max_print_work=1 << 26, video_disk_bytes=64 << 20) as live:
         with httpx.Client(base_url=live.url, timeout=60) as client:
             yield client
 
