@@ -8,6 +8,15 @@
 // A film is flat or 360° (equirect: every keyframe's camera becomes a panorama at its eye, as the 360° view
 // shows), at a size chosen from a list (the view's own first); the render's progress bar follows the job's
 // `done_frames`, each value seen kept in `progress` for the tests.
+//
+// The keys also show on a timeline (path/timeline.js: drag to retime, click to select, scrub to see the path
+// at a time), the selected one's values are typed in (path/editor.js: camera, ease, painting), and every
+// change can be undone and redone (path/history.js).
+
+import { keyEditor } from "./path/editor.js";
+import { motionChooser } from "./path/motions.js";
+import { History } from "./path/history.js";
+import { timeline } from "./path/timeline.js";
 
 const RECORD_EVERY_S = 0.5; // a keyframe this often while recording: the spline smooths between them
 const POLL_MS = 500;
@@ -31,6 +40,17 @@ export function pathPanel(root, hooks) {
   let playing = null; // {cameras, fps, start, frame}
   let job = null; // {id, frames, timer}
   const progress = []; // the progress bar's values during the last render
+  let selected = -1; // the keyframe shown in the editor
+  let scrubbed = null; // {t, frame}: the last time scrubbed to, and the frame shown
+  let preview = null; // {spec, answer}: the server's cameras of the path as it was last scrubbed
+  const history = new History(
+    () => path.keyframes,
+    (keys) => {
+      path.keyframes = keys;
+      selected = Math.min(selected, keys.length - 1);
+      show();
+    },
+  );
 
   // ---- keyframes ----
 
@@ -41,6 +61,7 @@ export function pathPanel(root, hooks) {
   }
 
   function add(t) {
+    if (!recording) history.record(); // a recording is one step to undo, taken as it starts
     const last = path.keyframes.at(-1);
     const when = t ?? (last ? round(last.t + 1) : 0);
     const key = { t: when, ...snapshot() };
@@ -60,20 +81,18 @@ export function pathPanel(root, hooks) {
       row.dataset.index = index;
       const time = document.createElement("input");
       Object.assign(time, { type: "number", min: 0, step: 0.1, value: key.t, title: "seconds along the path" });
-      time.addEventListener("change", () => {
-        key.t = Math.max(0, Number(time.value) || 0);
-        path.keyframes.sort((a, b) => a.t - b.t);
-        show();
-      });
+      time.addEventListener("change", () => change(index, { t: Math.max(0, Number(time.value) || 0) }));
       row.append(time, button("view", "Look from this keyframe", () => hooks.place(key)));
-      row.append(button("set", "Move this keyframe to the current view", () => {
-        Object.assign(key, snapshot());
-        show();
-      }));
+      row.append(button("set", "Move this keyframe to the current view", () => change(index, snapshot())));
       row.append(button("×", "Delete this keyframe", () => {
+        history.record();
         path.keyframes.splice(index, 1);
+        selected = -1;
         show();
       }));
+      row.addEventListener("click", (event) => {
+        if (event.target === row) select(index);
+      });
       list.append(row);
     });
     const count = path.keyframes.length;
@@ -81,7 +100,90 @@ export function pathPanel(root, hooks) {
     $("summary").textContent = count ? `${count} keyframes · ${end.toFixed(1)} s` : "no keyframes yet";
     for (const name of ["play", "save", "render"]) $(name).disabled = count < 2 || Boolean(job && name === "render");
     $("clear").disabled = count === 0;
+    line.draw();
+    editor.draw();
+    motions.draw();
   }
+
+  // ---- the timeline, the selected keyframe, undo ----
+
+  function select(index) {
+    selected = index;
+    show();
+  }
+
+  /** Typed or dragged values of keyframe `index`, one step to undo; the keys stay in time order. */
+  function change(index, fields) {
+    const key = path.keyframes[index];
+    if (!key) return;
+    const before = JSON.stringify(path.keyframes);
+    Object.assign(key, fields);
+    if (fields.paint === null) delete key.paint;
+    if (key.fade === 0) delete key.fade;
+    if (key.ease && key.ease.every((e) => e === 0)) delete key.ease;
+    path.keyframes.sort((a, b) => a.t - b.t);
+    if (selected >= 0) selected = path.keyframes.indexOf(key);
+    if (JSON.stringify(path.keyframes) !== before) history.push(before); // the same values again: no step
+    show();
+  }
+
+  /** The walk shows the path at `t` seconds: the server's camera of the frame there. */
+  async function scrub(t) {
+    const scene = hooks.scene();
+    if (!scene || path.keyframes.length < 2) return;
+    stopPlaying();
+    const asked = JSON.stringify(spec());
+    try {
+      if (preview?.spec !== asked) {
+        preview = { spec: asked, answer: await call("api/paths", "POST", { scene: scene.name, path: JSON.parse(asked) }) };
+      }
+      const { cameras, fps } = preview.answer;
+      const frame = Math.min(cameras.length - 1, Math.round(t * fps));
+      scrubbed = { t, frame };
+      hooks.place(cameras[frame]);
+    } catch (error) {
+      hooks.notice(`Cannot show the path at ${t} s: ${error.message}`);
+    }
+  }
+
+  const tools = document.createElement("div"); // the timeline, the undo buttons, the selected key's values
+  tools.className = "path-tools";
+  const undoing = document.createElement("div");
+  undoing.className = "buttons";
+  $("list").after(tools);
+  const line = timeline(tools, {
+    keys: () => path.keyframes,
+    selected: () => selected,
+    select,
+    retime: (index, t) => change(index, { t }),
+    scrub,
+  });
+  const editor = keyEditor(tools, {
+    key: () => path.keyframes[selected] ?? null,
+    change: (fields) => change(selected, fields),
+    notice: hooks.notice,
+  });
+  for (const [name, text, act] of [
+    ["undo", "Undo", () => history.undo()],
+    ["redo", "Redo", () => history.redo()],
+  ]) {
+    const b = button(text, `${text} the last change of the path`, act);
+    b.dataset.path = name;
+    undoing.append(b);
+  }
+  line.scrub.after(undoing);
+  const motions = motionChooser(tools, {
+    scene: hooks.scene,
+    fps: () => Number($("fps").value) || 24,
+    call,
+    take: (keys) => {
+      history.record();
+      path.keyframes = keys;
+      selected = -1;
+      show();
+    },
+    notice: hooks.notice,
+  });
 
   function button(text, title, action) {
     const b = document.createElement("button");
@@ -98,6 +200,7 @@ export function pathPanel(root, hooks) {
   function record() {
     if (recording) return stopRecording();
     stopPlaying();
+    history.record();
     path.keyframes = [];
     recording = { start: performance.now() };
     add(0);
@@ -192,6 +295,7 @@ export function pathPanel(root, hooks) {
     try {
       const loaded = JSON.parse(await file.text());
       if (!Array.isArray(loaded?.keyframes)) throw new Error("no keyframes in it");
+      history.record();
       path.keyframes = loaded.keyframes.map((k) => ({ ...k }));
       $("film").value = loaded.keyframes.some((k) => k.projection === "equirect") ? "equirect" : "perspective";
       showSizes();
@@ -299,7 +403,9 @@ export function pathPanel(root, hooks) {
   on("play", play);
   on("clear", () => {
     stopPlaying();
+    history.record();
     path.keyframes = [];
+    selected = -1;
     show();
   });
   on("save", save);
@@ -323,8 +429,16 @@ export function pathPanel(root, hooks) {
     add,
     progress,
     showSizes,
+    history,
+    select,
     get playing() {
       return playing;
+    },
+    get selected() {
+      return selected;
+    },
+    get scrubbed() {
+      return scrubbed;
     },
     get job() {
       return job;

@@ -66,6 +66,7 @@
  * @property {number | null} [grain] - size of the surface noise's cells, in scene units
  * @property {boolean | null} [hatch] - surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)
  * @property {number | null} [seed] - seed of the jitter and the noise
+ * @property {number | null} [boil] - boil: a film reseeds its jitter and noise every this many frames, a tremble (0: never)
  * @property {number | null} [z_max] - depth recorded for a miss (default: beyond the scene)
  * @property {"raytrace" | "image" | null} [method] - raytrace (right everywhere) or image (look up the plain render: fast, needs lambda_e 0)
  * @property {"clamp" | "wrap" | "mirror" | null} [edge] - how the image method reads off screen
@@ -124,6 +125,7 @@
  * @property {string} title
  * @property {Camera} camera
  * @property {Array<Viewpoint>} viewpoints
+ * @property {Array<string>} motions
  * @property {Object<string, any>} paint
  * @property {Array<string>} objects
  * @property {Array<string>} materials
@@ -358,6 +360,21 @@ export const CAMERA = {
 };
 // The painting settings (rcp_server/settings/params.py), each once.
 const PAINT_PROPERTIES = {
+ "boil": {
+  "anyOf": [
+   {
+    "maximum": 10000,
+    "minimum": 0,
+    "type": "integer"
+   },
+   {
+    "type": "null"
+   }
+  ],
+  "default": null,
+  "description": "boil: a film reseeds its jitter and noise every this many frames, a tremble (0: never)",
+  "title": "Boil"
+ },
  "edge": {
   "anyOf": [
    {
@@ -1022,6 +1039,7 @@ export const ENGINE_DEFAULTS = {
  "grain": 0.05,
  "hatch": false,
  "seed": 0,
+ "boil": 0,
  "z_max": null,
  "method": "raytrace",
  "edge": "mirror",

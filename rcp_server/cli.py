@@ -18,8 +18,9 @@ from .bench.cli import MissingExtra, add_bench_commands
 from .camera.camera import CAMERA_FIELDS, Camera, CameraError
 from .cluster.painter import ClusterError
 from .engine.kernels.embree import EmbreeMissing
-from .media import video
-from .media.camerapath import PathError, PathFrame, load_path
+from .media import prints, video
+from .media.camerapath import CAMERA_PREFIX, PathError, PathFrame, load_path, motion_path
+from .media.prints import BAND_PIXELS, BITS, MAX_SIDE
 from .painting.loop import PaintState, paint
 from .painting.sequence import paint_sequence
 from .scene.scene import Scene
@@ -119,13 +120,17 @@ def _parser() -> argparse.ArgumentParser:
         help="paint on Ray (the cluster extra): a local Ray runtime, or the cluster at ADDRESS (or RAY_ADDRESS)",
     )
     r.add_argument("--quality", type=int, default=92, choices=range(1, 101), metavar="1..100", help="JPEG quality")
+    r.add_argument(
+        "--alpha", action="store_true", help="a PNG with alpha 0 where the plain image sees no geometry (a still)"
+    )
+    r.add_argument("--bits", type=int, choices=BITS, default=8, help="bits a channel of a PNG still (default 8)")
     s = r.add_argument_group("sequences")
     s.add_argument("--frames", type=positive_int, default=1, help="number of frames")
     s.add_argument(
         "--path",
-        type=Path,
         metavar="JSON",
-        help="a camera path (keyframes; the client saves them): one frame every 1/fps along it",
+        help="a camera path (keyframes; the client saves them): one frame every 1/fps along it; or camera:NAME, "
+        "an animated camera of the model (a glTF's)",
     )
     s.add_argument("--fps", type=finite, help="frames per second of scene time (default 24, or the path's)")
     s.add_argument(
@@ -242,7 +247,17 @@ def _render(args: argparse.Namespace) -> None:
     if sequence and video.is_video(args.out):
         video.check_video_size(args.width, args.height)
     if sequence or args.ray is not None:
+        if args.alpha or args.bits != 8:
+            raise UsageError("--alpha and --bits make a still: leave out --path, --frames and --ray")
         _render_sequence(args, scene, params, base)
+        return
+    if (
+        args.alpha
+        or args.bits != 8
+        or args.width * args.height > BAND_PIXELS
+        or max(args.width, args.height) > MAX_SIDE
+    ):
+        _render_print(args, scene, params, base)
         return
     result = paint(
         scene,
@@ -260,6 +275,28 @@ def _render(args: argparse.Namespace) -> None:
             images.save(args.save_iterations / f"iteration_{k}.png", image)
 
 
+def _render_print(args: argparse.Namespace, scene: Scene, params: PaintParams, camera: Camera) -> None:
+    """A still in bands of rows, streamed to a PNG (``media/prints.py``): any size up to 16384 a side, memory
+    bounded, with alpha and 16 bits when asked; a progress bar counts the rows."""
+    from tqdm import tqdm
+
+    prints.check_print(args.width, args.height, params, args.bits)  # before the progress bar shows
+    if images.image_format(args.out) != "PNG":
+        raise UsageError(f"--out {args.out}: a still this large, with --alpha or --bits 16, is written as a .png")
+    if args.save_iterations is not None:
+        raise UsageError("--save-iterations keeps whole iterations: a still this large paints in bands")
+
+    def paint_band(band, band_params: PaintParams):
+        return paint(scene, camera, args.width, args.height, band_params, time=args.time, region=band,
+                     threads=args.threads)  # fmt: skip
+
+    rows = prints.print_bands(scene, camera, args.width, args.height, params, paint_band, time=args.time,
+                              bits=args.bits, alpha=args.alpha)  # fmt: skip
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    with tqdm(total=args.height, desc="painting", unit="row", disable=args.quiet) as bar:
+        prints.write_print(args.out, rows, args.width, args.height, args.bits, args.alpha, bar.update)
+
+
 def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base: Camera) -> None:
     """Paint a camera path or an orbit and walk, into a video, a folder of PNGs or numbered images."""
     from tqdm import tqdm  # type: ignore[import-untyped]
@@ -267,7 +304,13 @@ def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base:
     if args.save_iterations is not None and args.ray is not None:
         raise UsageError("--save-iterations paints here: leave out --ray")
     if args.path is not None:
-        path = load_path(args.path, base, args.fps)
+        if args.path.startswith(CAMERA_PREFIX):
+            distance = float(np.linalg.norm(np.subtract(base.look_at, base.eye)))
+            path = motion_path(args.path, scene.motions, args.fps, distance)
+        else:
+            path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
+        if path.track is not None and args.ray is not None:
+            raise UsageError("--ray paints one painting for a whole path: a path that keys its painting paints here")
         fps, count = path.fps, path.frame_count
         shots = (frame._replace(scene_time=frame.scene_time + args.time) for frame in path.frames())
     else:

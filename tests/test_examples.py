@@ -11,6 +11,7 @@ from PIL import Image
 
 from rcp_server import PaintParams, load_scene, paint
 from rcp_server.cli import main
+from rcp_server.media.camerapath import load_path
 from rcp_server.util.images import save
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -83,3 +84,31 @@ def test_the_scene_file_keeps_its_figure_sharp_among_smudged_blocks(tmp_path):
     np.testing.assert_array_equal(painted[figure], plain[figure])
     moved = np.abs(painted - plain).max(axis=2) > 2 / 255
     assert moved[blocks].mean() > 0.2
+
+
+def test_the_film_keys_its_painting_from_plain_to_smudged_to_fractured(tmp_path):
+    frames = tmp_path / "frames"
+    source = EXAMPLES / "film.json"
+    assert main(["-q", "render", "default", "--path", str(source), "--fps", "1", *SMALL, "--out", f"{frames}/"]) == 0
+    written = [_pixels(path) for path in sorted(frames.glob("frame_*.png"))]
+    assert len(written) == 10
+    scene = load_scene("default")
+    path = load_path(source, scene.camera, fps=1).with_painting(scene.paint, scene.check_names)
+    cameras, _ = path.at(np.arange(10.0))
+
+    def api(t: int, params: PaintParams) -> np.ndarray:
+        return paint(scene, cameras[t], W, H, params, time=float(t)).image
+
+    smudge = scene.painting({"style": "smudge", "objects": {"crowns": {"lambda_p": 0}}})
+    # lambda_p 0 at first: the plain render; at 3 s the smudge its key gives, and half-way (a straight line
+    # between two keys) from the smudge's surface noise and grain to those the fractured style keys at 6 s
+    plain = api(0, replace(smudge, iterations=1))
+    np.testing.assert_array_equal(written[0], _as_saved(plain, tmp_path, "0.png"))
+    keyed = replace(smudge, lambda_p=24.0, noise=0.3, surface_noise=0.3, grain=(0.05 + 0.8) / 2)
+    np.testing.assert_array_equal(written[3], _as_saved(api(3, keyed), tmp_path, "3.png"))
+    # at 5 s, half-way through the 2 s fade into the fractured style: half of each painting
+    (colour, w0), (normal, w1) = next(f for f in path.frames() if f.index == 5).looks
+    assert (colour.mapping, normal.mapping, w0, w1) == ("color", "normal", 0.5, 0.5)
+    assert colour.lambda_p == normal.lambda_p and 14.0 < colour.lambda_p < 24.0
+    blend = 0.5 * api(5, colour) + 0.5 * api(5, normal)
+    np.testing.assert_array_equal(written[5], _as_saved(blend, tmp_path, "5.png"))

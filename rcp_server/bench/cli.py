@@ -154,6 +154,7 @@ def add_bench_commands(subparsers) -> None:
     )
     command = partial(_command, bench.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK"))
     _engine_benchmarks(command)
+    _film_benchmarks(command)
     _service_benchmarks(command)
     _cluster_benchmarks(command)
 
@@ -202,6 +203,29 @@ def _engine_benchmarks(command) -> None:
     p.add_argument("--height", type=positive_int, default=720, help="pixels (default 720)")
     p.add_argument("--threads", type=positive_int, help="worker threads (default: all cores)")
     p.set_defaults(run_bench=_memory)
+
+
+WALK = Path(__file__).resolve().parents[2] / "examples" / "walk.json"
+
+
+def _flicker(args: argparse.Namespace) -> None:
+    from .flicker import flicker
+
+    flicker(args)
+
+
+def _film_benchmarks(command) -> None:
+    """The films': how much a painting flickers along a path."""
+    p = command("flicker", "the warping error of a film along a path, plain and painted, per frame and temporal")
+    p.add_argument("path", nargs="?", default=str(WALK), help="a camera path file (default: examples/walk.json)")
+    p.add_argument("--scene", default="default", help="a scene name, scene file or mesh file (default: default)")
+    p.add_argument("--width", type=positive_int, default=320, help="pixels (default 320)")
+    p.add_argument("--height", type=positive_int, default=180, help="pixels (default 180)")
+    p.add_argument("--fps", type=finite, default=8.0, help="frames a second along the path (default 8)")
+    p.add_argument("--frames", type=positive_int, help="only the first this many frames")
+    p.add_argument("--temporal", type=positive_int, default=1, help="iterations a frame of the temporal film (1)")
+    p.add_argument("--boil", type=int, help="reseed the noise every this many frames (default: the scene's)")
+    p.set_defaults(run_bench=_flicker)
 
 
 def _service_benchmarks(command) -> None:

@@ -20,8 +20,15 @@ TIMEOUT = 30  # seconds an answer may take; the largest painting the limits allo
 MAX_PIXELS = 64 * 64
 MAX_WORK = 1 << 24  # 64x64 pixels x 64 iterations x 64 spp
 SIZES = [1, 7, 16, 64]  # widths and heights whose products stay within MAX_PIXELS
-SERVER_SETTINGS = {"max_pixels": MAX_PIXELS, "max_work": MAX_WORK, "max_video_work": 4 * MAX_WORK, "token": TOKEN}
-"""The server fuzzed: every painting that passes is cheap, a video at most a few small paintings' work."""
+SERVER_SETTINGS = {
+    "max_pixels": MAX_PIXELS,
+    "max_work": MAX_WORK,
+    "max_video_work": 4 * MAX_WORK,
+    "max_print_work": 0,
+    "token": TOKEN,
+}
+"""The server fuzzed: every painting that passes is cheap, a video at most a few small paintings' work; no print
+(its bodies checked, every one refused at the work limit: a print's queue would fill with fuzzed ones)."""
 
 
 def fuzz_config(scenes: list[str], seed: int, examples: int, deterministic: bool) -> dict:

@@ -11,6 +11,11 @@ and for the first one the scene camera's. ``scene_time`` (seconds of the scene's
 the scene's clock then runs on with ``t`` from the previous keyframe's (so a path that gives none has
 ``scene_time = t``).
 
+``ease`` (``[in, out]``, each 0 to 1, default 0) slows the camera into and out of a keyframe: between keyframes
+``k`` and ``k + 1`` the curves are read at ``t_k + f(s) (t_{k+1} - t_k)``, ``s`` the fraction of the segment gone
+and ``f`` the cubic from 0 to 1 whose slope is ``1 - out_k`` at its start and ``1 - in_{k+1}`` at its end (1:
+the camera comes to rest there). The painting's keys follow the same eased time; the scene's clock does not.
+
 Frames are taken every ``1 / fps`` seconds from ``t = 0`` to the last keyframe's ``t``, both included (the
 last one when it falls on that grid). With ``loop``, the path closes: after the last keyframe it returns to
 the first keyframe's view over one mean keyframe interval, every curve is periodic, and the frames stop just
@@ -32,8 +37,8 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterator
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import asdict, dataclass, replace
 from typing import Annotated, Any, NamedTuple
 
 import numpy as np
@@ -43,7 +48,10 @@ from scipy.spatial.transform import Rotation, RotationSpline
 
 from ..camera.camera import Camera, CameraError, camera_faults
 from ..camera.wire import camera_fields
+from ..scene.motion import CameraMotion
 from ..scene.scenefile import one_line
+from ..settings.params import PaintParams
+from .keyedpaint import Looks, PaintKey, PaintTrack
 
 MAX_FRAMES = 100_000
 """The most frames one path may give (over an hour at 24 fps): a bound on what a path file can ask for."""
@@ -53,6 +61,9 @@ MAX_DURATION = 24 * 3600.0  # seconds along a path
 MIN_GAP = 1e-3
 """Seconds between consecutive keyframes, at least: closer ones are no view a video could show (a frame at the
 highest fps lasts 4 ms), and a curve's slopes through them overflow."""
+
+
+Unit = Annotated[float, Field(allow_inf_nan=False, ge=0, le=1)]
 
 
 class PathError(ValueError):
@@ -78,6 +89,9 @@ KeyframeSpec = create_model(  # type: ignore[call-overload]  # its camera is dec
     t=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)], ...),
     **camera_fields(optional=CARRIED),
     scene_time=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=1e6)] | None, None),
+    paint=(dict[str, Any] | None, None),
+    ease=(tuple[Unit, Unit] | None, None),
+    fade=(Annotated[float, Field(allow_inf_nan=False, ge=0, le=MAX_DURATION)] | None, None),
 )
 
 
@@ -114,7 +128,16 @@ class PathSpec(_Model):
         times: list[float] = []
         cameras: list[Camera] = []
         scene_times: list[float] = []
+        paints: list[PaintKey] = []
+        eases = tuple(tuple(key.ease) if key.ease is not None else (0.0, 0.0) for key in keyframes)
         for k, key in enumerate(keyframes):
+            if key.fade is not None and (key.paint is None or k == 0 or key.fade > key.t - keyframes[k - 1].t):
+                raise PathError(
+                    f"keyframes.{k}.fade: a fade belongs to a keyframe with a paint table, and lasts at most "
+                    "the time since the keyframe before"
+                )
+            if key.paint is not None:
+                paints.append(PaintKey(key.t, key.paint, key.fade or 0.0))
             carried.update({name: value for name in ("up", "fov") if (value := getattr(key, name)) is not None})
             try:
                 cameras.append(Camera(key.eye, key.look_at, **carried))
@@ -125,7 +148,9 @@ class PathSpec(_Model):
             else:
                 scene_times.append(key.t if k == 0 else scene_times[-1] + key.t - times[-1])
             times.append(key.t)
-        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop)
+        path = CameraPath(self.fps, tuple(times), tuple(cameras), tuple(scene_times), self.loop, tuple(paints),
+                          eases=eases if any(any(e) for e in eases) else ())  # fmt: skip
+        path.with_painting(PaintParams())  # the settings checked (the scene's objects, when it paints)
         if path.frame_count > MAX_FRAMES:
             raise PathError(
                 f"keyframes: {path.duration:g} s at {self.fps:g} fps is {path.frame_count:,} frames, "
@@ -166,12 +191,14 @@ def load_path(file, scene_camera: Camera, fps: float | None = None) -> CameraPat
 
 
 class PathFrame(NamedTuple):
-    """One frame of a path: its index, seconds along the path, the camera, and the scene's time."""
+    """One frame of a path: its index, seconds along the path, the camera, the scene's time, and the painting
+    that its path keys (``keyedpaint.Looks``; empty: the film's own)."""
 
     index: int  # type: ignore[assignment]  # the frame's number, in place of tuple.index (which nobody calls)
     t: float
     camera: Camera
     scene_time: float
+    looks: Looks = ()
 
 
 def _centripetal_knots(points: np.ndarray) -> np.ndarray:
@@ -218,6 +245,39 @@ class CameraPath:
     cameras: tuple[Camera, ...]
     scene_times: tuple[float, ...]
     loop: bool = False
+    paints: tuple[PaintKey, ...] = ()  # the keyframes' paint tables, in increasing t
+    track: PaintTrack | None = None  # the painting along the path, over a film's own (:meth:`with_painting`)
+    eases: tuple[tuple[float, float], ...] = ()  # (in, out) of each keyframe, or () for none
+
+    def timing(self, t: np.ndarray) -> np.ndarray:
+        """Seconds ``t (m,)`` as the curves read them: each segment's time eased by its keyframes (see the
+        module's docstring); ``t`` itself without eases."""
+        t = np.asarray(t, dtype=np.float64)
+        if not self.eases:
+            return t
+        times = np.asarray(self.times)
+        k = np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2)
+        span = times[k + 1] - times[k]
+        s = np.clip((t - times[k]) / span, 0.0, 1.0)
+        leave = 1.0 - np.array([e[1] for e in self.eases])[k]  # the speed leaving key k
+        arrive = 1.0 - np.array([e[0] for e in self.eases])[k + 1]  # and arriving at key k + 1
+        eased = (s**3 - 2 * s**2 + s) * leave + (-2 * s**3 + 3 * s**2) + (s**3 - s**2) * arrive
+        inside = (t > times[0]) & (t < times[-1])
+        return np.where(inside, times[k] + eased * span, t)
+
+    def with_painting(self, base: PaintParams, check: Callable[[PaintParams], None] | None = None) -> CameraPath:
+        """This path painting its keyed settings over ``base`` (the film's painting; unchanged if it keys none):
+        its frames then carry their :data:`Looks`. ``check`` (a scene's ``check_names``) refuses what the scene
+        cannot paint. Raises :class:`PathError` naming the keyframe."""
+        if not self.paints:
+            return self
+        try:
+            track = PaintTrack.build(base, self.paints, check)
+        except ValueError as exc:
+            k, _, reason = str(exc).partition(": ")
+            key = [t for t in self.times].index(self.paints[int(k)].t)
+            raise PathError(f"keyframes.{key}.paint: {reason}") from None
+        return replace(self, track=track)
 
     @property
     def end(self) -> float:
@@ -250,8 +310,8 @@ class CameraPath:
             raise PathError(f"keyframes: no smooth path passes through them ({' '.join(str(exc).split())})") from None
         times = self.frame_times()
         with np.errstate(all="ignore"):
-            eye, look_at, up = curves.view(times)
-            fov, scene_time = curves.fov(times), curves.scene_time(times)
+            eye, look_at, up = curves.view(self.timing(times))
+            fov, scene_time = curves.fov(self.timing(times)), curves.scene_time(times)
         bad, reason = camera_faults(eye, look_at, up, fov)
         if reason is None and not np.isfinite(scene_time).all():
             bad, reason = ~np.isfinite(scene_time), "its scene_time is not a finite number"
@@ -272,14 +332,17 @@ class CameraPath:
         for first in range(start, stop, 1024):
             chunk = times[first : min(stop, first + 1024)]
             for n, (t, camera, scene_time) in enumerate(zip(chunk, *self.at(chunk), strict=True)):
-                yield PathFrame(first + n, float(t), camera, scene_time)
+                eased = float(self.timing(np.array([min(float(t), self.end)]))[0])
+                looks = self.track.at(eased) if self.track is not None else ()
+                yield PathFrame(first + n, float(t), camera, scene_time, looks)
 
     def at(self, t: np.ndarray) -> tuple[list[Camera], list[float]]:
         """Cameras and scene times at seconds ``t (m,)`` along the path (held before the first keyframe)."""
-        t = np.clip(np.asarray(t, dtype=np.float64), self.times[0], self.end)
+        raw = np.clip(np.asarray(t, dtype=np.float64), self.times[0], self.end)
+        t = self.timing(raw)
         curves = self._curves()
         eye, look_at, up = curves.view(t)
-        fov, scene_time = curves.fov(t), curves.scene_time(t)
+        fov, scene_time = curves.fov(t), curves.scene_time(raw)  # the scene's clock is not eased
         held = {name: getattr(self.cameras[0], name) for name in HELD}  # the same in every keyframe
         cameras = [
             Camera(tuple(e), tuple(a), tuple(u), float(f), **held)
@@ -300,7 +363,21 @@ class CameraPath:
             {"t": t, **asdict(c), "scene_time": s}
             for t, c, s in zip(self.times, self.cameras, self.scene_times, strict=True)
         ]
-        return json.dumps({"fps": self.fps, "keyframes": keyframes, "loop": self.loop})
+        return json.dumps({"fps": self.fps, "keyframes": self.keyed(keyframes), "loop": self.loop})
+
+    def keyed(self, keyframes: list[dict]) -> list[dict]:
+        """``keyframes`` (one dict a keyframe, written out) with their ``paint``, ``fade`` and ``ease`` as given."""
+        by_time = {key.t: key for key in self.paints}
+        for keyframe, ease in zip(keyframes, self.eases, strict=False):
+            if any(ease):
+                keyframe["ease"] = list(ease)
+        for keyframe in keyframes:
+            key = by_time.get(keyframe["t"])
+            if key is not None:
+                keyframe["paint"] = dict(key.settings)
+                if key.fade:
+                    keyframe["fade"] = key.fade
+        return keyframes
 
 
 @dataclass(frozen=True)
@@ -428,3 +505,49 @@ def _view_matrix(camera: Camera) -> np.ndarray:
     """The camera's orientation, (3, 3): columns right, up and backward (``-f``), a proper rotation."""
     r, u, f = camera.basis()
     return np.stack([r, u, -f], axis=1)
+
+
+# ---- a path from an animated camera (a glTF's) ----
+
+CAMERA_PREFIX = "camera:"
+"""How a path names a scene's animated camera in place of a file or keyframes: ``camera:NAME``."""
+
+
+def motion_path(ref: str, motions: Mapping[str, CameraMotion], fps: float | None, distance: float) -> CameraPath:
+    """The path of the animated camera ``ref`` (``camera:NAME``) among a scene's ``motions``: one keyframe a frame,
+    every ``1 / fps`` seconds (default 24) from 0 to the animation's end, each the animation's camera at that time
+    (looking at ``distance`` along its view, the depth mapping's default focus), the scene's clock with it. The
+    path's curves pass through their keyframes, so every frame is the animation's camera. :class:`PathError` in
+    one line for an unknown name or an animation too long for a path."""
+    name = ref.removeprefix(CAMERA_PREFIX)
+    motion = motions.get(name)
+    if motion is None:
+        have = ", ".join(repr(n) for n in list(motions)[:12]) or "none"
+        raise PathError(f"{ref}: the scene has no animated camera {name!r} (it has: {have})")
+    fps = 24.0 if fps is None else fps
+    if not 0 < fps <= MAX_FPS:
+        raise PathError(f"{ref}: fps must be more than 0 and at most {MAX_FPS:g}, got {fps:g}")
+    count = math.floor(motion.duration * fps + 1e-9) + 1
+    if count < 2:
+        raise PathError(f"{ref}: its animation lasts {motion.duration:g} s, less than one frame at {fps:g} fps")
+    if count > MAX_KEYFRAMES:
+        raise PathError(
+            f"{ref}: {motion.duration:g} s at {fps:g} fps is {count:,} frames, more than the {MAX_KEYFRAMES:,} "
+            "keyframes a path may have"
+        )
+    times = np.arange(count) / fps
+    eye, forward, up, fov = motion.at(times)
+    try:
+        cameras = tuple(
+            Camera(_triple(e), _triple(e + distance * f), _triple(u), float(v))
+            for e, f, u, v in zip(eye, forward, up, fov, strict=True)
+        )
+    except CameraError as exc:
+        raise PathError(f"{ref}: {exc}") from None
+    path = CameraPath(fps, tuple(map(float, times)), cameras, tuple(map(float, times)))
+    path.check()
+    return path
+
+
+def _triple(v: np.ndarray) -> tuple[float, float, float]:
+    return (float(v[0]), float(v[1]), float(v[2]))

@@ -2,8 +2,10 @@
 
 A sequence is a list of shots (a camera and a scene time each): a camera path's frames
 (``camerapath.PathFrame``) or ``rcp render --frames``' orbit and walk. Per-frame mode paints every frame from
-``I_0`` with all of ``params.iterations``; temporal mode (``temporal=K``) paints the first frame so, then each
-later one with ``K`` iterations from the previous frame's painting (the paper's ``I_n = F(I_{n-1}, S(n))``).
+``I_0`` with all of ``params.iterations``; a shot that carries ``looks`` (a path that keys its painting,
+``keyedpaint.py``) paints with those in place of ``params``, and blends two within a cross-fade; temporal
+mode (``temporal=K``) paints the first frame so, then each later one with ``K`` iterations from the previous
+frame's painting (the paper's ``I_n = F(I_{n-1}, S(n))``).
 That rule lives here only: the threads of one machine (:func:`paint_sequence`), the service's shared pool and
 Ray's actors (``cluster.py``) all follow it.
 """
@@ -11,8 +13,8 @@ Ray's actors (``cluster.py``) all follow it.
 from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
-from dataclasses import replace
-from typing import Protocol
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -39,7 +41,10 @@ class FramePainter(Protocol):
 
 
 def frame_params(params: PaintParams, temporal: int | None, index: int) -> PaintParams:
-    """The settings of frame ``index``: all iterations from ``I_0``, or ``temporal`` from the previous frame."""
+    """The settings of frame ``index``: all iterations from ``I_0``, or ``temporal`` from the previous frame;
+    with ``boil = k``, the seed moved on by one every ``k`` frames (the noise and the jitter boil)."""
+    if params.boil:
+        params = replace(params, seed=(params.seed + index // params.boil) % 2**31)
     return params if not temporal or index == 0 else replace(params, iterations=temporal)
 
 
@@ -65,6 +70,31 @@ def paint_results(
     if temporal and first > 0 and previous is None:
         raise ValueError("a temporal sequence resumed past its first frame needs the previous frame's state")
     for index, shot in enumerate(shots, first):
-        result = paint_frame(shot.camera, shot.scene_time, frame_params(params, temporal, index), previous)
+        looks = getattr(shot, "looks", ()) or ((params, 1.0),)
+        results = [
+            (paint_frame(shot.camera, shot.scene_time, frame_params(look, temporal, index), previous), weight)
+            for look, weight in looks
+        ]
+        result = results[0][0] if len(results) == 1 else Blend.of(results)
         previous = result.state if temporal else None
         yield result
+
+
+@dataclass(frozen=True)
+class Blend:
+    """A frame that is the blend of two paintings (a cross-fade of a keyed painting): ``image`` the weighted
+    sum of theirs; ``state`` the heavier one's, which a temporal film goes on from."""
+
+    image: np.ndarray
+    state: PaintState
+    stage_seconds: dict[str, float]
+
+    @classmethod
+    def of(cls, results: list[tuple[Any, float]]) -> Blend:
+        image = sum((np.float32(w) * r.image for r, w in results), np.zeros_like(results[0][0].image))
+        heavier = max(results, key=lambda rw: rw[1])[0]
+        seconds: dict[str, float] = {}
+        for r, _ in results:
+            for stage, s in r.stage_seconds.items():
+                seconds[stage] = seconds.get(stage, 0.0) + s
+        return cls(image.astype(np.float32), heavier.state, seconds)

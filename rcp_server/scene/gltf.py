@@ -1,6 +1,8 @@
 """What trimesh drops from a glTF, read from its JSON: the file's cameras and lights
-(``KHR_lights_punctual``), and of each material what the shading model shows (base color factor, alpha
-mode and cutoff, emissive factor, ``KHR_materials_unlit``, ``KHR_texture_transform``).
+(``KHR_lights_punctual``), its cameras' animations (``motion.py``: translation, rotation and scale of the
+camera node and its ancestors, and ``yfov`` through ``KHR_animation_pointer``), and of each material what the
+shading model shows (base color factor, alpha mode and cutoff, emissive factor, ``KHR_materials_unlit``,
+``KHR_texture_transform``).
 
 trimesh reads the geometry, the images and the UVs; :func:`renamed_materials` gives each material of the
 JSON a name that says its index (``rcp-material-<k>``) before trimesh reads it, so that a trimesh
@@ -12,12 +14,17 @@ Colors: glTF's factors and vertex colors are linear; this renderer's colors are 
 
 from __future__ import annotations
 
+import base64
 import json
 import math
+import re
 import struct
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
+
+from .motion import MAX_CHAIN, CameraMotion, Channel, MotionError, NodeMotion
 
 GLB_MAGIC, GLB_JSON, GLB_BIN = b"glTF", 0x4E4F534A, 0x004E4942
 MATERIAL_PREFIX = "rcp-material-"
@@ -71,6 +78,7 @@ class GltfExtras:
     viewpoints: list[Viewpoint] = field(default_factory=list)
     lights: list[PunctualLight] = field(default_factory=list)
     materials: list[MaterialInfo] = field(default_factory=list)
+    motions: list[CameraMotion] = field(default_factory=list)
 
 
 def display(linear) -> np.ndarray:
@@ -308,3 +316,135 @@ def transformed_uv(uv: np.ndarray, matrix: np.ndarray) -> np.ndarray:
     tu = matrix[0, 0] * u + matrix[0, 1] * v + matrix[0, 2]
     tv = matrix[1, 0] * u + matrix[1, 1] * v + matrix[1, 2]
     return np.stack([tu, 1.0 - tv], axis=-1).astype(np.float32)
+
+
+# ---- animated cameras ----
+
+FLOAT = 5126
+WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+YFOV_POINTER = re.compile(r"/cameras/(\d+)/perspective/yfov")
+
+
+def _accessor(gltf: dict, buffers: list[bytes], index) -> np.ndarray:
+    """Accessor ``index`` as ``(count, width)`` float64: float keys only (what Blender writes); GltfError else."""
+    accessors, views = _list(gltf, "accessors"), _list(gltf, "bufferViews")
+    if not (isinstance(index, int) and 0 <= index < len(accessors)):
+        raise GltfError(f"an animation reads accessor {index!r}, which the file does not have")
+    accessor = accessors[index]
+    width = WIDTHS.get(accessor.get("type"))
+    count, view_index = accessor.get("count"), accessor.get("bufferView")
+    if accessor.get("componentType") != FLOAT or width is None or not isinstance(count, int) or count < 0:
+        raise GltfError(f"accessor {index}: an animation's keys must be float scalars or vectors")
+    if not (isinstance(view_index, int) and 0 <= view_index < len(views)):
+        raise GltfError(f"accessor {index}: no buffer view")
+    view = views[view_index]
+    buffer = view.get("buffer", 0)
+    if not (isinstance(buffer, int) and 0 <= buffer < len(buffers)):
+        raise GltfError(f"accessor {index}: no buffer {buffer!r}")
+    stride = view.get("byteStride") or 4 * width
+    start = int(view.get("byteOffset", 0) or 0) + int(accessor.get("byteOffset", 0) or 0)
+    if count > 3 * 100_000 + 3 or not isinstance(stride, int) or stride < 4 * width:
+        raise GltfError(f"accessor {index}: {count:,} keys, more than an animation may have")
+    data = buffers[buffer]
+    end = start + (count - 1) * stride + 4 * width if count else start
+    if start < 0 or end > len(data):
+        raise GltfError(f"accessor {index}: reads past the end of its buffer")
+    rows = np.ndarray((count, width), np.dtype("<f4"), data, start, (stride, 4)) if count else np.zeros((0, width))
+    return rows.astype(np.float64)
+
+
+def _buffers(gltf: dict, binary: bytes, folder: Path | None) -> list[bytes]:
+    """The bytes of every buffer: the GLB's chunk, a ``data:`` URI, or a file beside the model."""
+    out = []
+    for k, buffer in enumerate(_list(gltf, "buffers")):
+        uri = buffer.get("uri")
+        if uri is None:
+            out.append(binary if k == 0 else b"")
+        elif isinstance(uri, str) and uri.startswith("data:") and "," in uri:
+            out.append(base64.b64decode(uri.split(",", 1)[1], validate=False))
+        elif isinstance(uri, str) and folder is not None and "/" not in uri and not uri.startswith("."):
+            file = folder / uri
+            out.append(file.read_bytes() if file.is_file() else b"")
+        else:
+            out.append(b"")
+    return out
+
+
+def _node_motion(node: dict, channels: list[Channel]) -> NodeMotion:
+    matrix = _numbers(node.get("matrix"), 16, None)
+    return NodeMotion(
+        _numbers(node.get("translation"), 3, (0.0, 0.0, 0.0)),
+        _numbers(node.get("rotation"), 4, (0.0, 0.0, 0.0, 1.0)),
+        _numbers(node.get("scale"), 3, (1.0, 1.0, 1.0)),
+        matrix if matrix is not None and not channels else None,
+        tuple(channels),
+    )
+
+
+def _animation_targets(gltf: dict, animation: dict) -> list[tuple[object, str, dict]]:
+    """An animation's channels as ``(target, path, sampler)``: target a node index, or ``("camera", k)``."""
+    samplers = _list(animation, "samplers")
+    out: list[tuple[object, str, dict]] = []
+    for channel in _list(animation, "channels"):
+        target = _dict_or_empty(channel.get("target"))
+        sampler = channel.get("sampler")
+        if not (isinstance(sampler, int) and 0 <= sampler < len(samplers)):
+            continue
+        path = target.get("path")
+        if path in ("translation", "rotation", "scale") and isinstance(target.get("node"), int):
+            out.append((target["node"], str(path), samplers[sampler]))
+        elif path == "pointer":
+            pointer = _dict_or_empty(_dict_or_empty(target.get("extensions")).get("KHR_animation_pointer"))
+            found = YFOV_POINTER.fullmatch(str(pointer.get("pointer", "")))
+            if found:
+                out.append((("camera", int(found.group(1))), "yfov", samplers[sampler]))
+    return out
+
+
+def camera_motions(gltf: dict, binary: bytes, folder: Path | None = None) -> list[CameraMotion]:
+    """The animated cameras of a glTF, each named as its viewpoint is (the camera's name, or its node's): for
+    each perspective camera placed by the scene, the first animation that moves its node or an ancestor, or
+    animates its ``yfov``. :class:`GltfError` in one line for an animation refused (too long, too many keys,
+    keys that are not finite numbers)."""
+    nodes, cameras = _list(gltf, "nodes"), _list(gltf, "cameras")
+    animations = _list(gltf, "animations")
+    if not animations:
+        return []
+    parent = {c: k for k, node in enumerate(nodes) for c in _indices(node.get("children"))}
+    buffers: list[bytes] | None = None
+    motions: list[CameraMotion] = []
+    for k in sorted(world_matrices(gltf)):
+        cam = nodes[k].get("camera")
+        if not (isinstance(cam, int) and 0 <= cam < len(cameras) and cameras[cam].get("type") == "perspective"):
+            continue
+        chain = [k]
+        while chain[-1] in parent and len(chain) <= MAX_CHAIN:
+            chain.append(parent[chain[-1]])
+        chain.reverse()
+        name = str(cameras[cam].get("name") or nodes[k].get("name") or f"camera {len(motions) + 1}")
+        for animation in animations:
+            targets = [t for t in _animation_targets(gltf, animation) if t[0] in chain or t[0] == ("camera", cam)]
+            if not targets:
+                continue
+            buffers = buffers if buffers is not None else _buffers(gltf, binary, folder)
+            try:
+                channels: dict[object, list[Channel]] = {}
+                for target, path, sampler in targets:
+                    times = _accessor(gltf, buffers, sampler.get("input"))[:, 0]
+                    values = _accessor(gltf, buffers, sampler.get("output"))
+                    interpolation = str(sampler.get("interpolation", "LINEAR"))
+                    channels.setdefault(target, []).append(Channel(path, interpolation, times, values))
+                perspective = _dict_or_empty(cameras[cam].get("perspective"))
+                fov = channels.get(("camera", cam), [None])[0]
+                motions.append(
+                    CameraMotion(
+                        name[:80],
+                        tuple(_node_motion(nodes[n], channels.get(n, [])) for n in chain),
+                        float(perspective.get("yfov", 0.0) or 0.0),
+                        fov,
+                    )
+                )
+            except MotionError as exc:
+                raise GltfError(f"the animation of camera {name[:80]!r}: {exc}") from None
+            break
+    return motions

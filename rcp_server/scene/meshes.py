@@ -23,6 +23,7 @@ import numpy as np
 import trimesh
 
 from . import gltf
+from .motion import CameraMotion
 
 log = logging.getLogger("rcp")
 
@@ -213,6 +214,7 @@ class Model:
     parts: list[Part]
     viewpoints: list[gltf.Viewpoint] = field(default_factory=list)
     lights: list[gltf.PunctualLight] = field(default_factory=list)
+    motions: list[CameraMotion] = field(default_factory=list)  # its animated cameras (a glTF's)
 
 
 def _image_array(image) -> np.ndarray:
@@ -531,6 +533,7 @@ def _read_trimesh_scene(path: Path) -> tuple[trimesh.Scene, gltf.GltfExtras | No
     try:
         document, binary = gltf.split(data, glb)
         found = gltf.extras(document)
+        found.motions = gltf.camera_motions(document, binary, path.parent)
         data = gltf.joined(gltf.renamed_materials(document), binary, glb)
     except gltf.GltfError as exc:
         raise MeshError(f"{path}: {exc}") from None
@@ -618,7 +621,7 @@ def load_model(path: Path, refuse_nonfinite: bool = False) -> Model:
     release_freed_memory()
     if found is None:
         return Model(parts)
-    return Model(parts, found.viewpoints, found.lights)
+    return Model(parts, found.viewpoints, found.lights, found.motions)
 
 
 # ---- primitives: base on y = 0 and axis along +y (box, cylinder, cone); sphere about the origin ----

@@ -19,6 +19,7 @@ from ..engine.kernels.embree import Tracer
 from ..settings.params import PaintParams
 from ..settings.styles import with_style
 from .meshes import PLAIN, Material, Part, corner_normals, rgb8
+from .motion import CameraMotion
 
 
 @dataclass(frozen=True)
@@ -300,6 +301,7 @@ class Scene:
     paint: PaintParams = field(default_factory=PaintParams)  # how this scene is painted unless told otherwise
     z_max: float | None = None  # depth a miss records; derived from the scene's size when None
     viewpoints: dict[str, Camera] = field(default_factory=dict)  # other cameras offered by name (a glTF's)
+    motions: dict[str, CameraMotion] = field(default_factory=dict)  # animated cameras by name (a glTF's)
     _cache: dict = field(default_factory=dict, repr=False)
     _static: dict = field(default_factory=dict, repr=False)  # placed instances of objects that never move
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)

@@ -463,6 +463,7 @@ def model_scene(model: Model, name: str, title: str) -> Scene:
     cameras = framed_viewpoints(model.viewpoints, geometry, tracer, title)
     scene.camera = cameras.pop(next(iter(cameras))) if cameras else framing.default_camera(geometry, tracer)
     scene.viewpoints = cameras  # the others, offered by name
+    scene.motions = dict(zip(_unique([m.name for m in model.motions]), model.motions, strict=True))
     return scene
 
 

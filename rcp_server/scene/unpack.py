@@ -529,7 +529,8 @@ def write_parts(path: Path, model) -> None:
     ``emission_texture_k`` () int64 index or -1, ``alpha_k`` () int64 index of its coverage or -1; each
     distinct texture once as ``image_j`` (h, w, 3) uint8, each distinct coverage as ``coverage_j`` (h, w) uint8;
     the file's cameras as ``viewpoints`` (n, 10) float64 (eye, forward, up, fov) with ``viewpoint_names``,
-    its lights as ``lights`` (n, 6) float64 (position, direction) with ``light_kinds`` and ``light_names``."""
+    its lights as ``lights`` (n, 6) float64 (position, direction) with ``light_kinds`` and ``light_names``, its
+    animated cameras as ``camera_motions``, () text: their JSON (``motion.CameraMotion.to_json``)."""
     parts = model.parts
     arrays: dict[str, Any] = {"parts": np.int64(len(parts))}  # arrays and numpy scalars, by name
     images: dict[int, int] = {}
@@ -576,6 +577,7 @@ def write_parts(path: Path, model) -> None:
     )
     arrays["light_kinds"] = np.array([light.kind for light in model.lights], dtype=np.str_).reshape(-1)
     arrays["light_names"] = np.array([light.name[:80] for light in model.lights], dtype=np.str_).reshape(-1)
+    arrays["camera_motions"] = np.array(json.dumps([motion.to_json() for motion in model.motions]), dtype=np.str_)
     np.savez(path, **arrays)
 
 

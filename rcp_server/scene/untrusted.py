@@ -24,6 +24,7 @@ import numpy as np
 from . import unpack
 from .gltf import MAX_LIGHTS, MAX_VIEWPOINTS, PunctualLight, Viewpoint, triple
 from .meshes import PLAIN, Material, Model, Part, packed
+from .motion import CameraMotion, MotionError, motions_from_json
 from .unpack import READER_ENVIRONMENT, UPLOAD_SUFFIXES, Limits, NoRoom, Refused, check_kind
 
 __all__ = ["UPLOAD_SUFFIXES", "Limits", "NoRoom", "Refused", "read_model"]
@@ -101,7 +102,9 @@ def model_of_arrays(found: dict[str, np.ndarray], limits: Limits) -> Model:
     """The arrays of :func:`unpack.write_parts` as a model, every array checked: dtypes, shapes, face indices
     within the vertices, finite numbers, colors in [0, 1], and the limits."""
     try:
-        return Model(packed(_parts(found, limits)), *_cameras_and_lights(found))
+        return Model(packed(_parts(found, limits)), *_cameras_and_lights(found), _motions(found))
+    except MotionError as exc:
+        raise Refused(f"the model's camera animation: {exc}") from None
     except (OSError, ValueError, KeyError) as exc:
         raise Refused(f"the model's reader handed back something unusable ({type(exc).__name__})") from None
 
@@ -185,6 +188,17 @@ def _part(arrays: dict, k: int, textures: list[np.ndarray], coverages: list[np.n
         colored,
         PLAIN if material.plain else material,
     )
+
+
+def _motions(arrays: dict) -> list[CameraMotion]:
+    """The animated cameras of the child's arrays (none in arrays written before they were kept), checked again
+    (``motion.motions_from_json``: the limits, finite keys), at most :data:`MAX_VIEWPOINTS`."""
+    if "camera_motions" not in arrays:
+        return []
+    text = _array(arrays, "camera_motions", arrays["camera_motions"].dtype, ())
+    if text.dtype.kind != "U":
+        raise ValueError("camera motions are not text")
+    return motions_from_json(str(text))[:MAX_VIEWPOINTS]
 
 
 def _cameras_and_lights(arrays: dict) -> tuple[list[Viewpoint], list[PunctualLight]]:

@@ -17,7 +17,7 @@ from starlette.routing import Match, Mount
 from .access import NO_TOKEN, HostCheck, require_token
 from .faults import InternalErrors
 from .guard import BodyLimit, Capacity
-from .routes import docs, rest, scenes, styles, videos, walk
+from .routes import docs, prints, rest, scenes, styles, videos, walk
 from .settings import Settings
 from .startup import Starting, Startup
 from .state import Service, service_of
@@ -61,7 +61,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.add_exception_handler(RequestValidationError, _invalid)
     app.add_exception_handler(StarletteHTTPException, _http_error)
     app.include_router(rest.public)  # /api/health: open to all
-    for router in (rest.router, scenes.router, styles.router, videos.router, videos.paths, docs.router):
+    for router in (rest.router, scenes.router, styles.router, videos.router, videos.paths, prints.router, docs.router):
         app.include_router(router, dependencies=[Depends(require_token)], responses=NO_TOKEN)
     app.include_router(walk.router)  # the walk-through checks the token as it opens (walk.py)
     if settings.client.is_dir():

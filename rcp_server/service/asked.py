@@ -13,17 +13,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Annotated, Any
 
+import numpy as np
 from fastapi import Depends, HTTPException
 from starlette.concurrency import run_in_threadpool
 
 from ..camera.camera import Camera
 from ..camera.wire import camera_of
-from ..media.camerapath import CameraPath, PathError
+from ..media.camerapath import CAMERA_PREFIX, CameraPath, PathError, PathSpec, motion_path
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from . import protocol
 from .settings import Settings
 from .state import Service, ServiceDep
+from .videos import job_work
 
 
 class Refusal(ValueError):
@@ -114,14 +116,47 @@ async def video_asked(body: protocol.VideoRequest, service: ServiceDep) -> Video
     """``POST /api/videos``' path and painting; the whole film's work is the video queue's to check."""
     try:
         scene = find_scene(service, body.scene)
-        try:
-            path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
-        except PathError as exc:
-            raise Refusal(str(exc)) from None
+        path = await resolved(body.path, scene)
         frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
-        return VideoAsked(frame, path)
+        return VideoAsked(frame, keyed(service, path, frame, body.temporal))
     except Refusal as refusal:
         raise http_error(refusal) from None
+
+
+async def resolved(spec: PathSpec | protocol.CameraPathRef, scene: Scene) -> CameraPath:
+    """A request's path: keyframes resolved against the scene's camera, or one of the scene's animated cameras
+    (looking as far ahead as the scene's camera does); every frame checked, off the event loop (up to a
+    second). :class:`Refusal` in one line."""
+    try:
+        if isinstance(spec, protocol.CameraPathRef):
+            distance = float(np.linalg.norm(np.subtract(scene.camera.look_at, scene.camera.eye)))
+            ref = CAMERA_PREFIX + spec.camera
+            return await run_in_threadpool(motion_path, ref, scene.motions, spec.fps, distance)
+        return await run_in_threadpool(spec.resolve, scene.camera)
+    except PathError as exc:
+        raise Refusal(str(exc)) from None
+
+
+def keyed(service: Service, path: CameraPath, frame: Asked, temporal: int | None) -> CameraPath:
+    """``path`` painting what its keyframes key over the film's painting, checked against the scene and the
+    work a video may take (its most costly painting on every frame, twice where it cross-fades)."""
+    try:
+        path = path.with_painting(frame.params, frame.scene.check_names)
+    except PathError as exc:
+        raise Refusal(str(exc)) from None
+    if path.track is None:
+        return path
+    if service.videos.painter is not None:
+        raise Refusal("this server paints films on Ray, one painting a film: a path that keys its painting cannot")
+    paintings = path.track.paintings()
+    work = max(job_work(frame.width, frame.height, p, temporal, path.frame_count) for p in paintings)
+    work *= 2 if path.track.fades else 1
+    if work > service.settings.max_video_work:
+        raise Refusal(
+            f"its keyed painting takes up to {work:,} rays, more than the {service.settings.max_video_work:,} one "
+            "video may take: key fewer iterations or samples, or ask for fewer frames or pixels"
+        )
+    return path
 
 
 async def scene_named(body: protocol.PathRequest, service: ServiceDep) -> Scene:

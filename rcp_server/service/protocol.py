@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, StrictBool, TypeAdapter, crea
 from ..camera.camera import PROJECTIONS, STEREO
 from ..camera.wire import CameraSpec as CameraModel
 from ..camera.wire import Coordinate  # a camera on the wire is a camera in a scene file
-from ..media.camerapath import PathSpec
+from ..media.camerapath import MAX_FPS, PathSpec
 from ..scene.scenefile import SCENE_NAME
 from ..settings.params import PAINT_SETTINGS, PER, PER_PIXEL, PaintSetting
 from ..settings.styles import STYLE, STYLES
@@ -48,7 +48,8 @@ def _wire(declared: PaintSetting) -> tuple[Any, Any]:
         kind = StrictBool  # true or false, not "yes" or 1
     else:
         bounds = {k: v for k in ("ge", "gt", "le") if (v := getattr(declared, k)) is not None}
-        kind = Annotated[declared.kind, Field(allow_inf_nan=False, **bounds)]
+        # strict: a number, not true or false (a float setting still takes a whole number)
+        kind = Annotated[declared.kind, Field(strict=True, allow_inf_nan=False, **bounds)]
     return kind | None, Field(None, description=declared.help)
 
 
@@ -99,18 +100,50 @@ class RenderRequest(_Model):
     quality: Quality = 92
 
 
+class CameraPathRef(_Model):
+    """A model's animated camera as a path (``camerapath.motion_path``): its name (``SceneInfo.motions``), and
+    the frames a second it is sampled at."""
+
+    camera: Annotated[str, Field(min_length=1, max_length=80)]
+    fps: Annotated[float, Field(allow_inf_nan=False, gt=0, le=MAX_FPS)] = 24.0
+
+
 class VideoRequest(_Model):
     """``POST /api/videos``: a camera path (the format of ``camerapath.py``) painted into an MP4; the size and
     painting settings as for a still; ``temporal``: after the first frame, each frame runs this many
     iterations from the previous frame's painting (absent: every frame starts again from grey)."""
 
     scene: SceneName
-    path: PathSpec
+    path: PathSpec | CameraPathRef
     width: Size = 640
     height: Size = 360
     paint: PaintModel = PaintModel()
     temporal: Annotated[int, Field(ge=1, le=256)] | None = None
     format: Literal["mp4"] = "mp4"
+
+
+class PrintRequest(_Model):
+    """``POST /api/prints``: a still at print size (up to 16384 a side, painted in bands into a PNG) of an eye's
+    image of ``width x height``; ``alpha``: 0 where the plain image sees no geometry; ``bits``: 8 or 16."""
+
+    scene: SceneName
+    width: Annotated[int, Field(ge=1, le=16384)] = 4096
+    height: Annotated[int, Field(ge=1, le=16384)] = 2304
+    camera: CameraModel | None = None
+    paint: PaintModel = PaintModel()
+    time: Annotated[float, Field(strict=True, allow_inf_nan=False, ge=0, le=1e6)] = 0.0
+    alpha: StrictBool = False  # true or false, not 0 or "yes"
+    bits: Literal[8, 16] = 8
+
+
+class PrintStatus(BaseModel):
+    """A print job: ``queued``, ``running``, then ``done`` (its PNG ready), ``failed`` or ``cancelled``."""
+
+    id: str
+    state: Literal["queued", "running", "done", "failed", "cancelled"]
+    rows: int
+    done_rows: int
+    message: str
 
 
 class VideoCreated(BaseModel):
@@ -132,7 +165,7 @@ class PathRequest(_Model):
     """``POST /api/paths``: the cameras of a path's frames, for a client to play the path back as it will render."""
 
     scene: SceneName
-    path: PathSpec
+    path: PathSpec | CameraPathRef
 
 
 class PathCameras(BaseModel):
@@ -157,6 +190,7 @@ class SceneInfo(BaseModel):
     title: str
     camera: CameraModel
     viewpoints: list[Viewpoint] = []
+    motions: list[str] = []  # its animated cameras (a glTF's), each a path: {"camera": name} (CameraPathRef)
     paint: dict  # the scene's painting settings that differ from the engine's (client/protocol.js)
     objects: list[str] = []  # what settings per object are called by (the object channel's index)
     materials: list[str] = []  # the named materials, likewise

@@ -141,6 +141,12 @@ class Settings(BaseSettings):
         ge=1,
         description="pixels x spp x iterations over every frame of one video (about half an hour here); more is a 422",
     )
+    max_print_work: int = Field(
+        1 << 34,
+        ge=0,
+        description="pixels x spp x iterations of one still at print size (POST /api/prints, with the plain pass "
+        "of its alpha); more is a 422, and 0 takes none",
+    )
     video_disk_bytes: int = Field(
         2 << 30,
         ge=1,

@@ -21,6 +21,7 @@ from ..scene.scenefile import SceneError, load_scene, scene_names
 from ..settings.params import PaintParams
 from . import protocol
 from .memory import Budget, GiveBack, default_memory_bytes
+from .prints import Prints
 from .settings import Settings
 from .startup import Startup
 from .store import Store
@@ -61,6 +62,7 @@ class Service:
     store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
     cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
     walks: Walks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
+    prints: Prints | None = None  # stills at print size, painted in the background (opened with the service)
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
     startup: Startup = field(default_factory=Startup)  # ready once the scenes are loaded and the kernels compiled
@@ -84,7 +86,9 @@ class Service:
                 cluster.start(settings.ray_join_s)
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
-            return cls(settings, {}, {}, workshop, videos, store, cluster, memory=Budget(settings.memory_bytes))
+            service = cls(settings, {}, {}, workshop, videos, store, cluster, memory=Budget(settings.memory_bytes))
+            service.prints = Prints(settings, workshop, store.folder / "prints", videos.disk_used)
+            return service
         except BaseException:
             for opened in (workshop, cluster, store):
                 if opened is not None:
@@ -181,6 +185,8 @@ class Service:
             session.close()
         self.workshop.stop()  # the video jobs' paintings stop at their next tile
         self.videos.close()
+        if self.prints is not None:
+            self.prints.close()
         if self.walks is not None:
             self.walks.close()
         if self.cluster is not None:
@@ -225,6 +231,7 @@ def scene_info(scene: Scene) -> protocol.SceneInfo:
         title=scene.title,
         camera=spec_of(scene.camera),
         viewpoints=[protocol.Viewpoint(name=name, camera=spec_of(c)) for name, c in scene.viewpoints.items()],
+        motions=list(scene.motions),
         paint=scene.paint.non_defaults(),
         objects=object_names(scene.objects),
         materials=material_names(scene.objects),

@@ -149,7 +149,7 @@ def path_spec(path: CameraPath) -> dict:
         {"t": t, **asdict(c), "scene_time": st}
         for t, c, st in zip(path.times, path.cameras, path.scene_times, strict=True)
     ]
-    return {"fps": path.fps, "keyframes": keyframes, "loop": path.loop}
+    return {"fps": path.fps, "keyframes": path.keyed(keyframes), "loop": path.loop}
 
 
 def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Settings) -> VideoJob:
@@ -162,6 +162,7 @@ def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Set
         params = PaintParams(**given.params)
     except TypeError as exc:
         raise ValueError(f"its painting settings: {exc}") from None
+    path = path.with_painting(params)  # keyed settings as the door let them through
     camera = path.cameras[0]
     eye = camera.eye_size(given.width, given.height)
     if settings.painting_size(camera, *eye, params) != (given.width, given.height):

@@ -31,6 +31,7 @@ FLAGS = {
     },
     "walkers": {"--ray", "--scene", "--width", "--height", "--seconds"},
     "memory": {"--width", "--height", "--threads"},
+    "flicker": {"--scene", "--width", "--height", "--fps", "--frames", "--temporal", "--boil"},
 }
 # what a plain install lacks: the test extra's packages (the bench extra's among them)
 NOT_PLAIN = ("httpx", "matplotlib", "skimage", "playwright", "schemathesis", "pytest", "xdist")
@@ -114,6 +115,7 @@ def test_the_benchmarks_import_without_the_test_extra(tmp_path):
         "memory",
         "walkers",
         "walkmodel",
+        "flicker",
     ]
     code = _blocked(NOT_PLAIN) + "".join(f"import rcp_server.bench.{name}\n" for name in modules)
     code += "assert not {'httpx', 'matplotlib'} & {m.split('.')[0] for m in sys.modules if sys.modules[m]}\n"

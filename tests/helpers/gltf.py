@@ -10,6 +10,7 @@ import struct
 
 import numpy as np
 from PIL import Image
+from scipy.spatial.transform import Rotation, Slerp
 
 
 def quaternion(axis, degrees: float) -> list[float]:
@@ -113,3 +114,74 @@ class GltfBuilder:
         binary = bytes(self.binary) + b"\0" * (-len(self.binary) % 4)
         body = struct.pack("<II", len(text), 0x4E4F534A) + text + struct.pack("<II", len(binary), 0x004E4942) + binary
         return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+    def keys(self, values, kind: str) -> int:
+        """An accessor of float keys (times as ``SCALAR``, with the min and max glTF asks of them)."""
+        array = np.asarray(values, np.float32).reshape(len(values), -1)
+        index = self._accessor(array if kind != "SCALAR" else array.ravel(), kind)
+        if kind == "SCALAR":
+            self.gltf["accessors"][index]["min"] = [float(array.min())]
+            self.gltf["accessors"][index]["max"] = [float(array.max())]
+        return index
+
+    def animate(self, name: str, channels) -> None:
+        """An animation of ``channels``: ``(target, path, times, values, interpolation)``, target a node index,
+        or ``("camera", k)`` for camera k's ``yfov`` through ``KHR_animation_pointer``."""
+        animation: dict = {"name": name, "channels": [], "samplers": []}
+        for target, path, times, values, interpolation in channels:
+            kind = {"translation": "VEC3", "scale": "VEC3", "rotation": "VEC4", "yfov": "SCALAR"}[path]
+            sampler = {"input": self.keys(times, "SCALAR"), "output": self.keys(values, kind),
+                       "interpolation": interpolation}  # fmt: skip
+            animation["samplers"].append(sampler)
+            if isinstance(target, tuple):
+                pointer = {"KHR_animation_pointer": {"pointer": f"/cameras/{target[1]}/perspective/yfov"}}
+                spec = {"path": "pointer", "extensions": pointer}
+                if "KHR_animation_pointer" not in self.gltf.setdefault("extensionsUsed", []):
+                    self.gltf["extensionsUsed"].append("KHR_animation_pointer")
+            else:
+                spec = {"node": target, "path": path}
+            animation["channels"].append({"sampler": len(animation["samplers"]) - 1, "target": spec})
+        self._list("animations").append(animation)
+
+
+# ---- an animated camera, as Blender exports one ----
+
+WALL = [[-3, -2, -2], [3, -2, -2], [3, 2, -2], [-3, 2, -2]]
+TIMES = [0.0, 1.0, 2.5]
+EYES = [[0, 0, 5], [1, 0.5, 4], [-1, 0, 3]]
+TURNS = [quaternion((0, 1, 0), 0), quaternion((0, 1, 0), 20), quaternion((1, 0, 0), -15)]
+FOVS = [math.radians(50), math.radians(40), math.radians(30)]
+PARENT = (0.5, -0.25, 0.0)  # the camera's parent node stands here, turned 10 degrees about y
+PARENT_TURN = quaternion((0, 1, 0), 10)
+
+
+def animated_camera(channels=None) -> GltfBuilder:
+    """A wall, a still camera "Still", and a camera "Shot" under a parent node, moved and zoomed."""
+    b = GltfBuilder()
+    b.quad(WALL, material=b.material(pbrMetallicRoughness={"baseColorFactor": [0.8, 0.3, 0.1, 1]}))
+    b.camera("Still", (0, 0, 6))
+    shot = b.camera("Shot", EYES[0], TURNS[0])
+    b.gltf["scenes"][0]["nodes"].remove(shot)
+    b.gltf["nodes"].append({"translation": list(PARENT), "rotation": PARENT_TURN, "children": [shot]})
+    b.gltf["scenes"][0]["nodes"].append(len(b.gltf["nodes"]) - 1)
+    b.animate(
+        "Action",
+        channels
+        or [
+            (shot, "translation", TIMES, EYES, "LINEAR"),
+            (shot, "rotation", TIMES, TURNS, "LINEAR"),
+            (("camera", 1), "yfov", TIMES, FOVS, "LINEAR"),
+        ],
+    )
+    return b
+
+
+def expected_camera(t: np.ndarray):
+    """The animation's camera at ``t``, computed apart: numpy's lines, scipy's slerp, the parent's matrix."""
+    eye_local = np.stack([np.interp(t, TIMES, np.asarray(EYES)[:, k]) for k in range(3)], axis=1)
+    turn = Slerp(TIMES, Rotation.from_quat(TURNS))(np.clip(t, TIMES[0], TIMES[-1]))
+    parent = Rotation.from_quat(PARENT_TURN)
+    eye = parent.apply(eye_local) + PARENT
+    forward = (parent * turn).apply([0, 0, -1])
+    up = (parent * turn).apply([0, 1, 0])
+    return eye, forward, up, np.degrees(np.interp(t, TIMES, FOVS))

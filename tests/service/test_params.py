@@ -19,7 +19,7 @@ import pytest
 from helpers.wire import decode
 from PIL import Image
 
-from rcp_server.cli import main
+from rcp_server.cli import camera_path, main
 from rcp_server.painting.loop import paint
 from rcp_server.service import protocol
 from rcp_server.settings.params import PAINT_SETTINGS, PER, PaintParams
@@ -49,7 +49,10 @@ CHANGED = {
     "z_max": (5.0, {"mapping": "depth"}),
     "method": ("image", {}),
     "edge": ("wrap", {"method": "image"}),
+    "boil": (2, {"noise": 0.5}),
 }
+FILM_ONLY = {"boil"}
+"""Settings of a film's frames after its first: a still (a film's first frame) paints as without them."""
 
 
 SURFACES = "figures"  # a small scene with surfaces
@@ -95,7 +98,7 @@ def test_a_setting_reaches_rest(live_server, name):
     assert response.status_code == 200, response.text
     expected = _painting(scene, **given)
     np.testing.assert_array_equal(decode(response.content), expected)
-    assert not np.array_equal(expected, _painting(scene, **without))
+    assert np.array_equal(expected, _painting(scene, **without)) == (name in FILM_ONLY)
 
 
 @pytest.mark.parametrize("name", FIELDS)
@@ -116,7 +119,7 @@ def test_a_setting_reaches_the_walk_through(walk, live_server, name):
     if name in meta:  # the frame reports this setting (spp): it follows it
         assert meta[name] != before[name]
     else:
-        assert not np.array_equal(image, jpeg(without))
+        assert np.array_equal(image, jpeg(without)) == (name in FILM_ONLY)
 
 
 @pytest.mark.parametrize("name", FIELDS)
@@ -134,6 +137,21 @@ def test_a_setting_reaches_the_command_line(tmp_path, live_server, name):
     flags = [part for key, value in given.items() for part in flag(key, value)]
     assert main(["-q", "render", scene.name, "--out", str(out), "--width", str(W), "--height", str(H), *flags]) == 0
     np.testing.assert_array_equal(np.asarray(Image.open(out)), _painting(scene, **given))
+
+
+def test_boil_reseeds_a_films_noise_every_k_frames(tmp_path, live_server):
+    scene = live_server.app.state.service.scenes[SCENE]
+    size = ["--width", str(W), "--height", str(H), "--noise", "0.5", "--frames", "5", "--walk", "0.1"]
+    assert main(["-q", "render", SCENE, "--out", str(tmp_path / "f.png"), "--boil", "2", *size]) == 0
+    frames = [np.asarray(Image.open(tmp_path / f"f_{k:04d}.png")) for k in range(5)]
+    for k, frame in enumerate(frames):
+        camera = camera_path(scene.camera, k / 4, 0.0, 0.1)
+        params = dataclasses.replace(scene.paint, noise=0.5, seed=k // 2)
+        painted = paint(scene, camera, W, H, params, time=k / 24).image
+        np.testing.assert_array_equal(frame, images.to_uint8(painted))
+    plain = dataclasses.replace(scene.paint, noise=0.5)
+    still = images.to_uint8(paint(scene, camera_path(scene.camera, 0.5, 0.0, 0.1), W, H, plain, time=2 / 24).image)
+    assert not np.array_equal(frames[2], still)  # without the boil, frame 2 keeps seed 0
 
 
 @pytest.mark.parametrize("name", FIELDS)

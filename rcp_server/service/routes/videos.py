@@ -6,12 +6,10 @@ import os
 
 from fastapi import APIRouter, HTTPException, Response
 from fastapi.responses import FileResponse
-from starlette.concurrency import run_in_threadpool
 
 from ...camera.wire import spec_of
-from ...media.camerapath import PathError
 from .. import protocol
-from ..asked import SceneDep, VideoAskedDep
+from ..asked import Refusal, SceneDep, VideoAskedDep, resolved
 from ..state import ServiceDep
 from ..store import open_regular
 from ..videos import VideoJob, VideoRefused
@@ -47,10 +45,11 @@ PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 f
     },
 )
 async def path_cameras(body: protocol.PathRequest, scene: SceneDep) -> protocol.PathCameras:
-    """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path)."""
+    """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path);
+    ``path`` may name one of the scene's animated cameras (``{"camera": name}``)."""
     try:
-        path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
-    except PathError as exc:
+        path = await resolved(body.path, scene)
+    except Refusal as exc:
         raise HTTPException(422, str(exc)) from None
     step = -(-path.frame_count // PREVIEW_FRAMES)
     cameras, scene_times = path.at(path.frame_times()[::step])

@@ -1,0 +1,153 @@
+"""The camera path's timeline in a real headless Chromium against a real server: a key dragged to retime it,
+values typed into the selected key (camera, ease, painting), undo and redo, scrubbing (the walk shows the
+server's camera at that time), and the path saved and loaded as the JSON ``rcp render --path`` reads."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from helpers.browser import needs_chromium
+
+from rcp_server.media.camerapath import parse_path
+from rcp_server.scene.scenefile import load_scene
+
+WAIT_MS = 60_000
+pytestmark = needs_chromium
+SIDE = {"eye": [0, 1.6, 0], "look_at": [3, 1.6, -3], "up": [0, 1, 0], "fov": 50}
+AHEAD = {"eye": [0, 1.6, -4], "look_at": [0, 1.6, -8], "up": [0, 1, 0], "fov": 60}
+
+
+@pytest.fixture
+def page(browser, live_server, tmp_path):
+    context = browser.new_context(viewport={"width": 1024, "height": 900}, accept_downloads=True)
+    page = context.new_page()
+    problems = []
+    page.on("console", lambda m: problems.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: problems.append(str(e)))
+    page.goto(f"{live_server.url}/?scene=sky&width=64&height=48")
+    page.wait_for_function("rcp.state.scene !== null && rcp.overlay.frame", timeout=WAIT_MS)
+    yield page
+    page.screenshot(path=str(tmp_path / "timeline.png"))
+    context.close()
+    assert problems == [], f"console errors: {problems}"
+
+
+def keys(page) -> list[dict]:
+    return page.evaluate("rcp.path.path.keyframes")
+
+
+def three_keys(page) -> None:
+    add = page.locator("#path [data-path=add]")
+    for camera in (SIDE, AHEAD, SIDE):
+        page.evaluate(f"rcp.walk.place({json.dumps(camera)})")
+        add.click()
+    assert [k["t"] for k in keys(page)] == [0, 1, 2]
+
+
+def test_a_key_dragged_on_the_timeline_is_retimed_and_undone(page):
+    three_keys(page)
+    middle = page.locator("#path [data-path=timeline] [data-index='1']")
+    track = page.locator("#path [data-path=timeline]").bounding_box()
+    box = middle.bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(track["x"] + track["width"] * 0.25, box["y"] + box["height"] / 2, steps=8)
+    page.mouse.up()
+    times = [k["t"] for k in keys(page)]
+    assert times[0] == 0 and times[2] == 2 and times[1] == pytest.approx(0.5, abs=0.05)
+    assert page.evaluate("rcp.path.selected") == 1
+    # undo puts it back, redo retimes it again
+    page.locator("#path [data-path=undo]").click()
+    assert [k["t"] for k in keys(page)] == [0, 1, 2]
+    page.locator("#path [data-path=redo]").click()
+    assert [k["t"] for k in keys(page)] == times
+    # dragged past its neighbour, a key stops short of it
+    box = middle.bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(track["x"] + track["width"] + 50, box["y"] + box["height"] / 2, steps=8)
+    page.mouse.up()
+    assert keys(page)[1]["t"] == pytest.approx(1.99)
+
+
+def test_values_typed_into_the_selected_key_save_as_the_cli_reads_them(page, tmp_path, live_server):
+    three_keys(page)
+    page.locator("#path [data-path=timeline] [data-index='2']").click()
+    editor = page.locator("#path [data-path=editor]")
+    editor.locator("[data-field='fov']").fill("35")
+    editor.locator("[data-field='fov']").dispatch_event("change")
+    editor.locator("[data-field='eye.0']").fill("1.5")
+    editor.locator("[data-field='eye.0']").dispatch_event("change")
+    editor.locator("[data-field='ease.0']").fill("1")
+    editor.locator("[data-field='ease.0']").dispatch_event("change")
+    editor.locator("[data-field='paint']").fill('{"lambda_p": 3, "style": "smudge"}')
+    editor.locator("[data-field='paint']").dispatch_event("change")
+    editor.locator("[data-field='fade']").fill("0.5")
+    editor.locator("[data-field='fade']").dispatch_event("change")
+    last = keys(page)[2]
+    assert (last["fov"], last["eye"][0], last["ease"], last["paint"], last["fade"]) == (
+        35, 1.5, [1, 0], {"lambda_p": 3, "style": "smudge"}, 0.5)  # fmt: skip
+    # two undos take back the fade and the painting; a redo brings the painting again
+    page.locator("#path [data-path=undo]").click()
+    page.locator("#path [data-path=undo]").click()
+    assert "paint" not in keys(page)[2] and "fade" not in keys(page)[2] and keys(page)[2]["fov"] == 35
+    page.locator("#path [data-path=redo]").click()
+    assert keys(page)[2]["paint"] == {"lambda_p": 3, "style": "smudge"}
+    # saved: the JSON the command line reads, with its ease and painting
+    with page.expect_download() as saved:
+        page.locator("#path [data-path=save]").click()
+    file = tmp_path / "path.json"
+    saved.value.save_as(file)
+    written = json.loads(file.read_text())
+    assert written["keyframes"] == keys(page)
+    scene = load_scene("sky")
+    resolved = parse_path(written).resolve(scene.camera).with_painting(scene.paint, scene.check_names)
+    assert resolved.eases[2] == (1.0, 0.0) and resolved.track is not None
+    # and loaded back into an emptied path
+    page.locator("#path [data-path=clear]").click()
+    page.locator("#path [data-path=file]").set_input_files(str(file))
+    page.wait_for_function("rcp.path.path.keyframes.length === 3", timeout=WAIT_MS)
+    assert keys(page) == written["keyframes"]
+
+
+def test_scrubbing_shows_the_paths_camera_at_that_time(page, live_server):
+    three_keys(page)
+    scrub = page.locator("#path [data-path=scrub]")
+    scrub.fill("0.5")
+    page.wait_for_function("rcp.path.scrubbed !== null && rcp.path.scrubbed.t === 0.5", timeout=WAIT_MS)
+    assert page.evaluate("rcp.path.scrubbed.frame") == 12  # 0.5 s at 24 fps
+    spec = page.evaluate("rcp.path.spec()")
+    scene = load_scene("sky")
+    (expected,), _ = parse_path(spec).resolve(scene.camera).at([0.5])
+    page.wait_for_function(
+        f"rcp.state.lastCamera && Math.abs(rcp.state.lastCamera.eye[2] - ({expected.eye[2]})) < 1e-3", timeout=WAIT_MS
+    )
+    shown = page.evaluate("rcp.state.lastCamera")
+    assert shown["eye"] == pytest.approx(list(expected.eye), abs=1e-3)
+    assert shown["fov"] == pytest.approx(expected.fov, abs=1e-3)
+    # the walk paints that view: a frame comes for the scrubbed camera
+    page.wait_for_function(
+        f"rcp.overlay.frame && Math.abs(rcp.state.lastCamera.eye[2] - ({expected.eye[2]})) < 1e-3", timeout=WAIT_MS
+    )
+
+
+def test_an_uploaded_models_animated_camera_becomes_the_path(page):
+    from helpers.gltf import animated_camera, expected_camera
+
+    glb = animated_camera().glb()
+    page.set_input_files("#upload-file", files=[{"name": "Shot.glb", "mimeType": "model/gltf-binary", "buffer": glb}])
+    page.wait_for_function("rcp.state.scene?.uploaded === true", timeout=WAIT_MS)
+    assert page.evaluate("rcp.state.scene.motions") == ["Shot"]
+    page.locator("#path [data-path=fps]").fill("4")
+    page.locator("#path [data-path=motion]").focus()
+    page.locator("#path [data-path=use-motion]").click()
+    page.wait_for_function("rcp.path.path.keyframes.length === 11", timeout=WAIT_MS)  # 0 to 2.5 s at 4 fps
+    taken = keys(page)
+    eye, *_, fov = expected_camera([k["t"] for k in taken])
+    assert [k["t"] for k in taken] == [k / 4 for k in range(11)]
+    np.testing.assert_allclose([k["eye"] for k in taken], eye, atol=1e-6)
+    assert [k["fov"] for k in taken] == pytest.approx(fov.tolist(), abs=1e-5)  # the file holds float32 radians
+    page.locator("#path [data-path=undo]").click()
+    assert keys(page) == []

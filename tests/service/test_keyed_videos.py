@@ -1,0 +1,83 @@
+"""``POST /api/videos`` with a path that keys its painting: every frame painted with its own settings, keys the
+scene cannot paint and keyed work over the limit refused in one line."""
+
+from __future__ import annotations
+
+import io
+import time
+
+import av
+import httpx
+import numpy as np
+import pytest
+from helpers.scenes import SPINNING_BOX
+
+from rcp_server.bench.harness import BackgroundServer
+from rcp_server.media.camerapath import parse_path
+from rcp_server.painting.loop import paint
+from rcp_server.scene.scenefile import load_scene
+from rcp_server.util import images
+
+KEYED = {
+    "fps": 2,
+    "keyframes": [
+        {"t": 0, "eye": [0, 1, 4], "look_at": [0, 0.5, 0], "paint": {"lambda_p": 0}},
+        {"t": 1, "eye": [3, 1.5, 2], "look_at": [0, 0.5, 0], "paint": {"style": "layered"}, "fade": 1},
+    ],
+}
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("scenes")
+    (folder / "tiny.toml").write_text(SPINNING_BOX)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def server(scenes):
+    with BackgroundServer(scenes=scenes, max_video_work=1 << 24) as live:
+        with httpx.Client(base_url=live.url, timeout=30) as client:
+            yield client
+
+
+def test_a_keyed_film_paints_each_frame_with_its_own_settings(server, scenes):
+    answer = server.post("/api/videos", json={"scene": "tiny", "path": KEYED, "width": 64, "height": 48})
+    assert answer.status_code == 202, answer.text
+    deadline = time.monotonic() + 120
+    while (status := server.get(f"/api/videos/{answer.json()['id']}").json())["state"] not in ("done", "failed"):
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    assert status["state"] == "done", status
+    video = server.get(f"/api/videos/{answer.json()['id']}/file").content
+    with av.open(io.BytesIO(video)) as container:
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    scene = load_scene("tiny", scenes)
+    path = parse_path(KEYED).resolve(scene.camera).with_painting(scene.paint, scene.check_names)
+    shots = list(path.frames())
+    assert [[round(w, 3) for _, w in shot.looks] for shot in shots] == [[1.0], [0.5, 0.5], [1.0]]
+    for frame, shot in zip(frames, shots, strict=True):
+        image = sum(w * paint(scene, shot.camera, 64, 48, p, time=shot.scene_time).image for p, w in shot.looks)
+        played = av.VideoFrame.from_ndarray(images.to_uint8(image), format="rgb24").reformat(format="yuv420p")
+        mse = np.mean((frame.astype(float) - played.reformat(format="rgb24").to_ndarray()) ** 2)
+        assert 10 * np.log10(255**2 / mse) > 35  # the frame is its painting, up to the codec's loss
+
+
+def test_keys_that_cannot_paint_or_cost_too_much_are_refused_in_one_line(server):
+    def refused(keyframes, status=422) -> str:
+        answer = server.post("/api/videos", json={"scene": "tiny", "path": {**KEYED, "keyframes": keyframes}})
+        assert answer.status_code == status, answer.text
+        assert "\n" not in answer.json()["detail"]
+        return answer.json()["detail"]
+
+    first, second = KEYED["keyframes"]
+    assert refused([first, {**second, "paint": {"objects": {"ghost": {"lambda_p": 1}}}}]).startswith(
+        "keyframes.1.paint: objects: this scene has no 'ghost'"
+    )
+    assert refused([first, {**second, "paint": {"lambda_p": "far"}}]).startswith("keyframes.1.paint: lambda_p")
+    assert "more than the" in refused([first, {**second, "paint": {"iterations": 256, "spp": 64}}])
+    not_a_table = server.post(
+        "/api/videos", json={"scene": "tiny", "path": {**KEYED, "keyframes": [first, {**second, "paint": [1]}]}}
+    )
+    assert not_a_table.status_code == 422
+    assert not_a_table.json()["detail"][0]["loc"] == ["body", "path", "keyframes", 1, "paint"]
