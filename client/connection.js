@@ -1,7 +1,9 @@
 // The WebSocket to /ws, reconnected with exponential backoff whenever it drops.
 //
-// Frames arrive as a `frame` text message followed by one binary JPEG; the pair is handed on together.
+// Frames arrive as a `frame` text message followed by one binary JPEG (or one per band: bands.js); handed on together.
 // The owner restores the walk-through (scene, camera, settings) in `onOpen`, as after any fresh start.
+
+import { FrameParts } from "./bands.js";
 
 const BACKOFF_MS = [250, 8000]; // first retry, longest wait
 const CLOSED_BECAUSE = { 1001: "server going away", 1006: "connection lost", 1012: "server restarting", 1013: "server busy" };
@@ -18,7 +20,7 @@ export class Connection {
     this.state = "idle"; // connecting | open | waiting (to reconnect) | refused | stopped
     this.backoff = BACKOFF_MS[0];
     this.opens = 0; // connections opened so far (the tests watch reconnection through it)
-    this.meta = null; // the frame description waiting for its JPEG
+    this.parts = new FrameParts(); // the frame description waiting for its JPEG (or its bands')
     this.timer = null;
   }
 
@@ -67,9 +69,8 @@ export class Connection {
 
   receive(data) {
     if (typeof data !== "string") {
-      const meta = this.meta;
-      this.meta = null;
-      if (meta) this.handlers.onFrame(meta, data);
+      const frame = this.parts.take(data); // one JPEG, or a band's each (bands.js)
+      if (frame) this.handlers.onFrame(...frame);
       return;
     }
     let msg;
@@ -79,7 +80,7 @@ export class Connection {
       this.handlers.onMessage({ type: "error", message: "the server sent a message that is not JSON" });
       return;
     }
-    if (msg.type === "frame") this.meta = msg;
+    if (msg.type === "frame") this.parts.expect(msg);
     else this.handlers.onMessage(msg);
   }
 

@@ -784,6 +784,31 @@ export const PROTOCOL = {
   "frame": {
    "description": "Sent before the binary JPEG it describes: the painting of camera ``camera_id`` at ``width`` x\n``height`` with ``paint`` (what ``POST /api/render`` gives for the same, up to the JPEG). ``phase``:\n``walk`` while the camera moves (reduced in size and samples), ``refine`` once it rests; ``final`` when\nno further refinement follows; ``temporal``: it continues the last frame instead.",
    "properties": {
+    "bands": {
+     "anyOf": [
+      {
+       "items": {
+        "maxItems": 2,
+        "minItems": 2,
+        "prefixItems": [
+         {
+          "type": "integer"
+         },
+         {
+          "type": "integer"
+         }
+        ],
+        "type": "array"
+       },
+       "type": "array"
+      },
+      {
+       "type": "null"
+      }
+     ],
+     "default": null,
+     "title": "Bands"
+    },
     "camera_id": {
      "anyOf": [
       {

@@ -7,6 +7,7 @@
 // a new camera, and the server paints the panorama again (smaller while moving, refined at rest, as ever).
 // A painting's layout (mono, or stereo top-bottom for a headset, vr.js) is known by the camera id it shows.
 
+import { decodeFrame } from "./bands.js";
 import * as walkCamera from "./camera.js";
 import { PanoramaView, dot } from "./panorama.js";
 
@@ -114,7 +115,7 @@ export class View360 {
       const { meta, jpeg } = this.newest;
       this.newest = null;
       try {
-        const bitmap = await createImageBitmap(new Blob([jpeg], { type: "image/jpeg" }));
+        const bitmap = await decodeFrame(meta, jpeg); // one JPEG, or its bands drawn in place (bands.js)
         this.pano.show(bitmap, this.layouts.get(meta.camera_id) ?? "mono");
         bitmap.close();
         this.handlers.shown(meta);

@@ -291,6 +291,9 @@ class Frame(BaseModel):
     camera_id: int | None
     time: float
     dropped: int  # frames rendered but never sent, because a newer one replaced them
+    # painted in bands on several machines: each band's [first row, rows], top to bottom; one binary JPEG a band
+    # follows instead of one for the frame, each drawn at its rows (the frame shows once all are in)
+    bands: list[tuple[int, int]] | None = None
 
 
 class Error(BaseModel):

@@ -103,7 +103,7 @@ class Session:
         self.closed = False
         # ---- the outbox (drained by the sender) ----
         self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
-        self.frame: tuple[str, bytes] | None = None  # the newest frame not yet sent
+        self.frame: tuple[str, list[bytes]] | None = None  # the newest frame not yet sent (its JPEG, or its bands')
         self.seq = 0
         self.dropped = 0
         self.outbox = asyncio.Event()
@@ -370,8 +370,9 @@ class Session:
             camera_id=job.camera_id,
             time=plan.time,
             dropped=0,
+            bands=[(band.y, band.rows) for band in frame.bands] or None,
         )
-        self._post_frame(meta, frame.jpeg)
+        self._post_frame(meta, [band.jpeg for band in frame.bands] or [frame.jpeg])
 
     # ---- sending ----
 
@@ -379,11 +380,11 @@ class Session:
         self.notes.append(message.model_dump_json())
         self.outbox.set()
 
-    def _post_frame(self, meta: protocol.Frame, jpeg: bytes) -> None:
+    def _post_frame(self, meta: protocol.Frame, jpegs: list[bytes]) -> None:
         if self.frame is not None:
             self.dropped += 1  # never sent: this newer frame replaces it
         self.seq += 1
-        self.frame = (meta.model_copy(update={"seq": self.seq, "dropped": self.dropped}).model_dump_json(), jpeg)
+        self.frame = (meta.model_copy(update={"seq": self.seq, "dropped": self.dropped}).model_dump_json(), jpegs)
         self.outbox.set()
 
     async def _send(self) -> None:
@@ -393,10 +394,11 @@ class Session:
             while self.notes:
                 await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
             if self.frame is not None:
-                text, jpeg = self.frame
+                text, jpegs = self.frame
                 self.frame = None
                 await self._deliver({"type": "websocket.send", "text": text})
-                await self._deliver({"type": "websocket.send", "bytes": jpeg})
+                for jpeg in jpegs:  # one, or a band's each (forwarded as the workers encoded them)
+                    await self._deliver({"type": "websocket.send", "bytes": jpeg})
 
     async def _deliver(self, message: dict) -> None:
         """A send waits while the client's buffers are full (newer frames replace the unsent one meanwhile);
