@@ -39,6 +39,10 @@ class Member:
         """Whether its start finished (well or not: a failed one shows at its first frame)."""
         return bool(ray_module().wait([self.warm], timeout=0)[0])
 
+    def stale(self) -> bool:
+        """Whether it is still starting after ``FIRST_FRAME_S`` (its node gone, or never placed)."""
+        return time.monotonic() - self.started > FIRST_FRAME_S and not self.ready()
+
 
 class Pool:
     """Walk actors on the Ray joined: made with :meth:`joined` after each join (Ray ships no types)."""
@@ -50,10 +54,11 @@ class Pool:
         self._remote = ray_module().remote(num_cpus=0, max_restarts=0)(WalkPainter)
 
     def start(self, node: str, threads: int, held: Held) -> Member:
-        """A walk actor on ``node`` (elsewhere if it is gone: soft), building ``held``'s scene at once."""
+        """A walk actor on ``node``, building ``held``'s scene at once."""
         from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-        strategy = NodeAffinitySchedulingStrategy(node, soft=True)
+        # hard: a crew's bands are on distinct nodes or nowhere (an actor whose node went fails, and leaves the crew)
+        strategy = NodeAffinitySchedulingStrategy(node, soft=False)
         actor = self._remote.options(scheduling_strategy=strategy).remote(threads)
         return Member(node, actor, actor.warm.remote(held), threads, time.monotonic())
 

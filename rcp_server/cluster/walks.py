@@ -259,7 +259,7 @@ class Walks:
         count = crew_size(len(wanted), height, place.paint_s, place.overhead_s) if splits else 1
         wanted = wanted[:count]
         for node in list(place.crew):
-            if node not in wanted or node not in cores:
+            if node not in wanted or node not in cores or place.crew[node].stale():
                 kill(place.crew.pop(node).actor)
         for node in wanted:
             if node not in place.crew and node in cores:
