@@ -20,6 +20,7 @@ import os
 import socket
 import sys
 import threading
+import time
 from collections import OrderedDict
 from collections.abc import Generator
 from concurrent.futures import ThreadPoolExecutor
@@ -192,6 +193,37 @@ def serve(pipe: Pipe, host: Host) -> None:
             stop.set()
 
 
+WATCH_S = 1.0  # how often the driver checks that its raylet and Ray's head still answer
+WATCH_MISSES = 3  # checks in a row without an answer: this driver ends, and the server starts another
+
+
+def watch() -> None:
+    """End this process once its raylet or Ray's head (the GCS) stops taking connections: a driver whose runtime
+    died may hang rather than exit, and the server only starts a new one once this one has gone."""
+    import ray
+
+    node = ray._private.worker.global_worker.node
+    ends = [(node.node_ip_address, node.node_manager_port), _host_port(node.gcs_address)]
+    misses = 0
+    while True:
+        time.sleep(WATCH_S)
+        try:
+            for end in ends:
+                with socket.create_connection(end, timeout=WATCH_S):
+                    pass
+            misses = 0
+        except OSError:
+            misses += 1
+            if misses >= WATCH_MISSES:
+                log.warning("Ray's runtime stopped answering: its driver ends")
+                os._exit(3)
+
+
+def _host_port(address: str) -> tuple[str, int]:
+    host, _, port = address.rpartition(":")
+    return host, int(port)
+
+
 def main() -> None:
     """The child: ``python -m rcp_server.cluster.driver FD OPTIONS``: joins Ray, says so, serves, then stops Ray."""
     logging.basicConfig(level=os.environ.get("RCP_LOG_LEVEL", "WARNING"), format="%(levelname)s: %(message)s")
@@ -206,6 +238,10 @@ def main() -> None:
         pipe.send(("failed", first_line(exc)))
         return
     pipe.send(("joined", os.getpid()))
+    try:
+        threading.Thread(target=watch, name="rcp-ray-watch", daemon=True).start()
+    except Exception as exc:  # a client connection (ray://) has no raylet here: Ray's own errors end it
+        log.info("the driver does not watch its runtime: %s", first_line(exc))
     try:
         serve(pipe, host)
     finally:

@@ -20,9 +20,10 @@ FIRST_FRAME_S = 60.0  # a new actor's start (its process started, the scene fetc
 class ActorLost(Exception):
     """A walk actor died, or its frame did not come back in bounded time; ``actors`` are the ones lost."""
 
-    def __init__(self, reason: str, actors: list):
+    def __init__(self, reason: str, actors: list, died: bool = True):
         super().__init__(reason)
         self.actors = actors
+        self.died = died  # died (its node may be gone), rather than late (a busy machine)
 
 
 @dataclass
@@ -86,7 +87,7 @@ def wait_all(
             raise Abandoned
         if time.monotonic() - clock > limit_s:
             late = [actor for ref, actor in zip(refs, actors, strict=True) if ref in waiting]
-            raise ActorLost(f"no band within {limit_s:.1f} s", late)
+            raise ActorLost(f"no band within {limit_s:.1f} s", late, died=False)
         if gone():
             raise ClusterError("Ray stopped mid-walk")
     try:

@@ -117,7 +117,7 @@ class RemoteRay:
         while True:
             try:
                 message = pipe.recv()
-            except (EOFError, OSError):
+            except (EOFError, OSError, TypeError):  # the driver has gone (or our side was closed under us)
                 break
             future = self._pending.pop(message[1], None)
             if future is None:

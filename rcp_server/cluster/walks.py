@@ -55,6 +55,7 @@ class Place:
     home: str
     order: int
     crew: dict[str, Member] = field(default_factory=dict)
+    frames: int = 0
     recent_s: float | None = None
     paint_s: float | None = None
     overhead_s: float | None = None
@@ -110,13 +111,14 @@ class Walks:
 
     def figures(self) -> dict:
         """What the walks on Ray did so far: walkers placed, frames painted there, the CPU seconds the workers
-        spent on them, crew members lost, and each walker's crew size."""
+        spent on them, crew members lost, and each walker's crew size and frames."""
         return {
             "walkers": len(self.places),
             "frames": self.frames,
             "worker_cpu_s": round(self.worker_cpu_s, 3),
             "moved": self.moved,
             "crews": [len(place.crew) for place in list(self.places.values())],
+            "painted": [place.frames for place in list(self.places.values())],
         }
 
     def admit(self, key: object, params: PaintParams, scene: Scene | None = None) -> None:
@@ -274,11 +276,13 @@ class Walks:
             if member.actor in lost.actors:
                 del place.crew[node]
                 kill(member.actor)
-                self.inventory.lost(node)
+                if lost.died:
+                    self.inventory.lost(node)
                 self.moved += 1
 
     def _painted(self, place: Place, painted: Painted, params: PaintParams, seconds: float) -> None:
         self.frames += 1
+        place.frames += 1
         self.worker_cpu_s += painted.cpu_s
         bands = painted.bands or ()
         paint_s = sum(b.paint_s for b in bands) if bands else painted.paint_s
