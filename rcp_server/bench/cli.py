@@ -115,6 +115,7 @@ def _cluster(args: argparse.Namespace) -> None:
         args.cores,
         args.walkers_only,
         args.server_cores,
+        args.overhead_ms,
     )
 
 
@@ -282,4 +283,9 @@ def _cluster_benchmarks(command) -> None:
         "--server-cores", type=positive_int, default=4, help="the walkers' model: the server's cores (default 4)"
     )
     p.add_argument("--walkers-only", action="store_true", help="only the walkers' figures and model")
+    p.add_argument(
+        "--overhead-ms",
+        type=finite,
+        help="the crew's model: a frame's round trip beyond its painting, as rcp bench walkers measures it on a crew",
+    )
     p.set_defaults(run_bench=_cluster)

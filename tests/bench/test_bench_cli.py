@@ -28,8 +28,9 @@ FLAGS = {
         "--cores",
         "--server-cores",
         "--walkers-only",
+        "--overhead-ms",
     },
-    "walkers": {"--ray", "--scene", "--width", "--height", "--seconds"},
+    "walkers": {"--ray", "--scene", "--width", "--height", "--seconds", "--crew"},
     "memory": {"--width", "--height", "--threads"},
 }
 # what a plain install lacks: the test extra's packages (the bench extra's among them)
