@@ -33,7 +33,7 @@ from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .actor import portable
 from .admission import Full, Target
-from .connection import Backoff, ClusterError, PaintingFailed, check_address
+from .connection import JOIN_RETRY_S, Backoff, ClusterError, PaintingFailed, Unanswered, check_address
 from .driver import SCENES, SceneKey
 from .walkactor import Painted
 from .walks import NoRoom
@@ -86,8 +86,16 @@ class RemoteRay:
         """Start the driver and wait until it joined Ray (``timeout_s``, default ``JOIN_S``); a fault is a
         :class:`ClusterError` in one line."""
         timeout = JOIN_S if timeout_s is None else timeout_s
-        if self.address not in (None, "", "local", "auto"):
-            check_address(self.address, min(timeout, 10.0))
+        deadline = time.monotonic() + timeout
+        while self.address not in (None, "", "local", "auto"):  # a head starting beside us answers in a moment
+            try:
+                check_address(self.address, min(timeout, 10.0))
+                break
+            except Unanswered:
+                if time.monotonic() + JOIN_RETRY_S > deadline:
+                    raise
+                time.sleep(JOIN_RETRY_S)
+        timeout = max(0.1, deadline - time.monotonic())
         ours, theirs = socket.socketpair()
         options = {"address": self.address or "local", "retry_s": self.retry_s}
         if self.target is not None:
@@ -98,7 +106,9 @@ class RemoteRay:
         pipe = Pipe(ours.detach())
         if not pipe.poll(timeout):
             _end(process, pipe)
-            raise ClusterError(f"Ray at {self.address or 'local'} was not joined within {timeout:g} s")
+            raise ClusterError(
+                f"Ray at {self.address or 'local'} was not joined within {timeout_s or JOIN_S:g} s (RCP_RAY_JOIN_S)"
+            )
         try:
             said = pipe.recv()
         except (EOFError, OSError):
