@@ -17,6 +17,7 @@ import itertools
 import json
 import logging
 import os
+import pickle
 import socket
 import sys
 import threading
@@ -69,8 +70,8 @@ class Host:
         self.stops: dict[int, threading.Event] = {}
         self._serial = itertools.count(1)
 
-    def scene(self, key: int, fields: dict) -> None:
-        self.scenes[key] = Scene(**fields)
+    def scene(self, key: int, fields: bytes) -> None:
+        self.scenes[key] = Scene(**pickle.loads(fields))
         while len(self.scenes) > SCENES:
             self.scenes.popitem(last=False)
 
@@ -229,6 +230,8 @@ def main() -> None:
     logging.basicConfig(level=os.environ.get("RCP_LOG_LEVEL", "WARNING"), format="%(levelname)s: %(message)s")
     fd, options = int(sys.argv[1]), json.loads(sys.argv[2])
     pipe = Pipe(socket.socket(fileno=fd).detach())
+    stderr = os.dup(2)
+    os.dup2(os.open(os.devnull, os.O_WRONLY), 2)  # Ray's own lines while it joins: a failure is said in one line
     try:
         painter = RayPainter(options["address"])
         painter.connection.join()  # here, on the main thread
@@ -237,6 +240,8 @@ def main() -> None:
     except BaseException as exc:
         pipe.send(("failed", first_line(exc)))
         return
+    finally:
+        os.dup2(stderr, 2)
     pipe.send(("joined", os.getpid()))
     try:
         threading.Thread(target=watch, name="rcp-ray-watch", daemon=True).start()

@@ -33,7 +33,7 @@ from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .actor import portable
 from .admission import Full, Target
-from .connection import JOIN_RETRY_S, Backoff, ClusterError, PaintingFailed, Unanswered, check_address
+from .connection import JOIN_RETRY_S, Backoff, ClusterError, PaintingFailed, Unanswered, check_address, first_line
 from .driver import SCENES, SceneKey
 from .walkactor import Painted
 from .walks import NoRoom
@@ -203,7 +203,10 @@ class RemoteRay:
                     self._keys.popitem(last=False)
             key = entry[1]
         if self._sent.get(key) != generation:
-            self._call("scene", (key, portable(scene)), None, None)
+            # Ray's cloudpickle: a scene may hold functions of its own (an animation's motion)
+            from ray import cloudpickle
+
+            self._call("scene", (key, cloudpickle.dumps(portable(scene))), None, None)
             self._sent[key] = generation
         return SceneKey(key)
 
@@ -219,6 +222,9 @@ class RemoteRay:
         except (OSError, ValueError):
             self._pending.pop(call, None)
             raise _Down("Ray's driver has gone") from None
+        except Exception as exc:  # what cannot travel to the driver is painted here
+            self._pending.pop(call, None)
+            raise NoRoom(f"{method} cannot be handed to Ray's driver: {first_line(exc)}") from None
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while True:
             try:
