@@ -271,6 +271,8 @@ class RemoteRay:
         film = self._failing(lambda: self.call("film", scene, list(shots), width, height, params, temporal))
         try:
             while True:
+                if should_stop is not None and should_stop():  # frames quicker than a wait's poll stop here too
+                    raise Abandoned
                 image = self._failing(lambda: self.call("film_next", film, should_stop=should_stop))
                 if image is None:
                     return
