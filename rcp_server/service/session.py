@@ -101,6 +101,7 @@ class Session:
         self.kept: int | None = None  # on Ray: the last frame shown, whose per-pixel data its worker keeps
         self.serial = 0  # frames asked for
         self.closed = False
+        self.refused: Full | None = None  # the hello was refused for want of room: the socket closes
         # ---- the outbox (drained by the sender) ----
         self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
         self.frame: tuple[str, list[bytes]] | None = None  # the newest frame not yet sent (its JPEG, or its bands')
@@ -170,8 +171,18 @@ class Session:
             self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
         except (CameraError, ValueError) as exc:
             self._note(protocol.Error(message=str(exc)))
+            if self.refused is not None:  # no room for this walker anywhere: told, then closed at once
+                await self._refuse(self.refused)
         except Exception:  # a fault of ours: this message is lost, the session is not
             self._note(protocol.Error(message=fault_message(report_fault(f"session message {text[:200]!r}"))))
+
+    async def _refuse(self, full: Full) -> None:
+        """Send the refusal line now and close with a reason that says when to try again (1013)."""
+        while self.notes:
+            await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
+        reason = f"no room for another walker; try again in {full.retry_after} s"
+        await self.ws.close(code=1013, reason=reason)
+        raise WebSocketDisconnect(1013, reason)
 
     def _apply(self, msg) -> None:
         if isinstance(msg, protocol.Hello):
@@ -229,6 +240,7 @@ class Session:
             try:
                 self.service.walks.admit(self, painting.params, painting.scene)
             except Full as full:
+                self.refused = full  # said in one line, then the socket closes with its retry time (_take)
                 raise ValueError(str(full)) from None
         self.params, self.scene = painting.params, painting.scene
         self.camera, self.camera_id = self.scene.camera, None

@@ -23,6 +23,7 @@ import pytest
 ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs it
 
 from service.conftest import Walk  # noqa: E402
+from websockets.exceptions import ConnectionClosed  # noqa: E402
 
 from rcp_server.bench.harness import BackgroundServer, get_json  # noqa: E402
 from rcp_server.cluster.admission import Target  # noqa: E402
@@ -175,11 +176,20 @@ def test_walkers_are_admitted_while_there_is_room_and_none_starves(scenes, reque
         while not counts[3] and time.monotonic() < deadline:
             time.sleep(0.05)
         assert len(walks.on_ray) == 3 and len(walks.local) == 1
-        walker(live, counts[4], errors[4], threading.Event())  # a fifth: refused at once
-        (refusal,) = errors[4]
+        fifth = Walk(live)  # a fifth: refused in one line, and its socket closed at once with the retry time
+        fifth.send(type="hello", scene="tiny", width=W, height=H)
+        refusal = fifth.next(30)
+        assert refusal["type"] == "error"
         said = r"the cluster has room for 3 walkers at [\d.]+ fps at 96x64 \([\d.]+ cores each, measured\) and all"
         said += r" are walking, and the server's own cores hold 1 walkers, all walking; try again in 30 s"
-        assert re.fullmatch(said, refusal) and not counts[4]
+        assert re.fullmatch(said, refusal["message"])
+        with pytest.raises(ConnectionClosed) as closed:
+            fifth.ws.recv(1.0)
+        assert (closed.value.rcvd.code, closed.value.rcvd.reason) == (
+            1013,
+            "no room for another walker; try again in 30 s",
+        )
+        fifth.close()
         while min(driver.call("figures")["painted"]) < 5 and time.monotonic() < deadline + 60:
             time.sleep(0.05)  # each crew warm (painted here meanwhile)
         time.sleep(1.0)
