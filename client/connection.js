@@ -1,7 +1,7 @@
 // @ts-check
 // The WebSocket to /ws, reconnected with exponential backoff whenever it drops.
 //
-// Frames arrive as a `frame` text message followed by one binary JPEG; the pair is handed on together.
+// Frames arrive as a `frame` text message followed by one binary JPEG (or one per band: bands.js); handed on together.
 // The owner restores the walk-through (scene, camera, settings) in `onOpen`, as after any fresh start.
 //
 // A server that refuses a walker closes its socket at once with the reason, in one line. A reason that says
@@ -9,6 +9,8 @@
 // application's 4xxx, holds the page that long (state `held`), then offers to try again (state `offered`:
 // `start()` does); 1008 or 4xxx without one is final (`refused`: no token, a foreign page). The server's own
 // start ("the server is starting: ...", 1013) is waited out without asking.
+
+import { FrameParts } from "./bands.js";
 
 const BACKOFF_MS = [250, 8000]; // first retry, longest wait
 const CLOSED_BECAUSE = { 1001: "server going away", 1006: "connection lost", 1012: "server restarting", 1013: "server busy" };
@@ -58,7 +60,7 @@ export class Connection {
     this.state = "idle"; // connecting | open | waiting (to reconnect) | held | offered | refused | stopped
     this.backoff = BACKOFF_MS[0];
     this.opens = 0; // connections opened so far (the tests watch reconnection through it)
-    this.meta = null; // the frame description waiting for its JPEG
+    this.parts = new FrameParts(); // the frame description waiting for its JPEG (or its bands')
     this.timer = null;
   }
 
@@ -109,9 +111,8 @@ export class Connection {
 
   receive(data) {
     if (typeof data !== "string") {
-      const meta = this.meta;
-      this.meta = null;
-      if (meta) this.handlers.onFrame(meta, data);
+      const frame = this.parts.take(data); // one JPEG, or a band's each (bands.js)
+      if (frame) this.handlers.onFrame(...frame);
       return;
     }
     let msg;
@@ -121,7 +122,7 @@ export class Connection {
       this.handlers.onMessage({ type: "error", message: "the server sent a message that is not JSON" });
       return;
     }
-    if (msg.type === "frame") this.meta = msg;
+    if (msg.type === "frame") this.parts.expect(msg);
     else this.handlers.onMessage(msg);
   }
 

@@ -4,6 +4,7 @@
 // while another decodes replaces any frame still waiting, so a slow browser never falls behind. A frame smaller
 // than the canvas is scaled up with its edges kept sharp where WebGL2 allows (upscale.js, the walk quality).
 
+import { decodeFrame } from "./bands.js";
 import { Upscaler } from "./upscale.js";
 
 export class FrameView {
@@ -33,7 +34,7 @@ export class FrameView {
       const { meta, jpeg } = this.newest;
       this.newest = null;
       try {
-        const bitmap = await createImageBitmap(new Blob([jpeg], { type: "image/jpeg" }));
+        const bitmap = await decodeFrame(meta, jpeg); // one JPEG, or its bands drawn in place (bands.js)
         this.bitmap?.close();
         this.bitmap = bitmap;
         this.draw();

@@ -176,6 +176,7 @@
  * @property {number} dropped
  * @property {"perspective" | "equirect"} projection
  * @property {"mono" | "top-bottom" | "side-by-side"} stereo
+ * @property {Array<[number, number]> | null} bands
  */
 /**
  * A refusal or a failure, in one line. `answers`: the type of the client message refused (null: none, e.g.

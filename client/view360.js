@@ -9,6 +9,7 @@
 // A frame names its projection and stereo layout (mono, or top-bottom for a headset, vr.js): a panorama is
 // shown here, in its layout.
 
+import { decodeFrame } from "./bands.js";
 import * as walkCamera from "./camera.js";
 import { PanoramaView, dot } from "./panorama.js";
 
@@ -108,7 +109,7 @@ export class View360 {
       const { meta, jpeg } = this.newest;
       this.newest = null;
       try {
-        const bitmap = await createImageBitmap(new Blob([jpeg], { type: "image/jpeg" }));
+        const bitmap = await decodeFrame(meta, jpeg); // one JPEG, or its bands drawn in place (bands.js)
         this.pano.show(bitmap, meta.stereo);
         bitmap.close();
         this.handlers.shown(meta);

@@ -115,6 +115,7 @@ def _cluster(args: argparse.Namespace) -> None:
         args.cores,
         args.walkers_only,
         args.server_cores,
+        args.overhead_ms,
     )
 
 
@@ -124,8 +125,13 @@ def _walkers(args: argparse.Namespace) -> None:
         raise MissingExtra(
             "rcp bench walkers --ray needs Ray, which the cluster extra installs: pip install '.[cluster]'"
         )
-    from .walkers import bench_walkers
+    from .walkers import bench_crew, bench_walkers
 
+    if args.crew:
+        if not _findable("ray"):
+            raise MissingExtra("rcp bench walkers --crew needs Ray, which the cluster extra installs")
+        bench_crew(args.crew, args.scene, args.width, args.height, args.seconds)
+        return
     bench_walkers(args.walkers, args.ray, args.scene, args.width, args.height, args.seconds)
 
 
@@ -281,6 +287,12 @@ def _cluster_benchmarks(command) -> None:
     p.add_argument("--width", type=positive_int, default=640, help="each walker's pixels (default 640)")
     p.add_argument("--height", type=positive_int, default=360, help="each walker's pixels (default 360)")
     p.add_argument("--seconds", type=finite, default=10.0, help="seconds measured, after a warm-up (default 10)")
+    p.add_argument(
+        "--crew",
+        type=positive_int,
+        metavar="NODES",
+        help="one walker's frames in bands on NODES nodes of Ray's test cluster (one CPU each), against threads",
+    )
     p.set_defaults(run_bench=_walkers)
 
     p = command("cluster", "a camera path on Ray against this machine's threads, and a model of N machines")
@@ -295,4 +307,9 @@ def _cluster_benchmarks(command) -> None:
         "--server-cores", type=positive_int, default=4, help="the walkers' model: the server's cores (default 4)"
     )
     p.add_argument("--walkers-only", action="store_true", help="only the walkers' figures and model")
+    p.add_argument(
+        "--overhead-ms",
+        type=finite,
+        help="the crew's model: a frame's round trip beyond its painting, as rcp bench walkers measures it on a crew",
+    )
     p.set_defaults(run_bench=_cluster)

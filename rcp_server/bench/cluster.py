@@ -29,14 +29,14 @@ import numpy as np
 from ..cluster.admission import Target
 from ..cluster.connection import Connection
 from ..cluster.painter import RayPainter, connect
-from ..cluster.walks import Walks
+from ..cluster.walks import NoRoom, Walks
 from ..media.camerapath import parse_path
 from ..painting.loop import default_threads, paint
 from ..painting.sequence import frame_params, paint_sequence
 from ..scene.scenefile import load_scene
 from ..service.planner import WALK_QUALITY
 from ..util.images import encode as encode_image
-from .walkmodel import Measured, banded, walker_cores, walkers_held
+from .walkmodel import Measured, banded, crew, walker_cores, walkers_held
 
 
 def walk_path(scene, seconds: float, fps: float) -> dict:
@@ -57,6 +57,7 @@ NODES = (1, 4, 16, 64)  # the KubeRay clusters modelled, in two-core nodes
 NODE_CORES = 2
 WALK_FPS = 20.0
 BANDED = ((1280, 720), 30.0, 8)  # one walker's frame in bands: size, frames a second, nodes
+EFFICIENCY = 0.8  # the per-node efficiency a crew is to keep
 WALK_FRAMES = 5  # frames measured of each size and mode
 
 
@@ -66,10 +67,19 @@ def measure_walks(scene, address: str | None) -> Measured:
     params = replace(scene.paint, spp=1)  # a walk frame's
     walks = Walks(Connection(address), Target(1.0, 1, 1), 30)  # a target any cluster has room for: one walker
     frame_s, ray_s = walks.calibrate(scene, params, WALK_SIZES[0])
+    walks.admit("bench", params, scene)
     overheads, server, jpeg, encode = [], [], {}, {}
     try:
         for size in WALK_SIZES:
-            walks.paint("bench", scene, scene.camera, *size, params, 0.0, WALK_QUALITY, 0, None)  # built, warm
+            deadline = time.monotonic() + 120
+            while True:  # its crew built and warm
+                try:
+                    walks.paint("bench", scene, scene.camera, *size, params, 0.0, WALK_QUALITY, 0, None)
+                    break
+                except NoRoom:
+                    if time.monotonic() > deadline:
+                        raise
+                    time.sleep(0.1)
             sizes = []
             for k in range(1, WALK_FRAMES + 1):
                 for temporal in (False, True):
@@ -88,7 +98,7 @@ def measure_walks(scene, address: str | None) -> Measured:
                     )
                     server.append(time.process_time() - cpu)
                     overheads.append(time.perf_counter() - clock - painted.paint_s)
-                    sizes.append(len(painted.jpeg))
+                    sizes.append(len(painted.jpeg) + sum(len(band.jpeg) for band in painted.bands))
             jpeg[size] = int(np.median(sizes))
             image = paint(scene, scene.camera, *size, replace(params, iterations=1), threads=1).image
             clock = time.perf_counter()
@@ -128,7 +138,20 @@ def print_walk_model(m: Measured, gbps: float, server_cores: int) -> None:
                 cells.append(f"{held:>4} ({cores:5.2f} c, {span} n, {bound:>7})")
         print(f"{nodes:>5}" + "".join(f" {c:>28}" for c in cells))
     size, fps, nodes = BANDED
-    print(f"one walker at {size[0]}x{size[1]} in bands over {nodes} nodes ({nodes * NODE_CORES} cores, a band a core):")
+    print(
+        f"one walker at {size[0]}x{size[1]} in bands over {nodes} nodes of {NODE_CORES} cores (a band a node, each "
+        f"encoded on its node and forwarded as it is; {m.overhead_s * 1e3:.1f} ms a frame beyond its painting):"
+    )
+    for name, iterations in (("per frame", m.iterations), ("temporal", 1)):
+        # the fewest nodes that keep up (as the crew uses no more nodes than help), else all of them
+        used = next((n for n in range(1, nodes + 1) if crew(m, size, n, NODE_CORES, iterations)[0] >= fps), nodes)
+        rate, latency, efficiency = crew(m, size, used, NODE_CORES, iterations)
+        verdict = "holds" if rate >= fps and efficiency >= EFFICIENCY else "falls short of"
+        print(
+            f"  {name:>9} on {used} nodes: {rate:5.1f} fps, {latency * 1e3:.0f} ms a frame, per-node efficiency "
+            f"{efficiency:.2f} ({verdict} {fps:g} fps at {EFFICIENCY:g})"
+        )
+    print("the same, gathered on one machine (earlier models):")
     for encoders in (0, 2):
         where = "encoded by 2 worker cores in turn" if encoders else "gathered and encoded by the server"
         for name, iterations in (("per frame", m.iterations), ("temporal", 1)):
@@ -151,12 +174,19 @@ def bench_cluster(
     cores: int,
     walkers_only: bool = False,
     server_cores: int = 4,
+    overhead_ms: float | None = None,
 ) -> None:
+    """``overhead_ms``: a frame's round trip beyond its painting as measured elsewhere (``rcp bench walkers --crew``
+    on the test cluster), in place of the one measured here."""
     scene = load_scene(scene_name)
+
+    def taken(m: Measured) -> Measured:
+        return m if overhead_ms is None else replace(m, overhead_s=overhead_ms / 1e3)
+
     if walkers_only:
         started = connect(address, num_cpus=None if address else default_threads())
         try:
-            print_walk_model(measure_walks(scene, address), gbps, server_cores)
+            print_walk_model(taken(measure_walks(scene, address)), gbps, server_cores)
         finally:
             if started:
                 import ray
@@ -165,7 +195,7 @@ def bench_cluster(
         return
     measured = _measure_on_ray(scene, scene_name, width, height, frames, address)
     _print_films_model(measured, cores, gbps)
-    print_walk_model(measured["walks"], gbps, server_cores)
+    print_walk_model(taken(measured["walks"]), gbps, server_cores)
 
 
 def _threaded(scene, shots, params, width: int, height: int, threads: int, temporal) -> tuple[float, list]:

@@ -14,7 +14,7 @@ import json
 import os
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -109,3 +109,65 @@ def bench_walkers(n: int, address: str | None, scene_name: str, width: int, heig
         f"CPU over the run (warm-up included): server {server_cpu:.1f} s, Ray workers {worker_cpu:.1f} s "
         f"({frames} frames on Ray; the workers' share {worker_cpu / max(server_cpu + worker_cpu, 1e-9):.0%})"
     )
+
+
+def bench_crew(nodes: int, scene_name: str, width: int, height: int, seconds: float) -> None:
+    """One walker's frames in bands over a crew on ``nodes`` nodes of Ray's multi-node test cluster (one CPU each,
+    each its own raylet), through the server's driver process, against the same frames on this machine's threads:
+    frames a second, the frame's size, p95 latency, and the round trip beyond the slowest band's painting."""
+    from ray.cluster_utils import Cluster
+
+    from ..cluster.admission import Target
+    from ..cluster.remote import RemoteRay, RemoteWalks
+    from ..cluster.walks import NoRoom
+    from ..painting.loop import paint
+    from ..scene.scenefile import load_scene
+    from ..util import images
+
+    scene = load_scene(scene_name)
+    params = replace(scene.paint, spp=1)
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    for _ in range(nodes - 1):
+        cluster.add_node(num_cpus=1)
+    driver = RemoteRay(cluster.address, Target(0.01, width, height), 30)
+    try:
+        driver.start(120)
+        walks = RemoteWalks(driver, 1, 30)
+        walks.calibrate(scene, params)
+        walks.admit("crew", params, scene)
+        times: list[tuple[float, float, int]] = []  # (round trip, slowest band's painting, bands)
+        deadline, end, k = time.monotonic() + 120, None, 0
+        while end is None or time.monotonic() < end:
+            k += 1
+            camera = scene.camera.moved(eye=tuple(np.asarray(scene.camera.eye) + (0.01 * k, 0.0, 0.0)))
+            try:
+                clock = time.perf_counter()
+                painted = walks.paint("crew", scene, camera, width, height, params, 0.0, 80, k, None)
+            except NoRoom:  # the crew is starting
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
+                continue
+            bands = max(1, len(painted.bands))
+            if end is None and (bands == nodes or time.monotonic() > deadline):
+                end = time.monotonic() + seconds
+            elif end is not None:
+                times.append((time.perf_counter() - clock, painted.paint_s, bands))
+    finally:
+        driver.close()
+        cluster.shutdown()
+    here: list[float] = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        clock = time.perf_counter()
+        images.encode(paint(scene, scene.camera, width, height, params, threads=nodes).image, "JPEG", 80)
+        here.append(time.perf_counter() - clock)
+    trips = np.array([t for t, _, _ in times])
+    overhead = np.array([t - p for t, p, _ in times])
+    print(f"one walker of {scene_name!r} at {width}x{height}, {params.iterations} iterations, {seconds:g} s each")
+    print(f"{'where':>28} {'fps':>6} {'p95 ms':>7} {'overhead ms':>12}")
+    crew = f"a crew on {nodes} nodes ({times[-1][2] if times else 0} bands)"
+    p95, median = np.percentile(trips, 95) * 1e3, np.median(overhead) * 1e3
+    print(f"{crew:>28} {len(trips) / seconds:6.1f} {p95:7.1f} {median:12.1f}")
+    threads = f"{nodes} threads here"
+    print(f"{threads:>28} {len(here) / seconds:6.1f} {np.percentile(here, 95) * 1e3:7.1f} {'':>12}")

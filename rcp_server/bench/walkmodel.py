@@ -90,3 +90,13 @@ def banded(
     steps = {"painting": paint_s, "network": move_s, "server": server_s}
     which = max(steps, key=lambda k: steps[k])
     return 1 / steps[which], m.overhead_s + paint_s + move_s + server_s, which
+
+
+def crew(m: Measured, size: tuple[int, int], nodes: int, cores: int, iterations: int) -> tuple[float, float, float]:
+    """One walker's frame of ``size`` in a band a node over ``nodes`` nodes of ``cores`` cores, each band painted
+    with its node's threads and encoded there, the server forwarding the bands as they are: one call per node per
+    frame, one frame in flight. Returns (frames a second, the latency of a frame in seconds, the per-node
+    efficiency: the frame's rays alone over ``nodes x cores`` against the frame's whole time)."""
+    rays_s = size[0] * size[1] * iterations * m.ray_s / (nodes * cores)
+    period = m.overhead_s + m.frame_s + rays_s
+    return 1 / period, period, rays_s / period

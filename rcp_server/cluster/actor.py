@@ -7,7 +7,9 @@ time, settings) is a few hundred bytes; what comes back is the frame as uint8, 3
 
 from __future__ import annotations
 
+import itertools
 import os
+import threading
 from collections import OrderedDict
 from dataclasses import dataclass, fields
 
@@ -39,6 +41,34 @@ class Held:
 
     key: str
     ref: list
+
+
+class HeldScenes:
+    """The scenes this driver keeps in the object store (the last ``most``, the most recently used last): each put
+    there once, under a key of its own, for every kind of painting on Ray (films, large paintings, walkers) alike.
+    Forgotten as a whole when Ray is joined again (:meth:`clear`): what an earlier join held is gone."""
+
+    def __init__(self, most: int = WARM_SCENES):
+        self.most = most
+        self._held: OrderedDict[int, tuple[Scene, Held]] = OrderedDict()
+        self._lock = threading.Lock()
+        self._serial = itertools.count(1)
+
+    def hold(self, scene: Scene) -> Held:
+        """``scene`` in the object store, put there once."""
+        with self._lock:
+            entry = self._held.get(id(scene))
+            if entry is None or entry[0] is not scene:
+                held = Held(f"scene-{next(self._serial)}", [ray_module().put(portable(scene))])
+                entry = self._held[id(scene)] = (scene, held)
+                while len(self._held) > self.most:
+                    self._held.popitem(last=False)
+            self._held.move_to_end(id(scene))
+            return entry[1]
+
+    def clear(self) -> None:
+        with self._lock:
+            self._held.clear()
 
 
 class WarmScenes:

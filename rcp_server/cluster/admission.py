@@ -84,4 +84,40 @@ class Full(Exception):
 
     def __init__(self, reason: str, retry_after: int):
         super().__init__(f"{reason}; try again in {retry_after} s")
+        self.reason = reason
         self.retry_after = retry_after
+
+
+# ---- a walker's crew: its frame in bands over several nodes ----
+
+BAND_ROWS_LEAST = 8  # a band of fewer rows is not worth a call of its own
+
+
+def crew_size(nodes: int, rows: int, paint_s: float | None, overhead_s: float | None) -> int:
+    """How many of ``nodes`` help paint one walker's frame of ``rows`` rows, in bands: each band at least
+    ``BAND_ROWS_LEAST`` rows, and (once measured) each node's share of the frame's painting, ``paint_s`` wall seconds
+    on one node, at least the ``overhead_s`` a call costs beyond its painting: past that a node adds more overhead
+    than painting (its efficiency under one half)."""
+    most = max(1, min(nodes, rows // BAND_ROWS_LEAST))
+    if paint_s is None or overhead_s is None or overhead_s <= 0:
+        return most
+    return max(1, min(most, math.floor(paint_s / overhead_s)))
+
+
+def crews(nodes: list[str], walkers: list[tuple[object, str]]) -> dict[object, list[str]]:
+    """Which nodes paint each walker's frames (``walkers``: each walker with its home node, in the order they came):
+    alone, a walker gets every node; with others, the nodes are dealt out in turn, so each gets as many as the
+    next (one more for the first few); past a node each, every walker paints on its home node alone."""
+    ordered = sorted(nodes)
+    if not walkers or not ordered:
+        return {key: [home] for key, home in walkers}
+    if len(walkers) > len(ordered):
+        return {key: [home] for key, home in walkers}
+    return {key: ordered[k :: len(walkers)] for k, (key, _) in enumerate(walkers)}
+
+
+def band_rows(height: int, count: int) -> list[tuple[int, int]]:
+    """``count`` bands of a ``height``-row frame as (first row, rows), top to bottom, as even as rows allow."""
+    count = max(1, min(count, height))
+    edges = [round(k * height / count) for k in range(count + 1)]
+    return [(edges[k], edges[k + 1] - edges[k]) for k in range(count)]

@@ -96,28 +96,29 @@ def check_address(address: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
 
 
 def connect(address: str | None = None, num_cpus: int | None = None, **local_options) -> bool:
-    """Join the Ray cluster at ``address`` (or ``RAY_ADDRESS``), else start a local Ray runtime on this machine
+    """Join the Ray cluster at ``address`` (or ``RAY_ADDRESS``), else (or with ``local``) start a Ray runtime of
+    this process's own on this machine, never joining one it finds there
     (``num_cpus``, ``local_options`` for ``ray.init``). Returns whether this call started Ray (then the caller
     shuts it down). An address is checked first (:func:`check_address`); every fault is a :class:`ClusterError`."""
     ray = ray_module()
-    address = address or os.environ.get("RAY_ADDRESS") or None
-    if address in ("local", ""):
-        address = None
-    if address not in (None, "auto"):
+    # "local" is a runtime of this process's own, never one found on this machine (a dead one's address lingers)
+    address = address or os.environ.get("RAY_ADDRESS") or "local"
+    if address not in ("local", "auto"):
         check_address(address)
     if ray.is_initialized():  # joined already (a test's runtime, an earlier job): it stays as it is
         return False
     # read by the driver's core worker as it starts (an operator's own setting wins)
     os.environ.setdefault("RAY_gcs_rpc_server_reconnect_timeout_s", str(GCS_PATIENCE_S))
     options: dict[str, Any] = {"log_to_driver": False, "configure_logging": False}
-    if address is None:
+    if address == "local":
         options |= {"include_dashboard": False, "num_cpus": num_cpus, **local_options}
     # ray.init puts its own SIGTERM handler in place (exit status 15) on the main thread: the caller's stays
     stop = signal.getsignal(signal.SIGTERM) if threading.current_thread() is threading.main_thread() else None
     try:
         ray.init(address=address, **options)
     except Exception as exc:  # Ray's own errors are many and long: the first line says enough
-        raise ClusterError(f"cannot start Ray{f' at {address}' if address else ''}: {first_line(exc)}") from None
+        where = "" if address == "local" else f" at {address}"
+        raise ClusterError(f"cannot start Ray{where}: {first_line(exc)}") from None
     finally:
         if callable(stop):  # one the caller set (rcp serve's: a stop asked for is exit 0), not the default
             signal.signal(signal.SIGTERM, stop)

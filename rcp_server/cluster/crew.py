@@ -8,7 +8,6 @@ another's); each actor keeps the scenes it paints warm.
 from __future__ import annotations
 
 import itertools
-from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -16,7 +15,7 @@ from ..camera.camera import Camera, Region
 from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
-from .actor import WARM_SCENES, Held, LostState, Painter, portable
+from .actor import Held, HeldScenes, LostState, Painter
 from .connection import Connection, PaintingFailed, first_line, ray_module, worker_failure
 
 RESTARTS = 3  # times Ray restarts a dead worker and retries its calls before a job fails
@@ -33,14 +32,16 @@ class Crew:
     ``connection``. A worker that dies is restarted by Ray and its calls retried (``RESTARTS`` times); one gone
     for good is replaced (:meth:`replace`)."""
 
-    def __init__(self, connection: Connection, threads: int = 1, actors: int | None = None):
+    def __init__(
+        self, connection: Connection, threads: int = 1, actors: int | None = None, scenes: HeldScenes | None = None
+    ):
         self.connection = connection
+        self.scenes = scenes or HeldScenes()  # the object-store scene cache, shared with the walkers
         self.threads = threads
         self._wanted = actors
         self._actors: list = []
         self._remote: Any = None  # Ray's actor class of Painter, made with the crew (Ray ships no types)
-        self._held: OrderedDict[int, tuple[Scene, Held]] = OrderedDict()
-        self.serial = itertools.count(1)  # names the scenes held and the jobs
+        self.serial = itertools.count(1)  # names the jobs
         self._generation = 0  # the connection's join the actors and scenes held belong to
 
     def actors(self) -> list:
@@ -49,7 +50,7 @@ class Crew:
             self.connection.join()
             if self._generation != self.connection.generation:  # Ray was joined again: what it held is gone
                 self._actors, self._generation = [], self.connection.generation
-                self._held.clear()
+                self.scenes.clear()
             if not self._actors:
                 ray = ray_module()
                 count = self._wanted or max(1, int(ray.cluster_resources().get("CPU", 1) // self.threads))
@@ -68,15 +69,7 @@ class Crew:
 
     def hold(self, scene: Scene) -> Held:
         """``scene`` in the object store, put there once (the last ``WARM_SCENES`` scenes stay)."""
-        with self.connection.lock:
-            entry = self._held.get(id(scene))
-            if entry is None or entry[0] is not scene:
-                held = Held(f"scene-{next(self.serial)}", [ray_module().put(portable(scene))])
-                entry = self._held[id(scene)] = (scene, held)
-                while len(self._held) > WARM_SCENES:
-                    self._held.popitem(last=False)
-            self._held.move_to_end(id(scene))
-            return entry[1]
+        return self.scenes.hold(scene)
 
     def painted(self, actor, job: str | None, region: Region | None) -> list[int] | None:
         """The frames of ``job``'s band ``region`` that ``actor`` holds (any list when ``job`` is None), or None
@@ -122,7 +115,7 @@ class Crew:
     def close(self) -> None:
         """Stop the actors and forget the scenes held."""
         self.drop()
-        self._held.clear()
+        self.scenes.clear()
 
 
 def broken(refs: list) -> bool:

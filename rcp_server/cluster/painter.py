@@ -32,7 +32,7 @@ from ..camera.camera import Camera
 from ..painting.sequence import Shot, frame_params
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
-from .actor import Held
+from .actor import Held, HeldScenes
 from .connection import (
     Backoff,
     ClusterError,
@@ -86,7 +86,8 @@ class RayPainter:
         self.address = address
         self.threads = threads
         self.connection = Connection(address, num_cpus)
-        self.crew = Crew(self.connection, threads, actors)
+        self.scenes = HeldScenes()  # the object-store scene cache: the films' crew's and the walkers'
+        self.crew = Crew(self.connection, threads, actors, self.scenes)
 
     @property
     def backoff(self) -> Backoff:

@@ -10,32 +10,51 @@ do when they have no state.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..camera.camera import Camera
+from ..camera.camera import Camera, Region
 from ..painting.loop import PaintState, paint
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from ..util import images
 from .actor import Held, WarmScenes
+from .connection import ray_module
 
 WALK_SCENES = 2  # scenes a walk actor keeps built: the one shown and the one just left
+
+
+@dataclass(frozen=True)
+class Band:
+    """One band of a walk frame, painted and encoded by one worker: rows ``[y, y + rows)`` of the painting as a JPEG
+    of its own (the server forwards it as it is), and what the worker spent on it."""
+
+    y: int
+    rows: int
+    jpeg: bytes
+    continued: bool
+    paint_s: float
+    cpu_s: float
+    pixels: np.ndarray | None = None
+    node: str = ""  # the Ray node that painted it
 
 
 @dataclass(frozen=True)
 class Painted:
     """One walk frame, painted and encoded.
 
-    jpeg : the encoded frame; width, height : the painting's size in pixels (both eyes of a stereo pair);
-    serial : the frame whose state the worker keeps (None: painted on the server, the state is the session's);
-    continued : it went on from the last frame's state (temporal), rather than from ``I_0``; paint_s : wall
-    seconds painting and encoding on the worker; cpu_s : CPU seconds the worker's process spent on it (every
-    thread); pixels : (height, width, 3) uint8, the painting before encoding, when asked for (tests); seconds :
-    the frame's time as the server saw it (its round trip on Ray), what the walk's planner times."""
+    jpeg : the encoded frame (empty when it came in bands); bands : its bands, each encoded on its own worker, top
+    to bottom (empty when it is one JPEG); width, height : the painting's size in pixels (both eyes of a stereo
+    pair); serial : the frame whose state the workers keep (None: painted on the server, the state is the
+    session's); continued : it went on from the last frame's state (temporal), rather than from ``I_0``; paint_s :
+    wall seconds painting and encoding on the workers (the slowest band); cpu_s : CPU seconds the workers' processes
+    spent on it (every thread, every band); pixels : (height, width, 3) uint8, the painting before encoding, when
+    asked for (tests); seconds : the frame's time as the server saw it (its round trip on Ray), what the walk's
+    planner times."""
 
     jpeg: bytes
     width: int
@@ -46,15 +65,37 @@ class Painted:
     cpu_s: float
     pixels: np.ndarray | None = None
     seconds: float = 0.0
+    bands: tuple[Band, ...] = ()
+
+
+def joined(bands: list[Band], width: int, height: int, serial: int, seconds: float) -> Painted:
+    """The frame of ``bands`` (top to bottom): one band's JPEG is the frame's; several travel as they are."""
+    pixels = None
+    if all(band.pixels is not None for band in bands):
+        pixels = np.concatenate([band.pixels for band in bands], axis=0)
+    one = len(bands) == 1
+    return Painted(
+        bands[0].jpeg if one else b"",
+        width,
+        height,
+        serial,
+        all(band.continued for band in bands),
+        max(band.paint_s for band in bands),
+        sum(band.cpu_s for band in bands),
+        pixels,
+        seconds,
+        () if one else tuple(dataclasses.replace(band, pixels=None) for band in bands),
+    )
 
 
 class WalkPainter:
-    """A Ray actor that paints one walk-through's frames (``threads`` threads)."""
+    """A Ray actor that paints one walk-through's frames, or one band of rows of them (``threads`` threads)."""
 
     def __init__(self, threads: int):
         self.threads = threads
         self.scenes = WarmScenes(WALK_SCENES)
         self.serial: int | None = None  # the frame whose state is kept
+        self.region: Region | None = None  # the band of it
         self.state: PaintState | None = None
 
     def _scene(self, held: Held) -> Scene:
@@ -66,6 +107,56 @@ class WalkPainter:
         scene = self._scene(held)
         paint(scene, scene.camera, 8, 8, PaintParams(iterations=2), threads=1)
         return os.getpid()
+
+    def band(
+        self,
+        held: Held,
+        camera: Camera,
+        region: Region,
+        params: PaintParams,
+        scene_time: float,
+        quality: int,
+        serial: int,
+        after: int | None,
+        keep_pixels: bool = False,
+    ) -> Band:
+        """Rows ``region`` of frame ``serial`` (the painting's size: ``region.full_width x full_height``, both
+        eyes): painted from this band's state of frame ``after`` when this actor keeps it (temporal), else from
+        ``I_0``; encoded as JPEG at ``quality``."""
+        wall, cpu = time.perf_counter(), time.process_time()
+        width, height = region.full_width, region.full_height
+        whole = region == Region(width, height)
+        kept = self.region
+        # a whole frame goes on from a whole frame of any size (resized); a band only from the same band
+        same = kept == region or (whole and kept is not None and kept == Region(kept.full_width, kept.full_height))
+        continued = after is not None and self.serial == after and same and self.state is not None
+        previous = None
+        if continued and self.state is not None:
+            previous = self.state.resized(width, height) if whole else self.state
+        result = paint(
+            self._scene(held),
+            camera,
+            width,
+            height,
+            params,
+            time=scene_time,
+            previous=previous,
+            region=None if whole else region,
+            threads=self.threads,
+        )
+        self.serial, self.region, self.state = serial, region, result.state
+        pixels = images.to_uint8(result.image)
+        jpeg = images.encode(pixels, "JPEG", quality)
+        return Band(
+            region.y0,
+            region.height,
+            jpeg,
+            continued,
+            time.perf_counter() - wall,
+            time.process_time() - cpu,
+            pixels if keep_pixels else None,
+            ray_module().get_runtime_context().get_node_id(),
+        )
 
     def frame(
         self,
@@ -80,27 +171,9 @@ class WalkPainter:
         after: int | None,
         keep_pixels: bool = False,
     ) -> Painted:
-        """Frame ``serial``: painted from the state of frame ``after`` when this actor keeps it (temporal), else
-        from ``I_0``; encoded as JPEG at ``quality``. ``width x height``: the painting's size, both eyes."""
-        wall, cpu = time.perf_counter(), time.process_time()
-        continued = after is not None and self.serial == after and self.state is not None
-        previous = self.state.resized(width, height) if continued and self.state is not None else None
-        result = paint(
-            self._scene(held), camera, width, height, params, time=scene_time, previous=previous, threads=self.threads
-        )
-        self.serial, self.state = serial, result.state
-        pixels = images.to_uint8(result.image)
-        jpeg = images.encode(pixels, "JPEG", quality)
-        return Painted(
-            jpeg,
-            width,
-            height,
-            serial,
-            continued,
-            time.perf_counter() - wall,
-            time.process_time() - cpu,
-            pixels if keep_pixels else None,
-        )
+        """Frame ``serial`` whole (one band): see :meth:`band`."""
+        band = self.band(held, camera, Region(width, height), params, scene_time, quality, serial, after, keep_pixels)
+        return joined([band], width, height, serial, 0.0)
 
     def pid(self) -> int:
         return os.getpid()

@@ -1,95 +1,93 @@
-"""Walk-throughs painted on Ray: one actor a walker, admitted while the cluster has room, moved when lost.
+"""Walk-throughs painted on Ray: each walker admitted while the cluster has room, its frames painted in bands by a
+crew of actors on distinct nodes, the crew shrunk when a node is lost.
 
-The server routes (messages in, frames out); a walker's frames are painted and encoded by its own actor
-(:class:`~.walkactor.WalkPainter`), which keeps the scene and the temporal state: a frame sends the camera
-and returns the JPEG. Each actor paints one frame at a time, so walkers share the cores as their processes
-do, each at the pace of its own frames: none waits behind another's queue.
+The server routes (messages in, frames out); a walker's frame is painted and encoded by its crew
+(:class:`~.walkactor.WalkPainter`), one actor a node, each painting and encoding its own band of rows and keeping
+that band's temporal state: each pixel reads only its own previous values, so the bands need no halo and no
+exchange, and a frame is one call per node. The bands come back as JPEGs of their own and travel to the client as
+they are.
 
-* Admission (:mod:`.admission`): a walker takes a share of a node's cores, from the declared target and the
-  measured cost of a ray; past the cluster's room it is told so in one line, with a time to try again. The
-  actors ask Ray for no CPU (a film's crew holds every core it finds, and walkers must still be placed):
-  the shares are counted here, and the autoscaler is asked for the admitted walkers' cores and one more
-  walker's (``request_resources``), so the cluster grows and shrinks with them.
-* A lost actor (its worker or node gone, or a frame that does not come back in bounded time) is replaced on
-  a node with room, and the frame painted again there at once: the walker sees a pause. Its temporal state
-  went with it: the new actor starts the recursion again from ``I_0`` and keeps its own from there.
-* Ray lost as a whole raises :class:`~.connection.ClusterError` and backs off (the films' :class:`Backoff`,
-  shared): the session paints here meanwhile, and comes back to Ray once it may be tried again.
+* Admission (:mod:`.admission`): a walker takes a share of the cores, from the declared target and the measured
+  cost of a ray; never more walkers than the cluster's room (whole walkers per node). Its crew may be larger than
+  its share: alone, a walker paints on every node (as many as help: :func:`~.admission.crew_size`); with others,
+  the nodes are dealt out fairly (:func:`~.admission.crews`). The walk's planner sees the crew's quicker frames and
+  sizes the next ones from them.
+* A crew member lost (its worker or node gone, or a band that does not come back in bounded time) leaves the crew
+  and the frame is painted again at once by the others; a new member starts on a live node off the frames' path
+  and joins once it is warm. A walker with no warm member yet is painted on the server meanwhile (:class:`NoRoom`).
+* Ray lost as a whole raises :class:`~.connection.ClusterError`: the caller paints on the server and backs off.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import logging
-import math
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, field
 
-from ..camera.camera import Camera
+from ..camera.camera import Camera, Region
 from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
-from .actor import Held, portable
-from .admission import CostMeter, Full, Target, capacity, pick_node, share
+from .actor import HeldScenes
+from .admission import CostMeter, Full, Target, band_rows, capacity, crew_size, crews, pick_node, share
 from .connection import ClusterError, Connection, PaintingFailed, first_line, ray_module, worker_failure
-from .walkactor import Painted, WalkPainter
+from .inventory import Inventory
+from .pool import FIRST_FRAME_S, ActorLost, Member, Pool, kill, wait_all
+from .walkactor import Painted, joined
 
 log = logging.getLogger("rcp")
 
-POLL_S = 0.05  # how often a wait for a frame checks whether it is still wanted
-FIRST_FRAME_S = 60.0  # a new actor's first frame (its process started, the scene fetched, its BVH built)
-FRAME_LEAST_S = 2.0  # a frame not back within this, or FRAME_TIMES its walker's recent frame time, is lost
+FRAME_LEAST_S = 2.0  # a band not back within this, or FRAME_TIMES its walker's recent frame time, is lost
 FRAME_TIMES = 8.0
-NODES_FRESH_S = 2.0  # the nodes and their cores are asked of Ray again after this long
-HELD_SCENES = 8  # scenes kept in the object store for the walkers
-SPARE_START_S = 20.0  # a spare taken before it is warm: its start may take this long
-TRY_S = 30.0  # after a failure, a new actor must start within this for Ray to count as back
+ATTEMPTS = 3  # a frame whose crew members are lost is painted again by the others this many times
 SMALL = 8  # pixels each way of the frames that measure a frame's fixed cost
 CALIBRATION_FRAMES = 3  # frames of each size measured: the cheapest counts (the others met a busy core)
 
 
 @dataclass
 class Place:
-    """One admitted walker: its share of ``node``'s cores and, once it painted, its actor."""
+    """One admitted walker: its home node (where its share is counted), its crew (node -> member) and what its
+    frames took: the round trip, the painting on one node (all bands' wall seconds), the overhead beyond it."""
 
-    share: float
-    node: str
-    actor: Any = None
-    warming: Any = None  # the ref of its actor's start (and its scene's build), until the first frame waits for it
-    recent_s: float | None = None  # a running mean of its frames' round trips
-    first_s: float = FIRST_FRAME_S  # how long its actor's first frame may take (less for a spare, warm already)
+    home: str
+    order: int
+    crew: dict[str, Member] = field(default_factory=dict)
+    frames: int = 0
+    recent_s: float | None = None
+    paint_s: float | None = None
+    overhead_s: float | None = None
 
 
 class Walks:
-    """The walkers on the Ray of ``connection``, each admitted for ``target`` (see the module)."""
+    """The walkers on the Ray of ``connection``, each admitted for ``target`` (see the module); ``scenes``: the
+    object-store scene cache shared with the films' crew."""
 
-    def __init__(self, connection: Connection, target: Target, retry_s: int, max_threads: int = 8):
+    def __init__(
+        self,
+        connection: Connection,
+        target: Target,
+        retry_s: int,
+        scenes: HeldScenes | None = None,
+        max_threads: int = 8,
+    ):
         self.connection = connection
         self.target = target
         self.retry_s = retry_s
         self.max_threads = max_threads
+        self.scenes = scenes or HeldScenes()
         self.cost = CostMeter()
+        self.inventory = Inventory()
+        self.pool = Pool()
         self.places: dict[object, Place] = {}
         self.frames = 0  # painted on Ray
         self.worker_cpu_s = 0.0  # CPU seconds the workers spent on them
-        self.moved = 0  # walkers whose actor was lost and replaced
+        self.moved = 0  # crew members lost and left behind
         self._lock = threading.Lock()
-        self._measuring = threading.Lock()
-        self._asker: threading.Thread | None = None  # the thread that asks Ray for its nodes
-        self._asking: threading.Thread | None = None  # the last thread that asked the autoscaler
-        self._trier: threading.Thread | None = None  # the thread that tries Ray again after a failure
-        self._trying = False  # Ray failed: the walkers are painted here until it answers again
-        self._closed = False
-        self._spare: tuple[Any, str, Any] | None = None  # an actor started ahead, its node, the ref of its start
-        self._nodes: tuple[float, dict[str, float]] = (-math.inf, {})
-        self._held: dict[int, tuple[Scene, Held]] = {}
+        self._order = itertools.count()
         self._generation = -1
-        self._remote: Any = None
-        self._serial = itertools.count(1)  # names the scenes held
 
     # ---- admission ----
 
@@ -101,11 +99,11 @@ class Walks:
 
     def capacity(self, params: PaintParams) -> int:
         """Walkers with ``params`` the cluster holds at the target."""
-        return capacity(self.cores(), self.share(params))
+        return capacity(self.inventory.cores(), self.share(params))
 
     def describe(self, params: PaintParams) -> str:
         """One line: the walkers with ``params`` the cluster holds, at what share, on which cores."""
-        cores = self.cores()
+        cores = self.inventory.cores()
         return (
             f"room for {self.capacity(params)} walkers at {self.target} ({self.share(params):.2f} cores each) on "
             f"{len(cores)} nodes of {sum(cores.values()):g} cores"
@@ -113,72 +111,49 @@ class Walks:
 
     def figures(self) -> dict:
         """What the walks on Ray did so far: walkers placed, frames painted there, the CPU seconds the workers
-        spent on them, walkers moved after a lost actor, whether Ray is in use now."""
+        spent on them, crew members lost, and each walker's crew size and frames."""
         return {
             "walkers": len(self.places),
             "frames": self.frames,
             "worker_cpu_s": round(self.worker_cpu_s, 3),
             "moved": self.moved,
-            "on_ray": self.connection.ready() and not self._trying,
+            "crews": [len(place.crew) for place in list(self.places.values())],
+            "painted": [place.frames for place in list(self.places.values())],
         }
 
     def admit(self, key: object, params: PaintParams, scene: Scene | None = None) -> None:
-        """A place for walker ``key`` (its frames painted with ``params``), on the node with the most cores
-        left; :class:`~.admission.Full` when there is none. Its actor starts now, building ``scene``, while the
-        walker is told it is ready. While Ray backs off, nothing is reserved: the walker is painted on the
-        server, and placed when Ray is back (:meth:`paint`)."""
-        if self._trying or not self.connection.ready() or self.connection.gone() or self.cost.ray_s is None:
-            return
+        """A place for walker ``key`` (its frames painted with ``params``) on the node with the most room, never
+        past the cluster's room counted at today's cost; :class:`~.admission.Full` when there is none. Its crew
+        starts now, building ``scene``, while the walker is told it is ready."""
+        self._joined()
         walker = self.share(params)
         with self._lock:
-            cores = self.cores()
-            node = pick_node(cores, self._taken(), walker)
+            if key in self.places:
+                return
+            cores = self.inventory.cores()
+            held = capacity(cores, walker)
+            homes: dict[str, float] = {}
+            for place in self.places.values():
+                homes[place.home] = homes.get(place.home, 0.0) + walker
+            node = pick_node(cores, homes, walker) if len(self.places) < held else None
             if node is None:
-                held = capacity(cores, walker)
                 raise Full(
                     f"the cluster has room for {held} walkers at {self.target} ({walker:.2f} cores each, measured)"
                     f" and all are walking",
                     self.retry_s,
                 )
-            place = self.places[key] = Place(walker, node)
-        if scene is not None and self._remote is not None:
-            self._start(place, scene)
-        self._autoscale()
+            self.places[key] = Place(node, next(self._order))
+        if scene is not None:
+            self._staff(key, self.scenes.hold(scene), scene.camera, params, self.target.height)
+        self.inventory.autoscale([walker] * len(self.places))
 
     def leave(self, key: object) -> None:
-        """Walker ``key`` has gone: its actor stops, its place is free."""
+        """Walker ``key`` has gone: its crew stops, its place is free."""
         with self._lock:
             place = self.places.pop(key, None)
-        if place is not None and place.actor is not None and not self._trying:
-            _kill(place.actor)
-        self._autoscale()
-
-    def cores(self) -> dict[str, float]:
-        """The live nodes' cores, node id -> CPUs: asked of Ray once, then again every ``NODES_FRESH_S`` on a thread
-        (on a Ray that died, the question waits for a minute: no frame and no hello waits for it)."""
-        when, nodes = self._nodes
-        if not nodes:
-            self._ask_nodes()
-        elif time.monotonic() - when > NODES_FRESH_S and not (self._asker and self._asker.is_alive()):
-            self._asker = threading.Thread(target=self._ask_nodes, name="rcp-ray-nodes", daemon=True)
-            self._asker.start()
-        return self._nodes[1]
-
-    def _ask_nodes(self) -> None:
-        found = {n["NodeID"]: float(n["Resources"].get("CPU", 0.0)) for n in ray_module().nodes() if n["Alive"]}
-        self._nodes = (time.monotonic(), {node: cpu for node, cpu in found.items() if cpu > 0})
-
-    def _autoscale(self) -> None:
-        """Ask the autoscaler for the admitted walkers' cores and one more walker's: it adds a node before the
-        next walker finds none, and lets one go when walkers leave (no autoscaler: nothing happens)."""
-        shares = [place.share for place in self.places.values()]
-        bundles = [{"CPU": s} for s in shares + shares[-1:]]
-        if self._trying or not ray_module().is_initialized():  # Ray is down (a call could wait, or start one)
-            return
-        if self._closed:
-            return
-        self._asking = threading.Thread(target=_request, args=(bundles,), name="rcp-ray-autoscale", daemon=True)
-        self._asking.start()
+        if place is not None:
+            for member in place.crew.values():
+                kill(member.actor)
 
     # ---- painting ----
 
@@ -187,11 +162,11 @@ class Walks:
         of ``scene`` with ``params`` at ``size`` (the target's) and at ``SMALL`` pixels (the fewest CPU seconds of
         ``CALIBRATION_FRAMES`` each, after one that builds the scene). Returns (CPU seconds a frame, a ray)."""
         self._joined()
-        actor = self._remote.remote(1)
         ray = ray_module()
+        held = self.scenes.hold(scene)
+        actor, warm = self.pool.started(held)
         try:
-            held = self._hold(scene)
-            ray.get(actor.warm.remote(held), timeout=FIRST_FRAME_S)
+            ray.get(warm, timeout=FIRST_FRAME_S)
 
             def cpu_s(width: int, height: int) -> float:
                 shot = (scene.camera, width, height, params, 0.0, 70)
@@ -201,9 +176,9 @@ class Walks:
             width, height = size or (self.target.width, self.target.height)
             small, large = cpu_s(SMALL, SMALL), cpu_s(width, height)
         except Exception as exc:
-            raise ClusterError(f"the cost of a frame on Ray was not measured: {first_line(exc)}") from None
+            raise ClusterError(f"the cost of a frame on Ray was not measured: {worker_failure(exc)}") from None
         finally:
-            _kill(actor)
+            kill(actor)
         per_pixel = params.spp * params.iterations
         rays = width * height * per_pixel - SMALL * SMALL * per_pixel
         ray_s = max(large - small, 0.0) / max(rays, 1)
@@ -226,189 +201,97 @@ class Walks:
         should_stop: Callable[[], bool] | None = None,
         keep_pixels: bool = False,
     ) -> Painted:
-        """Walker ``key``'s frame ``serial`` (see :meth:`.WalkPainter.frame`), painted on its actor, placed now
-        if it has none. Raises :class:`ClusterError` when it cannot be painted on Ray (backing off, Ray gone,
-        no room): the caller paints it itself; :class:`~rcp_server.painting.loop.Abandoned` once
+        """Walker ``key``'s frame ``serial`` (the painting's ``width x height``, both eyes), in bands over its
+        crew. Raises :class:`NoRoom` when the walker has no place or no warm crew member yet (the caller paints it
+        itself), :class:`ClusterError` when Ray failed, :class:`~rcp_server.painting.loop.Abandoned` once
         ``should_stop`` says so."""
-        self.connection.check()
-        if self._trying:  # after a failure, Ray is tried on a thread of its own; painted here meanwhile
-            self._try_again(scene)
-            raise NoRoom("Ray is being tried again")
         try:
             self._joined()
-            if self.cost.ray_s is None:  # not measured at start-up: this walker's scene measures it
-                with self._measuring:
-                    if self.cost.ray_s is None:
-                        self.calibrate(scene, params)
-            if key not in self.places:
-                try:
-                    self.admit(key, params)
-                except Full as full:
-                    raise NoRoom(str(full)) from None
             place = self.places.get(key)
             if place is None:
-                raise NoRoom("the walker has no place on Ray yet")
-            for _ in range(2):
-                if place.actor is None:
-                    self._start(place, scene)
-                ref = place.actor.frame.remote(
-                    self._hold(scene), camera, width, height, params, scene_time, quality, serial, after, keep_pixels
-                )
+                raise NoRoom("the walker has no place on Ray")
+            held = self.scenes.hold(scene)
+            for _ in range(ATTEMPTS):
+                members = self._staff(key, held, camera, params, height)
+                if not members:
+                    raise NoRoom("the walker's crew is starting")
+                regions = _bands(width, height, len(members), camera, params)
+                clock = time.perf_counter()
+                refs = [
+                    m.actor.band.remote(held, camera, r, params, scene_time, quality, serial, after, keep_pixels)
+                    for m, r in zip(members, regions, strict=False)
+                ]
+                limit = FIRST_FRAME_S if place.recent_s is None else max(FRAME_LEAST_S, FRAME_TIMES * place.recent_s)
                 try:
-                    if place.warming is not None:  # the actor's start and the scene's build are not the frame's
-                        self._wait(place.warming, place, should_stop)
-                        place.warming = None
-                    clock = time.perf_counter()
-                    painted = self._wait(ref, place, should_stop)
-                    painted = dataclasses.replace(painted, seconds=time.perf_counter() - clock)
-                except _ActorLost as lost:
+                    bands = wait_all(refs, [m.actor for m in members], limit, should_stop, self.connection.gone)
+                except ActorLost as lost:
                     if key not in self.places:
-                        raise Abandoned from None  # it left meanwhile: its actor was stopped
-                    log.warning("a walker's Ray worker was lost (%s): moved to another", lost)
-                    _kill(place.actor)
-                    place.actor, after = None, None
-                    self.moved += 1
+                        raise Abandoned from None  # it left meanwhile: its crew was stopped
+                    self._lost(place, lost)
+                    after = None
                     continue
-                self._painted(painted, place, params)
+                seconds = time.perf_counter() - clock
+                painted = joined(bands, width, height, serial, seconds)
+                self._painted(place, painted, params, seconds)
                 self.connection.backoff.succeeded()
                 return painted
-            raise ClusterError("a walker's Ray worker was lost twice in a row")
-        except (Abandoned, NoRoom, PaintingFailed):
-            raise
-        except ClusterError as exc:
-            self._failed(str(exc))
+            raise ClusterError(f"a walker's Ray workers were lost {ATTEMPTS} times in a row")
+        except (Abandoned, NoRoom, PaintingFailed, ClusterError):
             raise
         except (Exception, SystemExit) as exc:  # Ray's own, many and long (a stopped runtime's call exits): Ray failed
-            self._failed(f"Ray failed a walk frame: {first_line(exc)}")
             raise ClusterError(f"Ray failed a walk frame: {first_line(exc)}") from None
 
-    def _painted(self, painted: Painted, place: Place, params: PaintParams) -> None:
-        self.frames += 1
-        self.worker_cpu_s += painted.cpu_s
-        self.cost.measured(painted.cpu_s, painted.width * painted.height * params.spp * params.iterations)
-
-    def _failed(self, reason: str) -> None:
-        """Ray failed as a whole: not tried for a while (painted here meanwhile), then tried again off the frames'
-        path (:meth:`_try_again`; if its runtime stopped, it is joined afresh then: :meth:`.Connection.gone`). The
-        actors are forgotten: each walker gets a new one once Ray is back."""
-        log.warning("walkers painted on the server until Ray answers again: %s", reason)
-        self.connection.gone()
-        self.connection.backoff.failed(reason)
+    def _staff(self, key: object, held, camera: Camera, params: PaintParams, height: int) -> list[Member]:
+        """Walker ``key``'s crew for its next frame: members start on the nodes it is dealt (:func:`crews`, as many
+        as help: :func:`crew_size`) and leave the nodes it is not; the warm ones on its nodes paint (by node id,
+        so a band keeps its rows frame after frame)."""
+        cores = self.inventory.cores()
         with self._lock:
-            self._trying, self._spare = True, None
-            for place in self.places.values():
-                place.actor = place.warming = None
+            place = self.places.get(key)
+            if place is None:
+                return []
+            order = sorted(self.places.items(), key=lambda item: item[1].order)
+            dealt = crews(list(cores), [(k, p.home) for k, p in order])
+            sharing: dict[str, int] = {}
+            for nodes in dealt.values():
+                for node in nodes:
+                    sharing[node] = sharing.get(node, 0) + 1
+        splits = _splits(camera, params)
+        wanted = dealt.get(key, [place.home])
+        count = crew_size(len(wanted), height, place.paint_s, place.overhead_s) if splits else 1
+        wanted = wanted[:count]
+        for node in list(place.crew):
+            if node not in wanted or node not in cores or place.crew[node].stale():
+                kill(place.crew.pop(node).actor)
+        for node in wanted:
+            if node not in place.crew and node in cores:
+                threads = max(1, min(self.max_threads, int(cores[node] // sharing.get(node, 1))))
+                place.crew[node] = self.pool.start(node, threads, held)
+        return [place.crew[node] for node in sorted(place.crew) if place.crew[node].ready()]
 
-    def _wait(self, ref, place: Place, should_stop: Callable[[], bool] | None) -> Any:
-        """``ref``'s value (a frame, or the actor's start); :class:`_ActorLost` when its actor died or it took
-        too long."""
-        ray = ray_module()
-        clock = time.monotonic()
-        limit = place.first_s if place.recent_s is None else max(FRAME_LEAST_S, FRAME_TIMES * place.recent_s)
-        while not ray.wait([ref], timeout=POLL_S)[0]:
-            if should_stop is not None and should_stop():
-                raise Abandoned
-            if time.monotonic() - clock > limit:
-                raise _ActorLost(f"no frame within {limit:.1f} s")
-            if self.connection.gone():
-                raise ClusterError("Ray stopped mid-walk")
-        try:
-            value = ray.get(ref)
-        except (ray.exceptions.RayActorError, ray.exceptions.ObjectLostError) as exc:
-            raise _ActorLost(first_line(exc)) from None
-        except ray.exceptions.RayTaskError as exc:
-            raise PaintingFailed(f"a walk frame failed on Ray: {worker_failure(exc)}") from None
-        seconds = time.monotonic() - clock
+    def _lost(self, place: Place, lost: ActorLost) -> None:
+        """Crew members lost: they leave the crew (their nodes count as gone until Ray says otherwise)."""
+        log.warning("a walker's Ray worker was lost (%s): its frame is painted again by the others", lost)
+        for node, member in list(place.crew.items()):
+            if member.actor in lost.actors:
+                del place.crew[node]
+                kill(member.actor)
+                if lost.died:
+                    self.inventory.lost(node)
+                self.moved += 1
+
+    def _painted(self, place: Place, painted: Painted, params: PaintParams, seconds: float) -> None:
+        self.frames += 1
+        place.frames += 1
+        self.worker_cpu_s += painted.cpu_s
+        bands = painted.bands or ()
+        paint_s = sum(b.paint_s for b in bands) if bands else painted.paint_s
+        overhead = max(0.0, seconds - painted.paint_s)
         place.recent_s = seconds if place.recent_s is None else 0.7 * place.recent_s + 0.3 * seconds
-        return value
-
-    def _start(self, place: Place, scene: Scene) -> None:
-        """An actor for ``place``: the spare when there is one (started already, its kernels loaded), else a new
-        one on its node if that is still there, else on the node with most room; it builds ``scene`` at once
-        (``place.warming``), and a new spare starts."""
-        cores = self.cores()
-        if place.node not in cores:
-            place.node = pick_node(cores, self._taken(but=place), place.share) or place.node
-        spare, self._spare = self._spare, None
-        if spare is not None and spare[1] in cores:
-            place.actor, place.node, warm = spare
-            # a spare that is warm answers at once (a dead Ray is found in seconds); one still starting may take
-            # a process's start
-            place.first_s = FRAME_LEAST_S if ray_module().wait([warm], timeout=0)[0] else SPARE_START_S
-        else:
-            place.first_s = FIRST_FRAME_S
-            if spare is not None:
-                _kill(spare[0])
-            place.actor = self._actor(place.node, self._threads(place.share, cores.get(place.node, 1.0)))
-        held = self._hold(scene)
-        place.warming, place.recent_s = place.actor.warm.remote(held), None
-        self._start_spare(held, place.share)
-
-    def _start_spare(self, held: Held, walker: float) -> None:
-        """A spare actor on the node with most room for a walker of ``walker`` cores, warm with ``held``: a lost
-        actor's walker, or a new walker, takes it and paints at once, rather than after a process starts."""
-        node = pick_node(self.cores(), self._taken(), walker)
-        if node is not None:
-            actor = self._actor(node, self._threads(walker, self.cores()[node]))
-            self._spare = (actor, node, actor.warm.remote(held))
-
-    def _actor(self, node: str, threads: int) -> Any:
-        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
-
-        strategy = NodeAffinitySchedulingStrategy(node, soft=True)  # soft: elsewhere if it is gone
-        return self._remote.options(scheduling_strategy=strategy).remote(threads)
-
-    def _threads(self, walker: float, cores: float) -> int:
-        """A walker's actor paints with as many threads as its share of cores, within its node's."""
-        return max(1, min(self.max_threads, math.ceil(walker), int(cores)))
-
-    def _taken(self, but: Place | None = None) -> dict[str, float]:
-        """The cores the walkers' shares take on each node (node -> cores), ``but``'s aside."""
-        taken: dict[str, float] = {}
-        for place in list(self.places.values()):
-            if place is not but:
-                taken[place.node] = taken.get(place.node, 0.0) + place.share
-        return taken
-
-    def _try_again(self, scene: Scene) -> None:
-        """Try Ray again on a thread (one at a time), off every frame's path: join it again if its runtime
-        stopped, then start an actor that builds ``scene`` within ``TRY_S``; it becomes the spare, and the walkers
-        go back to Ray. Else Ray backs off again."""
-        if self._trier is not None and self._trier.is_alive():
-            return
-
-        def attempt() -> None:
-            actor = None
-            try:
-                if self.connection.gone() and self.connection.address in (None, "", "local"):
-                    # Ray's processes die with the thread that starts them: a runtime of our own is not started here
-                    raise ClusterError("the local Ray runtime stopped")
-                self._joined()
-                actor = self._remote.remote(1)  # asks nothing of Ray that waits (the nodes would, on a dead one)
-                warm = actor.warm.remote(self._hold(scene))
-                if not self._waited(warm, TRY_S):
-                    raise ClusterError(f"a Ray worker did not start within {TRY_S:g} s")
-                self._ask_nodes()
-                node = next(iter(self.cores()), None)
-                with self._lock:
-                    self._spare, self._trying = (actor, node, warm) if node else None, False
-                log.info("walkers on Ray again")
-            except (Exception, SystemExit) as exc:  # Ray's own, many: still down
-                if actor is not None:
-                    _kill(actor)
-                self.connection.backoff.failed(f"Ray is still down: {first_line(exc)}")
-
-        self._trier = threading.Thread(target=attempt, name="rcp-ray-try", daemon=True)
-        self._trier.start()
-
-    def _waited(self, ref, seconds: float) -> bool:
-        """Whether ``ref`` is ready within ``seconds``, asked in short turns (a closing server stops waiting)."""
-        deadline = time.monotonic() + seconds
-        while not self._closed and time.monotonic() < deadline:
-            if ray_module().wait([ref], timeout=POLL_S)[0]:
-                ray_module().get(ref)
-                return True
-        return False
+        place.paint_s = paint_s if place.paint_s is None else 0.7 * place.paint_s + 0.3 * paint_s
+        place.overhead_s = overhead if place.overhead_s is None else 0.7 * place.overhead_s + 0.3 * overhead
+        rays = painted.width * painted.height * params.spp * params.iterations
+        self.cost.measured(painted.cpu_s / max(1, len(bands)), rays // max(1, len(bands)))
 
     def _joined(self) -> None:
         """Ray joined (again, after it stopped): what an earlier join held is forgotten."""
@@ -416,63 +299,32 @@ class Walks:
             self.connection.join()
             if self._generation != self.connection.generation:
                 self._generation = self.connection.generation
-                self._held.clear()
-                self._nodes = (-math.inf, {})
+                self.scenes.clear()
+                self.inventory.forget()
                 for place in self.places.values():
-                    place.actor = None
-                self._spare = None
-                self._remote = ray_module().remote(num_cpus=0, max_restarts=0)(WalkPainter)
-
-    def _hold(self, scene: Scene) -> Held:
-        """``scene`` in the object store, put there once."""
-        with self._lock:
-            entry = self._held.get(id(scene))
-            if entry is None or entry[0] is not scene:
-                entry = self._held[id(scene)] = (
-                    scene,
-                    Held(f"walk-{next(self._serial)}", [ray_module().put(portable(scene))]),
-                )
-                while len(self._held) > HELD_SCENES:
-                    self._held.pop(next(iter(self._held)))
-            return entry[1]
+                    place.crew.clear()
+                self.pool.joined()
 
     def close(self) -> None:
-        """Stop every walker's actor."""
-        self._closed = True
-        for thread in (self._trier, self._asker, self._asking):  # no call of theirs may outlive Ray's shutdown
-            if thread is not None:
-                thread.join(1.0)
+        """Stop every walker's crew."""
+        self.inventory.close()
         with self._lock:
             places, self.places = list(self.places.values()), {}
-            spare, self._spare = self._spare, None
-        for actor in [place.actor for place in places] + ([spare[0]] if spare else []):
-            if actor is not None and not self._trying:
-                _kill(actor)
+        for place in places:
+            for member in place.crew.values():
+                kill(member.actor)
 
 
-def _request(bundles: list[dict]) -> None:
-    """Ask the autoscaler for ``bundles`` (on a thread: it waits for Ray's control store)."""
-    try:
-        from ray.autoscaler.sdk import request_resources
+def _splits(camera: Camera, params: PaintParams) -> bool:
+    """Whether a frame may be painted in bands: the ray-traced method, each pixel reading only its own previous
+    values; not the image method (its lookups reach the whole screen), nor eyes that share their smudges."""
+    return params.method == "raytrace" and not (camera.eyes == "shared" and camera.stereo != "mono")
 
-        request_resources(bundles=bundles)
-    except Exception as exc:  # an old Ray, a client connection: the cluster keeps its size
-        log.debug("walkers' resources not requested: %s", first_line(exc))
+
+def _bands(width: int, height: int, count: int, camera: Camera, params: PaintParams) -> list[Region]:
+    count = count if _splits(camera, params) else 1
+    return [Region(width, height, 0, y, width, rows) for y, rows in band_rows(height, count)]
 
 
 class NoRoom(ClusterError):
     """A walker Ray has no place for (yet): painted on the server; not a failure of Ray's."""
-
-
-class _ActorLost(Exception):
-    """A walker's actor died, or its frame did not come back in bounded time."""
-
-
-def _kill(actor) -> None:
-    ray = ray_module()
-    if not ray.is_initialized():  # Ray stopped, and its actors with it (a call now would start a runtime)
-        return
-    try:
-        ray.kill(actor)
-    except Exception:  # gone already, or Ray with it: nothing left to stop
-        pass

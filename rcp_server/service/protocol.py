@@ -342,6 +342,9 @@ class Frame(BaseModel):
     dropped: int  # frames rendered but never sent, because a newer one replaced them
     projection: Literal[PROJECTIONS] = "perspective"  # type: ignore[valid-type]
     stereo: Literal[STEREO] = "mono"  # type: ignore[valid-type]
+    # painted in bands on several machines: each band's [first row, rows], top to bottom; one binary JPEG a band
+    # follows instead of one for the frame, each drawn at its rows (the frame shows once all are in)
+    bands: list[tuple[int, int]] | None = None
 
 
 ClientType = Literal["hello", "camera", "paint", "mode", "view", "pick", "move"]

@@ -102,9 +102,10 @@ class Session:
         self.kept: int | None = None  # on Ray: the last frame shown, whose per-pixel data its worker keeps
         self.serial = 0  # frames asked for
         self.closed = False
+        self.refused: Full | None = None  # the hello was refused for want of room: the socket closes
         # ---- the outbox (drained by the sender) ----
         self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
-        self.frame: tuple[str, bytes] | None = None  # the newest frame not yet sent
+        self.frame: tuple[str, list[bytes]] | None = None  # the newest frame not yet sent (its JPEG, or its bands')
         self.seq = 0
         self.dropped = 0
         self.outbox = asyncio.Event()
@@ -175,8 +176,18 @@ class Session:
             self._note(protocol.Error.answering(text, f"bad message: {one_line(exc)}"))
         except (CameraError, ValueError) as exc:
             self._note(protocol.Error.answering(text, str(exc)))
+            if self.refused is not None:  # no room for this walker anywhere: told, then closed at once
+                await self._refuse(self.refused)
         except Exception:  # a fault of ours: this message is lost, the session is not
             self._note(protocol.Error.answering(text, fault_message(report_fault(f"session message {text[:200]!r}"))))
+
+    async def _refuse(self, full: Full) -> None:
+        """Send the refusal line now and close with a reason that says when to try again (1013)."""
+        while self.notes:
+            await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
+        reason = f"no room for another walker; try again in {full.retry_after} s"
+        await self.ws.close(code=1013, reason=reason)
+        raise WebSocketDisconnect(1013, reason)
 
     def _apply(self, msg) -> None:
         if isinstance(msg, protocol.Hello):
@@ -245,6 +256,7 @@ class Session:
             try:
                 self.service.walks.admit(self, painting.params, painting.scene)
             except Full as full:
+                self.refused = full  # said in one line, then the socket closes with its retry time (_take)
                 raise ValueError(str(full)) from None
         self.params, self.scene = painting.params, painting.scene
         self.camera, self.camera_id = self.scene.camera, None
@@ -388,8 +400,9 @@ class Session:
             dropped=0,
             projection=job.camera.projection,
             stereo=job.camera.stereo,
+            bands=[(band.y, band.rows) for band in frame.bands] or None,
         )
-        self._post_frame(meta, frame.jpeg)
+        self._post_frame(meta, [band.jpeg for band in frame.bands] or [frame.jpeg])
 
     # ---- sending ----
 
@@ -397,11 +410,11 @@ class Session:
         self.notes.append(message.model_dump_json())
         self.outbox.set()
 
-    def _post_frame(self, meta: protocol.Frame, jpeg: bytes) -> None:
+    def _post_frame(self, meta: protocol.Frame, jpegs: list[bytes]) -> None:
         if self.frame is not None:
             self.dropped += 1  # never sent: this newer frame replaces it
         self.seq += 1
-        self.frame = (meta.model_copy(update={"seq": self.seq, "dropped": self.dropped}).model_dump_json(), jpeg)
+        self.frame = (meta.model_copy(update={"seq": self.seq, "dropped": self.dropped}).model_dump_json(), jpegs)
         self.outbox.set()
 
     async def _send(self) -> None:
@@ -411,10 +424,11 @@ class Session:
             while self.notes:
                 await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
             if self.frame is not None:
-                text, jpeg = self.frame
+                text, jpegs = self.frame
                 self.frame = None
                 await self._deliver({"type": "websocket.send", "text": text})
-                await self._deliver({"type": "websocket.send", "bytes": jpeg})
+                for jpeg in jpegs:  # one, or a band's each (forwarded as the workers encoded them)
+                    await self._deliver({"type": "websocket.send", "bytes": jpeg})
 
     async def _deliver(self, message: dict) -> None:
         """A send waits while the client's buffers are full (newer frames replace the unsent one meanwhile);

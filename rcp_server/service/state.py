@@ -30,8 +30,7 @@ from .videos import Videos
 from .workshop import Workshop
 
 if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
-    from ..cluster.painter import RayPainter
-    from ..cluster.walks import Walks
+    from ..cluster.remote import RemoteRay, RemoteWalks
 
 log = logging.getLogger("rcp.service")
 
@@ -60,8 +59,8 @@ class Service:
     workshop: Workshop
     videos: Videos
     store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
-    cluster: RayPainter | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
-    walks: Walks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
+    cluster: RemoteRay | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
+    walks: RemoteWalks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
     prints: Prints | None = None  # stills at print size, painted in the background (opened with the service)
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
@@ -80,9 +79,10 @@ class Service:
         cluster = workshop = None
         try:
             if settings.ray_address is not None:  # joined before serving: healthy means Ray is there
-                from ..cluster.painter import RayPainter
+                from ..cluster.remote import RemoteRay
 
-                cluster = RayPainter(settings.ray_address)
+                # Ray's driver runs in a child process: the server outlives its cluster
+                cluster = RemoteRay(settings.ray_address, walk_target(settings), settings.walk_retry_s)
                 cluster.start(settings.ray_join_s)
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             videos = Videos(settings, workshop, store, cluster)
@@ -203,22 +203,30 @@ class Service:
         return self.cluster is not None and work >= self.settings.ray_min_work and self.cluster.ready()
 
 
-def open_walks(settings: Settings, cluster: RayPainter, scenes: dict[str, Scene]) -> Walks:
-    """The walkers' place on Ray, with the cost of a ray measured there on the first scene (when that fails, it is
-    measured again with the first walker's frame)."""
+def walk_target(settings: Settings):
+    """What each walker on Ray is admitted for (None: walks are not painted on Ray)."""
     from ..cluster.admission import Target
-    from ..cluster.walks import Walks
 
-    target = Target(1000.0 / settings.frame_ms, settings.walk_width, settings.walk_height)
-    walks = Walks(cluster.connection, target, settings.walk_retry_s)
+    if not settings.ray_walks:
+        return None
+    return Target(1000.0 / settings.frame_ms, settings.walk_width, settings.walk_height)
+
+
+def open_walks(settings: Settings, cluster: RemoteRay, scenes: dict[str, Scene]) -> RemoteWalks:
+    """The walkers' place on Ray (past its room, on the server's own cores), with the cost of a ray measured there
+    on the first scene (when that fails, it is measured again with the first walker's frame)."""
+    from ..cluster.remote import RemoteWalks
+
+    walks = RemoteWalks(cluster, max(1, settings.threads), settings.walk_retry_s)
     for scene in list(scenes.values())[:1]:
         try:
-            frame_s, ray_s = walks.calibrate(scene, scene.painting({}))
+            measured = walks.calibrate(scene, scene.painting({}))
+            frame_s, ray_s = measured["frame_s"], measured["ray_s"]
             log.info(
                 "walkers on Ray, measured: %.2f ms a frame and %.3g us a ray of CPU; %s",
                 frame_s * 1e3,
                 ray_s * 1e6,
-                walks.describe(scene.painting({})),
+                measured["describe"],
             )
         except Exception as exc:  # Ray answers, but not yet for this: the first walker measures it
             log.warning("walkers on Ray: %s", exc)

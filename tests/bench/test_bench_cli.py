@@ -28,8 +28,9 @@ FLAGS = {
         "--cores",
         "--server-cores",
         "--walkers-only",
+        "--overhead-ms",
     },
-    "walkers": {"--ray", "--scene", "--width", "--height", "--seconds"},
+    "walkers": {"--ray", "--scene", "--width", "--height", "--seconds", "--crew"},
     "memory": {"--width", "--height", "--threads"},
     "flicker": {"--scene", "--width", "--height", "--fps", "--frames", "--temporal", "--boil"},
 }

@@ -49,3 +49,14 @@ def test_bands_encoded_on_workers_leave_the_server_one_jpeg_a_frame():
     paint = 0.005 + 640 * 360 * 6 * 1e-7 / 14
     assert bound == "painting" and fps == pytest.approx(1 / paint)  # encoding 10 ms / 2 and routing 2 ms are less
     assert latency == pytest.approx(0.004 + paint + 640 * 360 * 3 * 8 / 10e9 + 0.01 + 0.002)
+
+
+def test_a_crews_frame_takes_its_overhead_beside_its_share_of_the_rays():
+    from rcp_server.bench.walkmodel import crew
+
+    m = Measured(0.002, 1e-7, 0.004, 0.001, {(100, 100): 1000}, {(100, 100): 0.001}, 6)
+    rate, latency, efficiency = crew(m, (100, 100), 4, 2, 6)
+    rays_s = 100 * 100 * 6 * 1e-7 / 8  # a node's share of the rays, on its two cores
+    assert latency == pytest.approx(0.004 + 0.002 + rays_s) and rate == pytest.approx(1 / latency)
+    assert efficiency == pytest.approx(rays_s / latency)
+    assert crew(m, (100, 100), 8, 2, 6)[2] < efficiency  # more nodes: quicker frames, each node less busy
