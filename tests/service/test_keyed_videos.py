@@ -80,4 +80,5 @@ def test_keys_that_cannot_paint_or_cost_too_much_are_refused_in_one_line(server)
         "/api/videos", json={"scene": "tiny", "path": {**KEYED, "keyframes": [first, {**second, "paint": [1]}]}}
     )
     assert not_a_table.status_code == 422
-    assert not_a_table.json()["detail"][0]["loc"] == ["body", "path", "keyframes", 1, "paint"]
+    where = not_a_table.json()["detail"][0]["loc"]  # the path's model may name itself among the path's kinds
+    assert where[:2] == ["body", "path"] and where[-3:] == ["keyframes", 1, "paint"]
