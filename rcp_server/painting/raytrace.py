@@ -23,7 +23,7 @@ from ..settings.mappings import MappingInput, get_mapping
 from ..settings.params import PaintParams
 from ..util.sampling import noise_vectors, stratified_offsets
 from ..util.stopwatch import Stopwatch
-from . import fields, outlines
+from . import fields, outlines, screen
 from .alphamask import pass_masked, step_floor
 from .fields import Looks
 
@@ -133,6 +133,7 @@ class TileBuffers:
             starts=np.empty((cut, 3), RAY_DTYPE),
             todo=np.empty(cut, np.int64),
             next_todo=np.empty(cut, np.int64),
+            queue=np.empty(rays, np.int64),
         )
         whole = Region(capacity, 1)
         states = (PaintState.empty(whole, channels), PaintState.empty(whole, channels))
@@ -158,6 +159,7 @@ class TileBuffers:
             starts=s.starts[cut],
             todo=s.todo[cut],
             next_todo=s.next_todo[cut],
+            queue=s.queue[:rays],
         )
         states = (self.states[0].first(n, region), self.states[1].first(n, region))
         return scratch, states, None if self.anchor is None else self.anchor[:n]
@@ -321,7 +323,8 @@ class Frame:
             ink=ink(scene, time, camera, width, height),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
-        trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry))
+        cells = screen.cells(camera, params, width, height, geometry.triangles) if tracer else kernels.NO_SCREEN
+        trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry), cells)
         return cls(trace, shading, tracer, Looks.of(params, geometry.object_names, geometry.material_names))
 
 

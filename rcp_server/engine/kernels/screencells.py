@@ -1,0 +1,290 @@
+"""The screen cells of ``visibility.py``, built once a painting: for each eye at rest, cells of
+``CELL`` x ``CELL`` pixels over its image and a guard band around it, each listing every triangle whose
+projection can cover a point of the cell.
+
+Conservative everywhere it matters:
+
+- a triangle's projection is bounded by its corners' projections after clipping it to ``z >= eps`` (z the
+  depth along the view axis), where ``eps`` is small enough that what the clip removes (its points at
+  ``0 < z < eps``, no nearer to the eye than its plane) projects beyond every cell; a triangle whose plane
+  passes through the eye is listed everywhere; nothing behind the eye is ever hit by a ray of the cells;
+- a triangle is dropped from a cell only when another one covers the whole cell and lies provably nearer
+  than Embree can ever place the dropped one (its plane's distance from the eye);
+- a cell whose list stays longer than ``LONGEST`` is marked long: its rays go to Embree.
+
+The kernel's records hold, for every face and eye, what its edge functions and distance need in double
+precision and the bounds of Embree's single-precision errors on them.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+
+import numpy as np
+
+from .bundles import Screen
+from .jit import jit
+from .visibility import EDGES, OFFSET, RECORD, REL_T
+
+CELL = 4  # pixels a side
+LONGEST = 24  # triangles a cell may list; a longer list goes to Embree (it would cost more than the BVH)
+ENTRIES = 1.0  # entries of all lists a pixel of the image, at most: the cells with the longest lists go first
+GUARD_SHARE = 0.25  # the guard band is at most this share of the image's height, each side
+ERROR_ULPS = 64.0  # bound of Embree's float32 error, in ulps of the magnitudes it multiplies
+VARIABLE = "RCP_SCREEN_CELLS"
+"""``RCP_SCREEN_CELLS=0`` turns the screen cells off: every ray goes to Embree (the pictures do not change)."""
+
+
+def enabled() -> bool:
+    """Whether paintings use the screen cells (``RCP_SCREEN_CELLS``, on unless 0, off or false)."""
+    return os.environ.get(VARIABLE, "1").strip().lower() not in ("0", "off", "false", "no")
+
+
+def screen_bytes(width: int, height: int) -> float:
+    """Bytes a pixel the cells of a ``width x height`` eye take at most: a start (int32) and a long flag (a
+    byte) a cell over the image and the widest guard band, and ``ENTRIES`` entries a pixel (a face, int32,
+    and an error, float32)."""
+    guard = GUARD_SHARE * height
+    area = (width + 2 * guard + CELL) * (height + 2 * guard + CELL) / (width * height)
+    return area * (4 + 1) / CELL**2 + 8 * ENTRIES
+
+
+def guard_pixels(lambda_p: float, noise: float, height: int) -> int:
+    """How far past the image the cells reach, pixels: the largest displacement a painting makes with
+    ``lambda_p`` (its largest, overrides included) and ``noise``, within ``GUARD_SHARE`` of the height. Rays
+    beyond it are asked of Embree, so this is a matter of speed, not of what a ray finds."""
+    return int(min(math.ceil(abs(lambda_p) * (1.0 + noise) * math.sqrt(3.0)) + 2, GUARD_SHARE * height))
+
+
+def build(
+    triangles: np.ndarray,
+    eyes: np.ndarray,
+    basis: np.ndarray,
+    tan_half: float,
+    width: int,
+    height: int,
+    guard: int,
+) -> Screen:
+    """The screen cells of ``eyes`` (E, 3) float32 (the rays' own origins, exactly), looking along ``basis``
+    (3, 3) float64 rows ``r, u, f`` with a vertical half field ``tan_half``, for an eye's image of
+    ``width x height`` pixels and a guard band of ``guard`` pixels; ``triangles`` (F, 3, 3) float32, Embree's."""
+    clock = time.perf_counter()
+    aspect = width / height
+    columns = -(-(width + 2 * guard) // CELL)
+    rows = -(-(height + 2 * guard) // CELL)
+    # cell coordinates of a direction with dr/df = a, du/df = b: gx = a * scale_x + shift_x, gy likewise
+    scale_x = width / (2.0 * aspect * tan_half * CELL)
+    shift_x = (0.5 * width + guard) / CELL
+    scale_y = -height / (2.0 * tan_half * CELL)
+    shift_y = (0.5 * height + guard) / CELL
+    reach = math.hypot(
+        max(shift_x, columns - shift_x) / scale_x, max(shift_y, rows - shift_y) / abs(scale_y)
+    )  # the farthest point of the cells from the view axis, on the image plane
+    starts, longs, lists, records = [], [], [], []
+    errors = []
+    for eye in eyes:
+        record, box, plane, spread = _faces(triangles, eye, basis, reach)
+        x0 = np.floor(box[:, 0] * scale_x + shift_x - 1e-4)
+        x1 = np.floor(box[:, 1] * scale_x + shift_x + 1e-4)
+        y0 = np.floor(box[:, 3] * scale_y + shift_y - 1e-4)
+        y1 = np.floor(box[:, 2] * scale_y + shift_y + 1e-4)
+        live = ~np.isnan(box[:, 0]) & (x1 >= 0) & (x0 < columns) & (y1 >= 0) & (y0 < rows)
+        x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
+        cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
+        cells_y = np.stack([np.clip(y0, 0, rows - 1), np.clip(y1, 0, rows - 1)], axis=1).astype(np.int64)
+        start, long, faces, error = _fill(
+            cells_x=cells_x,
+            cells_y=cells_y,
+            live=live,
+            records=record,
+            plane=plane,
+            spread=spread,
+            grid=np.array([columns, rows, LONGEST, max(1, int(ENTRIES * width * height))], np.int64),
+            frame=np.array([scale_x, shift_x, scale_y, shift_y]),
+        )
+        starts.append(start + sum(len(f) for f in lists))
+        longs.append(long)
+        lists.append(faces)
+        errors.append(error)
+        records.append(record)
+    return Screen(
+        on=True,
+        eyes=np.asarray(eyes, np.float32).reshape(-1, 3),
+        basis=np.ascontiguousarray(basis, np.float64),
+        scale_x=scale_x,
+        shift_x=shift_x,
+        scale_y=scale_y,
+        shift_y=shift_y,
+        columns=columns,
+        rows=rows,
+        start=np.stack(starts).astype(np.int32),
+        long=np.stack(longs),
+        faces=np.concatenate(lists).astype(np.int32),
+        errors=np.concatenate(errors),
+        records=np.stack(records),
+        seconds=time.perf_counter() - clock,
+    )
+
+
+def _faces(triangles: np.ndarray, eye: np.ndarray, basis: np.ndarray, reach: float):
+    """Per face, for rays from ``eye``: the kernel's record (F, RECORD) float64; the bounds of its projection
+    on the image plane ``(a_min, a_max, b_min, b_max)`` (F, 4) float64 (NaN: never seen); its plane's distance
+    from the eye (F,) float64; what Embree's error on its edge functions scales with (F, 5) float64: its
+    centre from the eye (3), its corners' farthest distance from the eye times ``ERROR_ULPS`` ulps, its radius."""
+    o = eye.astype(np.float64)
+    a = triangles.astype(np.float64) - o  # corners from the eye
+    camera = a @ basis.T  # (F, 3, 3): x along r, y along u, z along f
+    # the edge function of corner i on the image plane: (a_j x a_k) . (a r + b u + f), in the camera's frame
+    normals = np.cross(np.roll(camera, -1, axis=1), np.roll(camera, -2, axis=1))  # (F, 3, 3) n_0, n_1, n_2
+    normal = normals.sum(axis=1)
+    offset = np.einsum("fk,fk->f", normal, camera[:, 0])
+    # Embree subtracts the eye in float32 (rounding each corner by its distance from the eye) and multiplies:
+    # its error on an edge function scales with the corners' distance times the ray's distance from them
+    ulp = ERROR_ULPS * 2.0**-24
+    far = np.linalg.norm(camera, axis=2).max(axis=1)
+    centre = camera.mean(axis=1)
+    edge = np.linalg.norm(camera - np.roll(camera, 1, axis=1), axis=2).max(axis=1)
+    radius = np.linalg.norm(camera - centre[:, None], axis=2).max(axis=1)
+    record = np.zeros((len(a), RECORD))
+    record[:, EDGES : EDGES + 9] = normals.reshape(-1, 9)
+    record[:, OFFSET] = offset
+    spread = np.column_stack([centre, ulp * far, radius + edge])
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        record[:, REL_T] = np.where(offset != 0.0, ulp * far * (far * edge + edge * edge) / np.abs(offset), np.inf)
+        plane = np.nan_to_num(np.abs(offset) / np.linalg.norm(normal, axis=1), nan=0.0)
+    z = camera[..., 2]
+    # what lies nearer than eps along the view axis lies farther than ``reach`` from it on the image plane
+    eps = 0.5 * plane / math.sqrt(reach * reach + 1.0)
+    box = _clipped_bounds(camera, eps)
+    box[z.max(axis=1) <= 0.0] = np.nan  # wholly behind the eye
+    everywhere = (eps <= 1e-30) & (z.min(axis=1) < 1e-30) & (z.max(axis=1) > 0.0)
+    box[everywhere] = (-np.inf, np.inf, -np.inf, np.inf)
+    return record, box, plane, spread
+
+
+def _clipped_bounds(camera: np.ndarray, eps: np.ndarray) -> np.ndarray:
+    """(F, 4) the bounds ``a_min, a_max, b_min, b_max`` of each triangle's part at ``z >= eps`` projected on the
+    image plane (``a = x / z, b = y / z``); NaN where no part is."""
+    z = camera[..., 2]
+    level = eps[:, None]
+    points, keep = [], []
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for i in range(3):
+            keep.append(z[:, i] >= level[:, 0])
+            points.append(camera[:, i, :2] / z[:, i, None])
+            j = (i + 1) % 3
+            crosses = (z[:, i] - level[:, 0]) * (z[:, j] - level[:, 0]) < 0.0
+            w = (level[:, 0] - z[:, i]) / (z[:, j] - z[:, i])
+            at = camera[:, i, :2] + w[:, None] * (camera[:, j, :2] - camera[:, i, :2])
+            keep.append(crosses)
+            points.append(at / level)
+    p = np.stack(points, axis=1)  # (F, 6, 2)
+    k = np.stack(keep, axis=1)[..., None]
+    low = np.where(k, p, np.inf).min(axis=1)
+    high = np.where(k, p, -np.inf).max(axis=1)
+    box = np.stack([low[:, 0], high[:, 0], low[:, 1], high[:, 1]], axis=1)
+    box[~k[:, :, 0].any(axis=1)] = np.nan
+    return box
+
+
+@jit
+def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
+    """The lists of every cell: ``(start (C+1,) int64, long (C,) bool, faces (K,) int32, errors (K,) float32)``,
+    each face of cells ``cells_x[f, 0]..cells_x[f, 1]`` x ``cells_y[f, 0]..cells_y[f, 1]`` listed where it is
+    not provably hidden, with the bound of Embree's error on its edge functions anywhere in the cell.
+    grid : columns, rows, the longest list, the most entries of all;  frame : scale_x, shift_x, scale_y, shift_y
+    """
+    columns, rows, longest, most = grid[0], grid[1], grid[2], grid[3]
+    scale_x, shift_x, scale_y, shift_y = frame[0], frame[1], frame[2], frame[3]
+    count = columns * rows
+    sizes = np.zeros(count + 1, np.int64)
+    for f in range(len(live)):
+        if live[f]:
+            for gy in range(cells_y[f, 0], cells_y[f, 1] + 1):
+                for gx in range(cells_x[f, 0], cells_x[f, 1] + 1):
+                    sizes[gy * columns + gx + 1] += 1
+    first = np.cumsum(sizes)
+    every = np.empty(first[-1], np.int32)
+    at = first[:-1].copy()
+    for f in range(len(live)):
+        if live[f]:
+            for gy in range(cells_y[f, 0], cells_y[f, 1] + 1):
+                for gx in range(cells_x[f, 0], cells_x[f, 1] + 1):
+                    c = gy * columns + gx
+                    every[at[c]] = f
+                    at[c] += 1
+    # ---- drop what is provably hidden, cap the lists ----
+    start = np.zeros(count + 1, np.int64)
+    long = np.zeros(count, np.bool_)
+    faces = np.empty(min(len(every), count * longest), np.int32)
+    errors = np.empty(len(faces), np.float32)
+    corners = np.empty((4, 2))
+    kept = 0
+    for c in range(count):
+        gy = c // columns
+        gx = c - gy * columns
+        widest = 0.0  # the longest w = a r + b u + f of the cell's rays
+        for q in range(4):
+            corners[q, 0] = (gx + (q & 1) * (1.0 + 2e-3) - 1e-3 - shift_x) / scale_x
+            corners[q, 1] = (gy + (q >> 1) * (1.0 + 2e-3) - 1e-3 - shift_y) / scale_y
+            widest = max(widest, math.sqrt(1.0 + corners[q, 0] ** 2 + corners[q, 1] ** 2))
+        ca = 0.5 * (corners[0, 0] + corners[3, 0])
+        cb = 0.5 * (corners[0, 1] + corners[3, 1])
+        half = 0.5 * math.sqrt((corners[3, 0] - corners[0, 0]) ** 2 + (corners[3, 1] - corners[0, 1]) ** 2)
+        nearest = math.inf  # the farthest the best covering face lies along a ray of the cell
+        for k in range(first[c], first[c + 1]):
+            nearest = min(nearest, _covers(records, every[k], corners))
+        reach = nearest * widest * 1.01  # no ray of the cell meets the covering face farther than this
+        begin = kept
+        for k in range(first[c], first[c + 1]):
+            f = every[k]
+            if plane[f] * (1.0 - records[f, REL_T]) > reach and records[f, REL_T] < 1e-3:
+                continue  # hidden: Embree cannot place it nearer than its plane
+            if kept - begin >= longest or kept >= most:
+                long[c] = True
+                break
+            # the ray's distance from the face's centre, anywhere in the cell, times |w|
+            x, y, z = spread[f, 0], spread[f, 1], spread[f, 2]
+            cx = y - z * cb
+            cy = z * ca - x
+            cz = x * cb - y * ca
+            distance = math.sqrt(cx * cx + cy * cy + cz * cz) + math.sqrt(x * x + y * y + z * z) * half
+            faces[kept] = f
+            errors[kept] = spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
+            kept += 1
+        if long[c]:
+            kept = begin
+        start[c + 1] = kept
+    return start, long, faces[:kept].copy(), errors[:kept].copy()
+
+
+@jit
+def _covers(records, f, corners):
+    """How deep face ``f`` lies at most, where it covers the whole cell of the four ``corners`` (points
+    ``(a, b)`` of the image plane): its largest depth over the cell; infinity where it does not cover it."""
+    deepest = 0.0
+    sign = 0.0
+    for q in range(4):
+        a = corners[q, 0]
+        b = corners[q, 1]
+        u0 = records[f, 0] * a + records[f, 1] * b + records[f, 2]
+        u1 = records[f, 3] * a + records[f, 4] * b + records[f, 5]
+        u2 = records[f, 6] * a + records[f, 7] * b + records[f, 8]
+        det = u0 + u1 + u2
+        if det == 0.0:
+            return math.inf
+        s = 1.0 if det > 0.0 else -1.0
+        if sign != 0.0 and s != sign:
+            return math.inf
+        sign = s
+        # inside at every corner: inside all over the (convex) cell
+        margin = 1e-9 * abs(det)
+        if s * u0 <= margin or s * u1 <= margin or s * u2 <= margin:
+            return math.inf
+        depth = records[f, OFFSET] / det
+        if not depth > 0.0:
+            return math.inf
+        deepest = max(deepest, depth)
+    return deepest

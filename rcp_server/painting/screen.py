@@ -1,0 +1,36 @@
+"""Which paintings the screen cells answer (``kernels.screencells``, ``kernels.visibility``): perspective
+cameras whose eyes stay put (``lambda_e`` 0), mono or stereo, each eye its own cells. Panoramas and moving
+eyes go to Embree, and so does everything when ``RCP_SCREEN_CELLS=0``: the pictures are the same either way.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..camera.camera import Camera
+from ..engine import kernels
+from ..engine.kernels import screencells
+from ..settings.params import PaintParams
+
+
+def cells(camera: Camera, params: PaintParams, width: int, height: int, triangles: np.ndarray) -> kernels.Screen:
+    """The screen cells of a ``width x height`` painting of ``triangles`` (F, 3, 3) float32 by ``camera``, or
+    ``kernels.NO_SCREEN`` where they do not apply."""
+    looks = params.looks()
+    if (
+        not screencells.enabled()
+        or camera.projection != "perspective"
+        or len(triangles) == 0
+        or any(look.lambda_e != 0.0 for look in looks)
+    ):
+        return kernels.NO_SCREEN
+    eye_width, eye_height = camera.eye_size(width, height)
+    basis = np.stack(camera.basis())
+    eye = np.asarray(camera.eye, np.float64)
+    half_ipd = 0.5 * camera.ipd if camera.stereo != "mono" else 0.0
+    # as cast_rays places each eye: eye + side * half_ipd * r, in float64, stored float32
+    eyes = np.array([eye + side * half_ipd * basis[0] for side in camera.sides], np.float64).astype(np.float32)
+    reach = max(abs(look.lambda_p) for look in looks)
+    noise = max(look.noise for look in looks)
+    guard = screencells.guard_pixels(reach, noise, eye_height)
+    return screencells.build(triangles, eyes, basis, camera.half_height(), eye_width, eye_height, guard)
