@@ -17,8 +17,9 @@ def cells(camera: Camera, params: PaintParams, width: int, height: int, triangle
     """The screen cells of a ``width x height`` painting of ``triangles`` (F, 3, 3) float32 by ``camera``, or
     ``kernels.NO_SCREEN`` where they do not apply."""
     looks = params.looks()
+    rays = width * height * params.spp * params.iterations
     if (
-        not screencells.enabled()
+        not screencells.pays(rays, len(triangles))
         or camera.projection != "perspective"
         or len(triangles) == 0
         or any(look.lambda_e != 0.0 for look in looks)

@@ -32,14 +32,30 @@ CELL = 4  # pixels a side
 LONGEST = 24  # triangles a cell may list; a longer list goes to Embree (it would cost more than the BVH)
 ENTRIES = 1.0  # entries of all lists a pixel of the image, at most: the cells with the longest lists go first
 GUARD_SHARE = 0.25  # the guard band is at most this share of the image's height, each side
+PAD = 0.02  # cells each side of a face's projection: Embree's float32 hits may stray past it (by ~1e-5 rad)
 ERROR_ULPS = 64.0  # bound of Embree's float32 error, in ulps of the magnitudes it multiplies
 VARIABLE = "RCP_SCREEN_CELLS"
-"""``RCP_SCREEN_CELLS=0`` turns the screen cells off: every ray goes to Embree (the pictures do not change)."""
+MODES = ("auto", "on", "off")
+"""``RCP_SCREEN_CELLS``: ``auto`` (the default) builds the screen cells for a painting that casts at least
+``PAYS`` rays a triangle of the scene (building them costs about as much as tracing that many rays); ``on``
+builds them for every painting they apply to; ``off`` (or ``0``) never: every ray goes to Embree. The pictures
+are the same in every mode."""
+PAYS = 8.0
 
 
-def enabled() -> bool:
-    """Whether paintings use the screen cells (``RCP_SCREEN_CELLS``, on unless 0, off or false)."""
-    return os.environ.get(VARIABLE, "1").strip().lower() not in ("0", "off", "false", "no")
+def mode() -> str:
+    """The mode of ``RCP_SCREEN_CELLS`` (:data:`MODES`); raises ValueError for another value."""
+    given = os.environ.get(VARIABLE, "auto").strip().lower()
+    given = {"0": "off", "1": "on", "false": "off", "true": "on", "": "auto"}.get(given, given)
+    if given not in MODES:
+        raise ValueError(f"{VARIABLE} is one of {', '.join(MODES)}, not {given!r}")
+    return given
+
+
+def pays(rays: int, faces: int) -> bool:
+    """Whether the cells are worth building for a painting of ``rays`` rays over ``faces`` triangles."""
+    chosen = mode()
+    return chosen == "on" or (chosen == "auto" and rays >= PAYS * faces)
 
 
 def screen_bytes(width: int, height: int) -> float:
@@ -86,10 +102,10 @@ def build(
     errors = []
     for eye in eyes:
         record, box, plane, spread = _faces(triangles, eye, basis, reach)
-        x0 = np.floor(box[:, 0] * scale_x + shift_x - 1e-4)
-        x1 = np.floor(box[:, 1] * scale_x + shift_x + 1e-4)
-        y0 = np.floor(box[:, 3] * scale_y + shift_y - 1e-4)
-        y1 = np.floor(box[:, 2] * scale_y + shift_y + 1e-4)
+        x0 = np.floor(box[:, 0] * scale_x + shift_x - PAD)
+        x1 = np.floor(box[:, 1] * scale_x + shift_x + PAD)
+        y0 = np.floor(box[:, 3] * scale_y + shift_y - PAD)
+        y1 = np.floor(box[:, 2] * scale_y + shift_y + PAD)
         live = ~np.isnan(box[:, 0]) & (x1 >= 0) & (x0 < columns) & (y1 >= 0) & (y0 < rows)
         x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
         cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
@@ -133,60 +149,114 @@ def _faces(triangles: np.ndarray, eye: np.ndarray, basis: np.ndarray, reach: flo
     on the image plane ``(a_min, a_max, b_min, b_max)`` (F, 4) float64 (NaN: never seen); its plane's distance
     from the eye (F,) float64; what Embree's error on its edge functions scales with (F, 5) float64: its
     centre from the eye (3), its corners' farthest distance from the eye times ``ERROR_ULPS`` ulps, its radius."""
-    o = eye.astype(np.float64)
-    a = triangles.astype(np.float64) - o  # corners from the eye
-    camera = a @ basis.T  # (F, 3, 3): x along r, y along u, z along f
-    # the edge function of corner i on the image plane: (a_j x a_k) . (a r + b u + f), in the camera's frame
-    normals = np.cross(np.roll(camera, -1, axis=1), np.roll(camera, -2, axis=1))  # (F, 3, 3) n_0, n_1, n_2
-    normal = normals.sum(axis=1)
-    offset = np.einsum("fk,fk->f", normal, camera[:, 0])
-    # Embree subtracts the eye in float32 (rounding each corner by its distance from the eye) and multiplies:
-    # its error on an edge function scales with the corners' distance times the ray's distance from them
-    ulp = ERROR_ULPS * 2.0**-24
-    far = np.linalg.norm(camera, axis=2).max(axis=1)
-    centre = camera.mean(axis=1)
-    edge = np.linalg.norm(camera - np.roll(camera, 1, axis=1), axis=2).max(axis=1)
-    radius = np.linalg.norm(camera - centre[:, None], axis=2).max(axis=1)
-    record = np.zeros((len(a), RECORD))
-    record[:, EDGES : EDGES + 9] = normals.reshape(-1, 9)
-    record[:, OFFSET] = offset
-    spread = np.column_stack([centre, ulp * far, radius + edge])
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        record[:, REL_T] = np.where(offset != 0.0, ulp * far * (far * edge + edge * edge) / np.abs(offset), np.inf)
-        plane = np.nan_to_num(np.abs(offset) / np.linalg.norm(normal, axis=1), nan=0.0)
-    z = camera[..., 2]
-    # what lies nearer than eps along the view axis lies farther than ``reach`` from it on the image plane
-    eps = 0.5 * plane / math.sqrt(reach * reach + 1.0)
-    box = _clipped_bounds(camera, eps)
-    box[z.max(axis=1) <= 0.0] = np.nan  # wholly behind the eye
-    everywhere = (eps <= 1e-30) & (z.min(axis=1) < 1e-30) & (z.max(axis=1) > 0.0)
-    box[everywhere] = (-np.inf, np.inf, -np.inf, np.inf)
+    count = len(triangles)
+    record, box = np.empty((count, RECORD)), np.empty((count, 4))
+    plane, spread = np.empty(count), np.empty((count, 5))
+    _face_kernel(
+        triangles=triangles,
+        eye=eye.astype(np.float64),
+        basis=np.ascontiguousarray(basis, np.float64),
+        reach=reach,
+        ulp=ERROR_ULPS * 2.0**-24,
+        record=record,
+        box=box,
+        plane=plane,
+        spread=spread,
+    )
     return record, box, plane, spread
 
 
-def _clipped_bounds(camera: np.ndarray, eps: np.ndarray) -> np.ndarray:
-    """(F, 4) the bounds ``a_min, a_max, b_min, b_max`` of each triangle's part at ``z >= eps`` projected on the
-    image plane (``a = x / z, b = y / z``); NaN where no part is."""
-    z = camera[..., 2]
-    level = eps[:, None]
-    points, keep = [], []
-    with np.errstate(divide="ignore", invalid="ignore"):
+@jit
+def _face_kernel(triangles, eye, basis, reach, ulp, record, box, plane, spread):
+    """``_faces``, a face at a time."""
+    corner = np.empty((3, 3))
+    for f in range(len(triangles)):
+        # corners from the eye in the camera's frame: x along r, y along u, z along f
         for i in range(3):
-            keep.append(z[:, i] >= level[:, 0])
-            points.append(camera[:, i, :2] / z[:, i, None])
+            px = triangles[f, i, 0] - eye[0]
+            py = triangles[f, i, 1] - eye[1]
+            pz = triangles[f, i, 2] - eye[2]
+            for k in range(3):
+                corner[i, k] = px * basis[k, 0] + py * basis[k, 1] + pz * basis[k, 2]
+        # the edge function of corner i on the image plane: (a_j x a_k) . (a r + b u + f)
+        nx = ny = nz = 0.0
+        for i in range(3):
             j = (i + 1) % 3
-            crosses = (z[:, i] - level[:, 0]) * (z[:, j] - level[:, 0]) < 0.0
-            w = (level[:, 0] - z[:, i]) / (z[:, j] - z[:, i])
-            at = camera[:, i, :2] + w[:, None] * (camera[:, j, :2] - camera[:, i, :2])
-            keep.append(crosses)
-            points.append(at / level)
-    p = np.stack(points, axis=1)  # (F, 6, 2)
-    k = np.stack(keep, axis=1)[..., None]
-    low = np.where(k, p, np.inf).min(axis=1)
-    high = np.where(k, p, -np.inf).max(axis=1)
-    box = np.stack([low[:, 0], high[:, 0], low[:, 1], high[:, 1]], axis=1)
-    box[~k[:, :, 0].any(axis=1)] = np.nan
-    return box
+            k = (i + 2) % 3
+            cx = corner[j, 1] * corner[k, 2] - corner[j, 2] * corner[k, 1]
+            cy = corner[j, 2] * corner[k, 0] - corner[j, 0] * corner[k, 2]
+            cz = corner[j, 0] * corner[k, 1] - corner[j, 1] * corner[k, 0]
+            record[f, 3 * i] = cx
+            record[f, 3 * i + 1] = cy
+            record[f, 3 * i + 2] = cz
+            nx += cx
+            ny += cy
+            nz += cz
+        offset = nx * corner[0, 0] + ny * corner[0, 1] + nz * corner[0, 2]
+        record[f, OFFSET] = offset
+        # Embree subtracts the eye in float32 (rounding each corner by its distance from the eye) and
+        # multiplies: its error on an edge function scales with the corners' distance times the ray's
+        # distance from them
+        far = edge = radius = 0.0
+        mx = (corner[0, 0] + corner[1, 0] + corner[2, 0]) / 3.0
+        my = (corner[0, 1] + corner[1, 1] + corner[2, 1]) / 3.0
+        mz = (corner[0, 2] + corner[1, 2] + corner[2, 2]) / 3.0
+        for i in range(3):
+            j = (i + 1) % 3
+            far = max(far, math.sqrt(corner[i, 0] ** 2 + corner[i, 1] ** 2 + corner[i, 2] ** 2))
+            edge = max(
+                edge,
+                math.sqrt(
+                    (corner[i, 0] - corner[j, 0]) ** 2
+                    + (corner[i, 1] - corner[j, 1]) ** 2
+                    + (corner[i, 2] - corner[j, 2]) ** 2
+                ),
+            )
+            radius = max(radius, math.sqrt((corner[i, 0] - mx) ** 2 + (corner[i, 1] - my) ** 2 + (corner[i, 2] - mz) ** 2))
+        spread[f, 0] = mx
+        spread[f, 1] = my
+        spread[f, 2] = mz
+        spread[f, 3] = ulp * far
+        spread[f, 4] = radius + edge
+        record[f, REL_T] = ulp * far * (far * edge + edge * edge) / abs(offset) if offset != 0.0 else math.inf
+        size = math.sqrt(nx * nx + ny * ny + nz * nz)
+        distance = abs(offset) / size if size > 0.0 else 0.0
+        plane[f] = distance
+        # ---- its projection: what lies nearer than eps along the view axis lies farther than ``reach`` ----
+        eps = 0.5 * distance / math.sqrt(reach * reach + 1.0)
+        zmin = min(corner[0, 2], corner[1, 2], corner[2, 2])
+        zmax = max(corner[0, 2], corner[1, 2], corner[2, 2])
+        if not record[f, REL_T] < 0.25 or (eps <= 1e-30 and zmin < 1e-30 < zmax):
+            # its plane passes (nearly) through the eye: Embree may place a hit on it at t ~ 0 anywhere its
+            # edge functions agree, or it covers the whole screen
+            box[f, 0] = box[f, 2] = -math.inf
+            box[f, 1] = box[f, 3] = math.inf
+            continue
+        if zmax <= 0.0:  # wholly behind the eye
+            box[f, 0] = box[f, 1] = box[f, 2] = box[f, 3] = math.nan
+            continue
+        lo_a = lo_b = math.inf
+        hi_a = hi_b = -math.inf
+        for i in range(3):
+            j = (i + 1) % 3
+            zi = corner[i, 2]
+            zj = corner[j, 2]
+            if zi >= eps:
+                pa = corner[i, 0] / zi
+                pb = corner[i, 1] / zi
+                lo_a, hi_a, lo_b, hi_b = min(lo_a, pa), max(hi_a, pa), min(lo_b, pb), max(hi_b, pb)
+            if (zi - eps) * (zj - eps) < 0.0:  # the edge crosses z = eps: where, on the image plane
+                w = (eps - zi) / (zj - zi)
+                pa = (corner[i, 0] + w * (corner[j, 0] - corner[i, 0])) / eps
+                pb = (corner[i, 1] + w * (corner[j, 1] - corner[i, 1])) / eps
+                lo_a, hi_a, lo_b, hi_b = min(lo_a, pa), max(hi_a, pa), min(lo_b, pb), max(hi_b, pb)
+        if lo_a > hi_a:  # nothing at z >= eps
+            box[f, 0] = box[f, 1] = box[f, 2] = box[f, 3] = math.nan
+            continue
+        box[f, 0] = lo_a
+        box[f, 1] = hi_a
+        box[f, 2] = lo_b
+        box[f, 3] = hi_b
 
 
 @jit
