@@ -33,5 +33,5 @@ def cells(camera: Camera, params: PaintParams, width: int, height: int, triangle
     eyes = np.array([eye + side * half_ipd * basis[0] for side in camera.sides], np.float64).astype(np.float32)
     reach = max(abs(look.lambda_p) for look in looks)
     noise = max(look.noise for look in looks)
-    guard = screencells.guard_pixels(reach, noise, eye_height)
+    guard = screencells.guard_pixels(reach, noise, eye_width, eye_height)
     return screencells.build(triangles, eyes, basis, camera.half_height(), eye_width, eye_height, guard)

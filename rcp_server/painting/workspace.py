@@ -16,6 +16,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from ..camera.camera import Region
+from ..engine.kernels import screencells
 from ..engine.paintstate import CHANNELS, PaintState, channel_shape
 from ..settings.params import PaintParams
 from .raytrace import TileBuffers
@@ -41,7 +42,7 @@ ENCODED_BYTES = 3  # the picture as 8-bit RGB, before the encoder
 def pixel_bytes(params: PaintParams, *, outlines: bool = False, shared: bool = False, kept: int = 1) -> dict[str, int]:
     """What one painted pixel costs with ``params``, buffer by buffer, bytes: ``kept`` result states (a walk
     in temporal mode holds two: the frame before and the one being painted), the ink when some material draws
-    ``outlines``, the anchor of surface noise when the eyes of a stereo painting are ``shared`` (its tiles
+    ``outlines``, the screen cells when the eyes rest, the anchor of surface noise when the eyes of a stereo painting are ``shared`` (its tiles
     run one iteration at a time), the 8-bit picture. Tile buffers are not counted: their size is the tiles',
     not the painting's. ``rcp bench memory`` prints these beside the measured slope."""
     reads = params.reads()
@@ -50,6 +51,8 @@ def pixel_bytes(params: PaintParams, *, outlines: bool = False, shared: bool = F
         "ink": INK_BYTES if outlines else 0,
         "anchor": ANCHOR_BYTES if shared and "position" in reads else 0,
         "picture": ENCODED_BYTES,
+        # the screen cells of eyes at rest (kernels.screencells), each eye's over its own pixels
+        "screen": screencells.BYTES if all(look.lambda_e == 0.0 for look in params.looks()) else 0,
     }
     if params.method == "image":
         costs["plain"] = state_bytes(reads)

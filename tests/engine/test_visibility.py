@@ -11,7 +11,7 @@ from rcp_server.engine.kernels.embree import Tracer, intersect_rays
 from rcp_server.engine.kernels.screencells import build
 
 CAMERA = Camera((0.2, 0.1, 0.3), (0.0, 0.0, -4.0), fov=60.0)
-W, H, GUARD = 64, 48, 6
+W, H, GUARD = 160, 120, 12
 
 
 def _grid(n=24, depth=-4.0, size=4.0, seed=0):

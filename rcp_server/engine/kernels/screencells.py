@@ -22,17 +22,18 @@ import math
 import os
 import time
 
+import numba
 import numpy as np
 
-from .bundles import Screen
+from .bundles import NO_SCREEN, Screen
 from .jit import jit
 from .visibility import EDGES, OFFSET, RECORD, REL_T
 
 CELL = 4  # pixels a side
 LONGEST = 24  # triangles a cell may list; a longer list goes to Embree (it would cost more than the BVH)
-ENTRIES = 1.0  # entries of all lists a pixel of the image, at most: the cells with the longest lists go first
-GUARD_SHARE = 0.25  # the guard band is at most this share of the image's height, each side
+GUARD_SHARE = 0.25  # the guard band is at most this share of the image's smaller side, each side
 PAD = 0.02  # cells each side of a face's projection: Embree's float32 hits may stray past it (by ~1e-5 rad)
+T_ULPS = 8.0  # bound of Embree's float32 error on the numerator of t, in ulps of what it multiplies
 ERROR_ULPS = 64.0  # bound of Embree's float32 error, in ulps of the magnitudes it multiplies
 VARIABLE = "RCP_SCREEN_CELLS"
 MODES = ("auto", "on", "off")
@@ -58,20 +59,18 @@ def pays(rays: int, faces: int) -> bool:
     return chosen == "on" or (chosen == "auto" and rays >= PAYS * faces)
 
 
-def screen_bytes(width: int, height: int) -> float:
-    """Bytes a pixel the cells of a ``width x height`` eye take at most: a start (int32) and a long flag (a
-    byte) a cell over the image and the widest guard band, and ``ENTRIES`` entries a pixel (a face, int32,
-    and an error, float32)."""
-    guard = GUARD_SHARE * height
-    area = (width + 2 * guard + CELL) * (height + 2 * guard + CELL) / (width * height)
-    return area * (4 + 1) / CELL**2 + 8 * ENTRIES
+BYTES = 4
+"""Bytes a pixel the cells of an eye's image take at most (``pixel_bytes`` declares them: a painted pixel's
+budget is 64 bytes): a start (int32) and a long flag (a byte) a cell, and an entry of the lists (a face, int32,
+and an error, float32) takes 8 bytes; past the budget, the cells left (in row order) are long: their rays go
+to Embree."""
 
 
-def guard_pixels(lambda_p: float, noise: float, height: int) -> int:
+def guard_pixels(lambda_p: float, noise: float, width: int, height: int) -> int:
     """How far past the image the cells reach, pixels: the largest displacement a painting makes with
     ``lambda_p`` (its largest, overrides included) and ``noise``, within ``GUARD_SHARE`` of the height. Rays
     beyond it are asked of Embree, so this is a matter of speed, not of what a ray finds."""
-    return int(min(math.ceil(abs(lambda_p) * (1.0 + noise) * math.sqrt(3.0)) + 2, GUARD_SHARE * height))
+    return int(min(math.ceil(abs(lambda_p) * (1.0 + noise) * math.sqrt(3.0)) + 2, GUARD_SHARE * min(width, height)))
 
 
 def build(
@@ -83,7 +82,7 @@ def build(
     height: int,
     guard: int,
 ) -> Screen:
-    """The screen cells of ``eyes`` (E, 3) float32 (the rays' own origins, exactly), looking along ``basis``
+    """The screen cells of ``eyes`` (E, 3) float32 (the rays' own origins, exactly; at most ``BYTES`` a pixel each), looking along ``basis``
     (3, 3) float64 rows ``r, u, f`` with a vertical half field ``tan_half``, for an eye's image of
     ``width x height`` pixels and a guard band of ``guard`` pixels; ``triangles`` (F, 3, 3) float32, Embree's."""
     clock = time.perf_counter()
@@ -100,6 +99,9 @@ def build(
     )  # the farthest point of the cells from the view axis, on the image plane
     starts, longs, lists, records = [], [], [], []
     errors = []
+    most = (BYTES * width * height - 5 * (columns * rows + 1)) // 8  # entries of all lists, each eye
+    if most <= 0:  # an image too small for cells
+        return NO_SCREEN
     for eye in eyes:
         record, box, plane, spread = _faces(triangles, eye, basis, reach)
         x0 = np.floor(box[:, 0] * scale_x + shift_x - PAD)
@@ -117,7 +119,7 @@ def build(
             records=record,
             plane=plane,
             spread=spread,
-            grid=np.array([columns, rows, LONGEST, max(1, int(ENTRIES * width * height))], np.int64),
+            grid=np.array([columns, rows, LONGEST, most], np.int64),
             frame=np.array([scale_x, shift_x, scale_y, shift_y]),
         )
         starts.append(start + sum(len(f) for f in lists))
@@ -218,45 +220,52 @@ def _face_kernel(triangles, eye, basis, reach, ulp, record, box, plane, spread):
         spread[f, 2] = mz
         spread[f, 3] = ulp * far
         spread[f, 4] = radius + edge
-        record[f, REL_T] = ulp * far * (far * edge + edge * edge) / abs(offset) if offset != 0.0 else math.inf
+        # t = T / den: Embree's T is its corner (rounded by ~ulp far) times its normal (rounded by ~ulp far edge)
+        t_ulp = T_ULPS * 2.0**-24
+        record[f, REL_T] = t_ulp * far * (far * edge + edge * edge) / abs(offset) if offset != 0.0 else math.inf
         size = math.sqrt(nx * nx + ny * ny + nz * nz)
         distance = abs(offset) / size if size > 0.0 else 0.0
         plane[f] = distance
         # ---- its projection: what lies nearer than eps along the view axis lies farther than ``reach`` ----
         eps = 0.5 * distance / math.sqrt(reach * reach + 1.0)
-        zmin = min(corner[0, 2], corner[1, 2], corner[2, 2])
-        zmax = max(corner[0, 2], corner[1, 2], corner[2, 2])
-        if not record[f, REL_T] < 0.25 or (eps <= 1e-30 and zmin < 1e-30 < zmax):
-            # its plane passes (nearly) through the eye: Embree may place a hit on it at t ~ 0 anywhere its
-            # edge functions agree, or it covers the whole screen
+        if not distance > 1e-9 * far:  # its plane holds the eye, within rounding: it may be met anywhere
             box[f, 0] = box[f, 2] = -math.inf
             box[f, 1] = box[f, 3] = math.inf
             continue
-        if zmax <= 0.0:  # wholly behind the eye
-            box[f, 0] = box[f, 1] = box[f, 2] = box[f, 3] = math.nan
-            continue
-        lo_a = lo_b = math.inf
-        hi_a = hi_b = -math.inf
-        for i in range(3):
-            j = (i + 1) % 3
-            zi = corner[i, 2]
-            zj = corner[j, 2]
-            if zi >= eps:
-                pa = corner[i, 0] / zi
-                pb = corner[i, 1] / zi
-                lo_a, hi_a, lo_b, hi_b = min(lo_a, pa), max(hi_a, pa), min(lo_b, pb), max(hi_b, pb)
-            if (zi - eps) * (zj - eps) < 0.0:  # the edge crosses z = eps: where, on the image plane
-                w = (eps - zi) / (zj - zi)
-                pa = (corner[i, 0] + w * (corner[j, 0] - corner[i, 0])) / eps
-                pb = (corner[i, 1] + w * (corner[j, 1] - corner[i, 1])) / eps
-                lo_a, hi_a, lo_b, hi_b = min(lo_a, pa), max(hi_a, pa), min(lo_b, pb), max(hi_b, pb)
-        if lo_a > hi_a:  # nothing at z >= eps
+        lo_a, hi_a, lo_b, hi_b = _projection(corner, 1.0, eps)
+        if not record[f, REL_T] < 1.0:  # Embree may see it on the wrong side of the eye: its mirror image too
+            la, ha, lb, hb = _projection(corner, -1.0, eps)
+            lo_a, hi_a, lo_b, hi_b = min(lo_a, la), max(hi_a, ha), min(lo_b, lb), max(hi_b, hb)
+        if lo_a > hi_a:  # nothing in front of the eye
             box[f, 0] = box[f, 1] = box[f, 2] = box[f, 3] = math.nan
             continue
         box[f, 0] = lo_a
         box[f, 1] = hi_a
         box[f, 2] = lo_b
         box[f, 3] = hi_b
+
+
+@numba.njit(inline="always")
+def _projection(corner, side, eps):
+    """The bounds ``(a_min, a_max, b_min, b_max)`` on the image plane of the part at ``z >= eps`` of the
+    triangle of ``corner`` (3, 3), camera frame, times ``side`` (1, or -1: its mirror image through the eye);
+    ``a_min > a_max`` when it has no such part."""
+    lo_a = lo_b = math.inf
+    hi_a = hi_b = -math.inf
+    for i in range(3):
+        j = (i + 1) % 3
+        zi = side * corner[i, 2]
+        zj = side * corner[j, 2]
+        if zi >= eps:
+            pa = side * corner[i, 0] / zi
+            pb = side * corner[i, 1] / zi
+            lo_a, hi_a, lo_b, hi_b = min(lo_a, pa), max(hi_a, pa), min(lo_b, pb), max(hi_b, pb)
+        if (zi - eps) * (zj - eps) < 0.0:  # the edge crosses z = eps: where, on the image plane
+            w = (eps - zi) / (zj - zi)
+            pa = side * (corner[i, 0] + w * (corner[j, 0] - corner[i, 0])) / eps
+            pb = side * (corner[i, 1] + w * (corner[j, 1] - corner[i, 1])) / eps
+            lo_a, hi_a, lo_b, hi_b = min(lo_a, pa), max(hi_a, pa), min(lo_b, pb), max(hi_b, pb)
+    return lo_a, hi_a, lo_b, hi_b
 
 
 @jit
