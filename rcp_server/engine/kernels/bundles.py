@@ -148,15 +148,18 @@ class Screen(NamedTuple):
     columns: int
     rows: int
     start: np.ndarray  # (E, columns * rows + 1) int32 where each cell's list starts in faces
-    long: np.ndarray  # (E, columns * rows) bool: the cell's list is too long, its rays go to Embree
+    cover: np.ndarray  # (E, columns * rows) int32: the face (a record) that answers every ray of the cell when one
+    # provably does, -1 when its rays test its list, visibility.LONG_CELL when the list is too long to pay
     faces: np.ndarray  # (K,) int32 the lists, one after the other
     errors: np.ndarray  # (K,) float64 the bound of Embree's error on the listed face's edge functions in the cell
-    records: np.ndarray  # (E, F, visibility.RECORD) float64 each face's edge functions and distance, by eye
+    records: np.ndarray  # (L, visibility.RECORD) float64 the edge functions and distance of each face listed,
+    # for the eye whose lists name it (a face listed for two eyes has two)
+    ids: np.ndarray  # (L,) int32 which face of the scene each record is
     seconds: float  # what building them took
 
     def nbytes(self) -> int:
         """The bytes of the cells (starts, flags and lists; not the per-face records)."""
-        return self.start.nbytes + self.long.nbytes + self.faces.nbytes + self.errors.nbytes
+        return self.start.nbytes + self.cover.nbytes + self.faces.nbytes + self.errors.nbytes
 
 
 NO_SCREEN = Screen(
@@ -170,10 +173,11 @@ NO_SCREEN = Screen(
     1,
     1,
     np.zeros((0, 2), np.int32),
-    np.zeros((0, 1), np.bool_),
+    np.zeros((0, 1), np.int32),
     np.zeros(1, np.int32),
     np.zeros(1, np.float32),
-    np.zeros((0, 1, 12)),
+    np.zeros((1, 12)),
+    np.zeros(1, np.int32),
     0.0,
 )
 

@@ -27,13 +27,15 @@ import numpy as np
 
 from .bundles import NO_SCREEN, Screen
 from .jit import jit
-from .visibility import EDGES, OFFSET, RECORD, REL_T
+from .embree import EDGE
+from .visibility import EDGES, LONG_CELL, OFFSET, RECORD, REL_T
 
 CELL = 4  # pixels a side
 LONGEST = 24  # triangles a cell may list; a longer list goes to Embree (it would cost more than the BVH)
 GUARD_SHARE = 0.25  # the guard band is at most this share of the image's smaller side, each side
 PAD = 0.02  # cells each side of a face's projection: Embree's float32 hits may stray past it (by ~1e-5 rad)
 T_ULPS = 8.0  # bound of Embree's float32 error on the numerator of t, in ulps of what it multiplies
+HIDDEN = 1.1  # a face deeper than this times the depth of one that covers the cell is dropped from it
 ERROR_ULPS = 64.0  # bound of Embree's float32 error, in ulps of the magnitudes it multiplies
 VARIABLE = "RCP_SCREEN_CELLS"
 MODES = ("auto", "on", "off")
@@ -61,7 +63,7 @@ def pays(rays: int, faces: int) -> bool:
 
 BYTES = 4
 """Bytes a pixel the cells of an eye's image take at most (``pixel_bytes`` declares them: a painted pixel's
-budget is 64 bytes): a start (int32) and a long flag (a byte) a cell, and an entry of the lists (a face, int32,
+budget is 64 bytes): a start and a cover (int32 each) a cell, and an entry of the lists (a face, int32,
 and an error, float32) takes 8 bytes; past the budget, the cells left (in row order) are long: their rays go
 to Embree."""
 
@@ -97,9 +99,9 @@ def build(
     reach = math.hypot(
         max(shift_x, columns - shift_x) / scale_x, max(shift_y, rows - shift_y) / abs(scale_y)
     )  # the farthest point of the cells from the view axis, on the image plane
-    starts, longs, lists, records = [], [], [], []
-    errors = []
-    most = (BYTES * width * height - 5 * (columns * rows + 1)) // 8  # entries of all lists, each eye
+    starts, covers, lists, records = [], [], [], []
+    errors, ids = [], []
+    most = (BYTES * width * height - 8 * (columns * rows + 1)) // 8  # entries of all lists, each eye
     if most <= 0:  # an image too small for cells
         return NO_SCREEN
     for eye in eyes:
@@ -112,7 +114,7 @@ def build(
         x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
         cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
         cells_y = np.stack([np.clip(y0, 0, rows - 1), np.clip(y1, 0, rows - 1)], axis=1).astype(np.int64)
-        start, long, faces, error = _fill(
+        start, cover, faces, error = _fill(
             cells_x=cells_x,
             cells_y=cells_y,
             live=live,
@@ -122,11 +124,18 @@ def build(
             grid=np.array([columns, rows, LONGEST, most], np.int64),
             frame=np.array([scale_x, shift_x, scale_y, shift_y]),
         )
+        # the listed faces renumbered in the order the lists first name them, their records in that order:
+        # the faces of a cell lie side by side in memory
+        _, first = np.unique(faces, return_index=True)
+        named = faces[np.sort(first)]
+        local = np.empty(len(record), np.int32)
+        local[named] = np.arange(len(named), dtype=np.int32) + sum(len(r) for r in records)
         starts.append(start + sum(len(f) for f in lists))
-        longs.append(long)
-        lists.append(faces)
+        covers.append(np.where(cover >= 0, local[np.maximum(cover, 0)], cover))
+        lists.append(local[faces])
         errors.append(error)
-        records.append(record)
+        records.append(record[named])
+        ids.append(named)
     return Screen(
         on=True,
         eyes=np.asarray(eyes, np.float32).reshape(-1, 3),
@@ -138,10 +147,11 @@ def build(
         columns=columns,
         rows=rows,
         start=np.stack(starts).astype(np.int32),
-        long=np.stack(longs),
+        cover=np.stack(covers).astype(np.int32),
         faces=np.concatenate(lists).astype(np.int32),
         errors=np.concatenate(errors),
-        records=np.stack(records),
+        records=np.concatenate(records),
+        ids=np.concatenate(ids).astype(np.int32),
         seconds=time.perf_counter() - clock,
     )
 
@@ -214,7 +224,9 @@ def _face_kernel(triangles, eye, basis, reach, ulp, record, box, plane, spread):
                     + (corner[i, 2] - corner[j, 2]) ** 2
                 ),
             )
-            radius = max(radius, math.sqrt((corner[i, 0] - mx) ** 2 + (corner[i, 1] - my) ** 2 + (corner[i, 2] - mz) ** 2))
+            radius = max(
+                radius, math.sqrt((corner[i, 0] - mx) ** 2 + (corner[i, 1] - my) ** 2 + (corner[i, 2] - mz) ** 2)
+            )
         spread[f, 0] = mx
         spread[f, 1] = my
         spread[f, 2] = mz
@@ -296,7 +308,7 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
                     at[c] += 1
     # ---- drop what is provably hidden, cap the lists ----
     start = np.zeros(count + 1, np.int64)
-    long = np.zeros(count, np.bool_)
+    cover = np.full(count, -1, np.int32)
     faces = np.empty(min(len(every), count * longest), np.int32)
     errors = np.empty(len(faces), np.float32)
     corners = np.empty((4, 2))
@@ -321,22 +333,81 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
             f = every[k]
             if plane[f] * (1.0 - records[f, REL_T]) > reach and records[f, REL_T] < 1e-3:
                 continue  # hidden: Embree cannot place it nearer than its plane
-            if kept - begin >= longest or kept >= most:
-                long[c] = True
-                break
             # the ray's distance from the face's centre, anywhere in the cell, times |w|
             x, y, z = spread[f, 0], spread[f, 1], spread[f, 2]
             cx = y - z * cb
             cy = z * ca - x
             cz = x * cb - y * ca
             distance = math.sqrt(cx * cx + cy * cy + cz * cz) + math.sqrt(x * x + y * y + z * z) * half
+            err = spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
+            if nearest < math.inf and _behind(records, f, corners, err, HIDDEN * nearest):
+                continue  # hidden: wherever Embree meets it in this cell, it is farther than the covering face
+            if kept - begin >= longest or kept >= most:
+                cover[c] = LONG_CELL
+                break
             faces[kept] = f
-            errors[kept] = spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
+            errors[kept] = err
             kept += 1
-        if long[c]:
+        if cover[c] == LONG_CELL:
             kept = begin
+        elif kept - begin == 1 and _answers_all(records, faces[begin], corners, errors[begin]):
+            cover[c] = faces[begin]  # alone and inside it all over the cell: every ray of the cell meets it
         start[c + 1] = kept
-    return start, long, faces[:kept].copy(), errors[:kept].copy()
+    return start, cover, faces[:kept].copy(), errors[:kept].copy()
+
+
+@jit
+def _answers_all(records, f, corners, err):
+    """Whether every ray of the cell of ``corners`` meets face ``f`` provably as the kernel requires (inside by
+    its margins at every corner, ``visibility._answer``), so that the kernel need not test it ray by ray."""
+    sign = 0.0
+    for q in range(4):
+        a = corners[q, 0]
+        b = corners[q, 1]
+        u0 = records[f, 0] * a + records[f, 1] * b + records[f, 2]
+        u1 = records[f, 3] * a + records[f, 4] * b + records[f, 5]
+        u2 = records[f, 6] * a + records[f, 7] * b + records[f, 8]
+        det = u0 + u1 + u2
+        spread = 3.0 * err
+        s = 1.0 if det > 0.0 else -1.0
+        if not abs(det) > 2.0 * spread or (sign != 0.0 and s != sign):
+            return False
+        sign = s
+        # inside by the margin at every corner: inside by it all over the cell (u - EDGE |det| is linear)
+        margin = EDGE * (abs(det) + 2.0 * spread) + 2.0 * err
+        if s * u0 < margin or s * u1 < margin or s * u2 < margin:
+            return False
+        rel = records[f, REL_T] + spread / abs(det)
+        if not (rel < 0.5 and records[f, OFFSET] / det > 0.0):
+            return False
+    return True
+
+
+@jit
+def _behind(records, f, corners, err, depth):
+    """Whether Embree, meeting face ``f`` anywhere in the cell of ``corners`` (its edge functions' error
+    ``err``), places it deeper than ``depth`` or behind the eye: its plane's depth over the cell (extreme at
+    the corners: its inverse is linear) with the error of t that the kernel allows."""
+    sign = 0.0
+    behind = False
+    for q in range(4):
+        a = corners[q, 0]
+        b = corners[q, 1]
+        det = 0.0
+        for i in range(9):
+            det += records[f, i] * (a if i % 3 == 0 else b if i % 3 == 1 else 1.0)
+        s = 1.0 if det > 0.0 else -1.0
+        if not abs(det) > 6.0 * err or (sign != 0.0 and s != sign):
+            return False  # grazing somewhere in the cell
+        sign = s
+        rel = records[f, REL_T] + 3.0 * err / abs(det)
+        z = records[f, OFFSET] / det
+        if not rel < 0.5 or not (z < 0.0 or z * (1.0 - rel) > depth):
+            return False
+        if q > 0 and (z < 0.0) != behind:
+            return False
+        behind = z < 0.0
+    return True
 
 
 @jit

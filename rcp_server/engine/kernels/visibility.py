@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 
-import numba
+import numpy as np
 
 from .embree import EDGE, intersect_rays
 from .jit import jit
@@ -38,77 +38,107 @@ RECORD = 12
 
 # why a ray goes to Embree (``reasons`` counts them)
 ANSWERED, OTHER_EYE, OUTSIDE, LONG, GRAZING, EDGE_OR_TIE = 0, 1, 2, 3, 4, 5
+LONG_CELL = -2  # a cell's cover when its list is too long to pay (-1: test its list, >= 0: the face of all its rays)
 REASONS = ("answered", "another eye", "outside the cells", "long list", "grazing", "edge or tie")
 
 
-@numba.njit(inline="always")
-def _eye_of(screen, ox, oy, oz):
-    """Which of the screen's eyes the ray's (float32) origin is exactly, -1 for none."""
-    for e in range(screen.eyes.shape[0]):
-        if ox == screen.eyes[e, 0] and oy == screen.eyes[e, 1] and oz == screen.eyes[e, 2]:
-            return e
-    return -1
+@jit
+def classify(screen, origins, directions, rays, status, face):
+    """What the cells answer for each listed ray: ``status[k]`` for ray ``rays[k]`` (a reason of
+    :data:`REASONS`: ANSWERED, or why Embree must answer instead), and where ANSWERED its face into
+    ``face[rays[k]]`` (-1: it misses). One call for all the rays: the cells' arrays stay in registers.
 
-
-@numba.njit(inline="always")
-def _answer(screen, origins, directions, s):
-    """``(status, face)`` of ray ``s`` from the lists: ANSWERED with its face (-1: it misses), or why Embree must answer instead (REASONS)."""
-    e = _eye_of(screen, origins[s, 0], origins[s, 1], origins[s, 2])
-    if e < 0:
-        return OTHER_EYE, -1
-    dx = float(directions[s, 0])
-    dy = float(directions[s, 1])
-    dz = float(directions[s, 2])
-    b = screen.basis
-    df = dx * b[2, 0] + dy * b[2, 1] + dz * b[2, 2]
-    if not df > 0.0:  # behind the camera, along the image plane, or not finite
-        return OUTSIDE, -1
-    pa = (dx * b[0, 0] + dy * b[0, 1] + dz * b[0, 2]) / df
-    pb = (dx * b[1, 0] + dy * b[1, 1] + dz * b[1, 2]) / df
-    gx = pa * screen.scale_x + screen.shift_x
-    gy = pb * screen.scale_y + screen.shift_y
-    if not (gx >= 0.0 and gx < screen.columns and gy >= 0.0 and gy < screen.rows):
-        return OUTSIDE, -1  # beyond the guard band (or NaN)
-    cell = int(gy) * screen.columns + int(gx)
-    if screen.long[e, cell]:
-        return LONG, -1
-    best = -1
-    best_z = best_lo = best_hi = math.inf
-    rival_lo = math.inf  # the nearest any other face that is not missed can be
-    for k in range(screen.start[e, cell], screen.start[e, cell + 1]):
-        f = screen.faces[k]
-        err = screen.errors[k]  # Embree's error on this face's edge functions, anywhere in the cell
-        u0 = screen.records[e, f, 0] * pa + screen.records[e, f, 1] * pb + screen.records[e, f, 2]
-        u1 = screen.records[e, f, 3] * pa + screen.records[e, f, 4] * pb + screen.records[e, f, 5]
-        u2 = screen.records[e, f, 6] * pa + screen.records[e, f, 7] * pb + screen.records[e, f, 8]
-        if (u0 > err or u1 > err or u2 > err) and (u0 < -err or u1 < -err or u2 < -err):
-            continue  # two edges certainly disagree: Embree misses it too
-        det = u0 + u1 + u2
-        spread = 3.0 * err
-        if not abs(det) > 2.0 * spread:  # grazing: the side it is met from is anybody's guess
-            return GRAZING, -1
-        z = screen.records[e, f, OFFSET] / det
-        rel = screen.records[e, f, REL_T] + spread / abs(det) + 1e-9
-        if not rel < 0.5:
-            return GRAZING, -1
-        if z <= 0.0:  # its plane is met behind the eye (the error cannot flip the sign of t)
+    status : (>= m,) int64 out;  face : (n,) int32 out
+    """
+    # unpacked once: a bundle handed to a function a ray costs more than the ray's whole test
+    eyes, b, columns, rows = screen.eyes, screen.basis, screen.columns, screen.rows
+    scale_x, shift_x, scale_y, shift_y = screen.scale_x, screen.shift_x, screen.scale_y, screen.shift_y
+    start, covers, faces, errors, records, ids = (
+        screen.start,
+        screen.cover,
+        screen.faces,
+        screen.errors,
+        screen.records,
+        screen.ids,
+    )
+    for k in range(len(rays)):
+        s = rays[k]
+        e = -1
+        for q in range(eyes.shape[0]):  # which eye the ray's (float32) origin is, exactly
+            if origins[s, 0] == eyes[q, 0] and origins[s, 1] == eyes[q, 1] and origins[s, 2] == eyes[q, 2]:
+                e = q
+        if e < 0:
+            status[k] = OTHER_EYE
             continue
-        lo = z * (1.0 - rel)
-        hi = z * (1.0 + rel)
-        if det < 0.0:
-            u0, u1, u2 = -u0, -u1, -u2
-        # inside by more than EDGE as Embree computes it: its packets do not ask the ray again alone
-        margin = EDGE * (abs(det) + spread) + err
-        if u0 >= margin and u1 >= margin and u2 >= margin and z < best_z:
-            rival_lo = min(rival_lo, best_lo)
-            best, best_z, best_lo, best_hi = f, z, lo, hi
+        dx = float(directions[s, 0])
+        dy = float(directions[s, 1])
+        dz = float(directions[s, 2])
+        df = dx * b[2, 0] + dy * b[2, 1] + dz * b[2, 2]
+        if not df > 0.0:  # behind the camera, along the image plane, or not finite
+            status[k] = OUTSIDE
+            continue
+        pa = (dx * b[0, 0] + dy * b[0, 1] + dz * b[0, 2]) / df
+        pb = (dx * b[1, 0] + dy * b[1, 1] + dz * b[1, 2]) / df
+        gx = pa * scale_x + shift_x
+        gy = pb * scale_y + shift_y
+        if not (gx >= 0.0 and gx < columns and gy >= 0.0 and gy < rows):
+            status[k] = OUTSIDE  # beyond the guard band (or NaN)
+            continue
+        cell = int(gy) * columns + int(gx)
+        cover = covers[e, cell]
+        if cover >= 0:  # one face covers the whole cell, provably: no ray of it needs a test
+            status[k] = ANSWERED
+            face[s] = ids[cover]
+            continue
+        if cover == LONG_CELL:
+            status[k] = LONG
+            continue
+        best = -1
+        best_z = best_lo = best_hi = math.inf
+        rival_lo = math.inf  # the nearest any other face that is not missed can be
+        verdict = ANSWERED
+        for j in range(start[e, cell], start[e, cell + 1]):
+            f = faces[j]
+            err = errors[j]  # Embree's error on this face's edge functions, anywhere in the cell
+            u0 = records[f, 0] * pa + records[f, 1] * pb + records[f, 2]
+            u1 = records[f, 3] * pa + records[f, 4] * pb + records[f, 5]
+            u2 = records[f, 6] * pa + records[f, 7] * pb + records[f, 8]
+            if (u0 > err or u1 > err or u2 > err) and (u0 < -err or u1 < -err or u2 < -err):
+                continue  # two edges certainly disagree: Embree misses it too
+            det = u0 + u1 + u2
+            spread = 3.0 * err
+            if not abs(det) > 2.0 * spread:  # grazing: the side it is met from is anybody's guess
+                verdict = GRAZING
+                break
+            z = records[f, OFFSET] / det
+            rel = records[f, REL_T] + spread / abs(det) + 1e-9
+            if not rel < 0.5:
+                verdict = GRAZING
+                break
+            if z <= 0.0:  # its plane is met behind the eye (the error cannot flip the sign of t)
+                continue
+            lo = z * (1.0 - rel)
+            hi = z * (1.0 + rel)
+            if det < 0.0:
+                u0, u1, u2 = -u0, -u1, -u2
+            # inside by more than EDGE as Embree computes it: its packets do not ask the ray again alone (and
+            # its depth known within 5%: a face dropped from the cell lies 10% deeper than one covering it)
+            margin = EDGE * (abs(det) + spread) + err
+            if u0 >= margin and u1 >= margin and u2 >= margin and rel < 0.05 and z < best_z:
+                rival_lo = min(rival_lo, best_lo)
+                best, best_z, best_lo, best_hi = f, z, lo, hi
+            else:
+                rival_lo = min(rival_lo, lo)
+        if verdict != ANSWERED:
+            status[k] = verdict
+        elif best < 0:
+            status[k] = ANSWERED if rival_lo == math.inf else EDGE_OR_TIE
+            face[s] = -1
+        elif rival_lo > best_hi:
+            status[k] = ANSWERED
+            face[s] = ids[best]
         else:
-            rival_lo = min(rival_lo, lo)
-    if best < 0:
-        return (ANSWERED, -1) if rival_lo == math.inf else (EDGE_OR_TIE, -1)
-    if rival_lo > best_hi:
-        return ANSWERED, best
-    return EDGE_OR_TIE, -1
+            status[k] = EDGE_OR_TIE
 
 
 @jit
@@ -125,18 +155,15 @@ def find_faces(screen, embree, origins, directions, rays, face, queue):
     if not screen.on:
         intersect_rays(embree, origins, directions, rays, face, True)
         return 0
+    status = queue  # the statuses first; the queue overwrites them behind the packet being read
+    classify(screen, origins, directions, rays, status, face)
     queued = 0
     answered = 0
     for start in range(0, m, _PACKET):
         lanes = min(_PACKET, m - start)
         whole = True
         for lane in range(lanes):
-            s = rays[start + lane]
-            status, f = _answer(screen, origins, directions, s)
-            if status != ANSWERED:
-                whole = False
-                break
-            face[s] = f
+            whole = whole and status[start + lane] == ANSWERED
         if whole:
             answered += lanes
             continue
@@ -153,6 +180,11 @@ def find_faces(screen, embree, origins, directions, rays, face, queue):
 def reasons(screen, origins, directions, rays, counts):
     """Why each listed ray would go to Embree, or that the cells answer it: ``counts`` (len(REASONS),) int64
     added to, one entry a reason (what ``rcp bench speed`` prints)."""
-    for s in rays:
-        status, _ = _answer(screen, origins, directions, s) if screen.on else (OTHER_EYE, -1)
-        counts[status] += 1
+    if not screen.on:
+        counts[OTHER_EYE] += len(rays)
+        return
+    status = np.empty(len(rays), np.int64)
+    face = np.empty(len(origins), np.int32)
+    classify(screen, origins, directions, rays, status, face)
+    for k in range(len(rays)):
+        counts[status[k]] += 1
