@@ -138,7 +138,9 @@ def _screen_paths(trace, origins: np.ndarray, directions: np.ndarray, repeats: i
     print(
         f"screen cells: built in {screen.seconds * 1e3:.1f} ms; {screen.nbytes() / 1e3:.0f} kB "
         f"({screen.nbytes() / n:.2f} bytes a pixel; declared at most {screencells.BYTES}) and "
-        f"{screen.records.nbytes / 1e6:.1f} MB of face records; {(screen.cover == visibility.LONG_CELL).mean():.0%} of the cells long, {(screen.cover >= 0).mean():.0%} covered by one face"
+        f"{screen.records.nbytes / 1e6:.1f} MB of face records; "
+        f"{(screen.cover == visibility.LONG_CELL).mean():.0%} of the cells long, "
+        f"{(screen.cover >= 0).mean():.0%} covered by one face"
     )
     every = np.arange(n)
     counts = np.zeros(len(visibility.REASONS), np.int64)

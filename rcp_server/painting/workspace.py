@@ -42,9 +42,9 @@ ENCODED_BYTES = 3  # the picture as 8-bit RGB, before the encoder
 def pixel_bytes(params: PaintParams, *, outlines: bool = False, shared: bool = False, kept: int = 1) -> dict[str, int]:
     """What one painted pixel costs with ``params``, buffer by buffer, bytes: ``kept`` result states (a walk
     in temporal mode holds two: the frame before and the one being painted), the ink when some material draws
-    ``outlines``, the screen cells when the eyes rest, the anchor of surface noise when the eyes of a stereo painting are ``shared`` (its tiles
-    run one iteration at a time), the 8-bit picture. Tile buffers are not counted: their size is the tiles',
-    not the painting's. ``rcp bench memory`` prints these beside the measured slope."""
+    ``outlines``, the screen cells when the eyes rest, the anchor of surface noise when the eyes of a stereo
+    painting are ``shared`` (its tiles run one iteration at a time), the 8-bit picture. Tile buffers are not
+    counted: their size is the tiles', not the painting's. ``rcp bench memory`` prints these beside the measured slope."""
     reads = params.reads()
     costs = {
         "result": kept * state_bytes(reads),

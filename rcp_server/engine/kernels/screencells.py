@@ -26,9 +26,9 @@ import numba
 import numpy as np
 
 from .bundles import NO_SCREEN, Screen
-from .jit import jit
 from .embree import EDGE
-from .visibility import EDGES, LONG_CELL, OFFSET, RECORD, REL_T
+from .jit import jit
+from .visibility import LONG_CELL, OFFSET, RECORD, REL_T
 
 CELL = 4  # pixels a side
 LONGEST = 24  # triangles a cell may list; a longer list goes to Embree (it would cost more than the BVH)
@@ -84,9 +84,10 @@ def build(
     height: int,
     guard: int,
 ) -> Screen:
-    """The screen cells of ``eyes`` (E, 3) float32 (the rays' own origins, exactly; at most ``BYTES`` a pixel each), looking along ``basis``
+    """The screen cells of ``eyes`` (E, 3) float32 (the rays' own origins, exactly), looking along ``basis``
     (3, 3) float64 rows ``r, u, f`` with a vertical half field ``tan_half``, for an eye's image of
-    ``width x height`` pixels and a guard band of ``guard`` pixels; ``triangles`` (F, 3, 3) float32, Embree's."""
+    ``width x height`` pixels and a guard band of ``guard`` pixels; ``triangles`` (F, 3, 3) float32, Embree's.
+    At most ``BYTES`` a pixel each eye; ``NO_SCREEN`` for an image too small to hold cells."""
     clock = time.perf_counter()
     aspect = width / height
     columns = -(-(width + 2 * guard) // CELL)

@@ -4,9 +4,10 @@ nearest listed triangle that contains it, whenever that answer provably is Embre
 
 Provably: every listed triangle is tested with its three edge functions in double precision, each with a
 bound of the error Embree makes computing it in single precision (``screencells.ERROR_ULPS`` ulps of the
-corners' distance from the eye times the ray's distance from the corners). A triangle is *certain* when the signs of its three edge functions and of its
-determinant cannot differ from Embree's and the ray lies more than ``embree.EDGE`` inside it as Embree computes it (so that
-Embree's packets do not ask the ray again alone), *missed* when two edge functions certainly differ in sign
+corners' distance from the eye times the ray's distance from the corners). A triangle is *certain* when the
+signs of its three edge functions and of its determinant cannot differ from Embree's and the ray lies more
+than ``embree.EDGE`` inside it as Embree computes it (so that Embree's packets do not ask the ray again
+alone), *missed* when two edge functions certainly differ in sign
 or the hit lies certainly behind the eye, and *uncertain* otherwise. The answer is the nearest certain
 triangle when no other triangle that is not missed can come as near within both distances' error bounds,
 and a miss when every listed triangle is missed. Anything else goes to Embree: a ray near an edge, two
