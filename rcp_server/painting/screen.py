@@ -1,6 +1,7 @@
 """Which paintings the screen cells answer (``kernels.screencells``, ``kernels.visibility``): perspective
 cameras whose eyes stay put (``lambda_e`` 0), mono or stereo, each eye its own cells. Panoramas and moving
-eyes go to Embree, and so does everything when ``RCP_SCREEN_CELLS=0``: the pictures are the same either way.
+eyes go to Embree, and so does everything unless ``RCP_SCREEN_CELLS`` asks for cells (``screencells.MODES``,
+off by default): the pictures are the same either way.
 """
 
 from __future__ import annotations

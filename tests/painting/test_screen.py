@@ -112,6 +112,8 @@ def test_auto_builds_the_cells_only_for_paintings_that_cast_enough_rays_a_triang
     large = raytrace.Frame.of(scene, 0.0, CAMERA, params, 320, 180)
     assert 16 * 9 * 6 < screencells.PAYS * faces <= 320 * 180 * 6
     assert not small.trace.screen.on and large.trace.screen.on
+    monkeypatch.delenv(screencells.VARIABLE)
+    assert screencells.mode() == "off" and not raytrace.Frame.of(scene, 0.0, CAMERA, params, 320, 180).trace.screen.on
     monkeypatch.setenv(screencells.VARIABLE, "sometimes")
     with pytest.raises(ValueError, match="RCP_SCREEN_CELLS"):
         screencells.mode()
