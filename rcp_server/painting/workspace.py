@@ -44,7 +44,8 @@ def pixel_bytes(params: PaintParams, *, outlines: bool = False, shared: bool = F
     in temporal mode holds two: the frame before and the one being painted), the ink when some material draws
     ``outlines``, the screen cells when the eyes rest, the anchor of surface noise when the eyes of a stereo
     painting are ``shared`` (its tiles run one iteration at a time), the 8-bit picture. Tile buffers are not
-    counted: their size is the tiles', not the painting's. ``rcp bench memory`` prints these beside the measured slope."""
+    counted: their size is the tiles', not the painting's. ``rcp bench memory`` prints these beside the
+    measured slope."""
     reads = params.reads()
     costs = {
         "result": kept * state_bytes(reads),
