@@ -151,7 +151,8 @@ class Screen(NamedTuple):
     cover: np.ndarray  # (E, columns * rows) int32: the face (a record) that answers every ray of the cell when one
     # provably does, -1 when its rays test its list, visibility.LONG_CELL when the list is too long to pay
     faces: np.ndarray  # (K,) int32 the lists, one after the other
-    errors: np.ndarray  # (K,) float64 the bound of Embree's error on the listed face's edge functions in the cell
+    errors: np.ndarray  # (K,) float32 the bound of Embree's error on the listed face's edge functions in the cell
+    nearest: np.ndarray  # (K,) float32 the nearest depth Embree can place it at in the cell (lists run front to back)
     records: np.ndarray  # (L, visibility.RECORD) float64 the edge functions and distance of each face listed,
     # for the eye whose lists name it (a face listed for two eyes has two)
     ids: np.ndarray  # (L,) int32 which face of the scene each record is
@@ -159,7 +160,7 @@ class Screen(NamedTuple):
 
     def nbytes(self) -> int:
         """The bytes of the cells (starts, flags and lists; not the per-face records)."""
-        return self.start.nbytes + self.cover.nbytes + self.faces.nbytes + self.errors.nbytes
+        return self.start.nbytes + self.cover.nbytes + self.faces.nbytes + self.errors.nbytes + self.nearest.nbytes
 
 
 NO_SCREEN = Screen(
@@ -175,6 +176,7 @@ NO_SCREEN = Screen(
     np.zeros((0, 2), np.int32),
     np.zeros((0, 1), np.int32),
     np.zeros(1, np.int32),
+    np.zeros(1, np.float32),
     np.zeros(1, np.float32),
     np.zeros((1, 12)),
     np.zeros(1, np.int32),

@@ -65,8 +65,8 @@ def pays(rays: int, faces: int) -> bool:
 BYTES = 4
 """Bytes a pixel the cells of an eye's image take at most (``pixel_bytes`` declares them: a painted pixel's
 budget is 64 bytes): a start and a cover (int32 each) a cell, and an entry of the lists (a face, int32,
-and an error, float32) takes 8 bytes; past the budget, the cells left (in row order) are long: their rays go
-to Embree."""
+an error and a nearest depth, float32) takes 12 bytes; past the budget, the cells with the longest lists
+are long: their rays go to Embree."""
 
 
 def guard_pixels(lambda_p: float, noise: float, width: int, height: int) -> int:
@@ -102,8 +102,8 @@ def build(
         max(shift_x, columns - shift_x) / scale_x, max(shift_y, rows - shift_y) / abs(scale_y)
     )  # the farthest point of the cells from the view axis, on the image plane
     starts, covers, lists, records = [], [], [], []
-    errors, ids = [], []
-    most = (BYTES * width * height - 8 * (columns * rows + 1)) // 8  # entries of all lists, each eye
+    errors, ids, nearest = [], [], []
+    most = (BYTES * width * height - 8 * (columns * rows + 1)) // 12  # entries of all lists, each eye
     if most <= 0:  # an image too small for cells
         return NO_SCREEN
     for eye in eyes:
@@ -116,7 +116,7 @@ def build(
         x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
         cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
         cells_y = np.stack([np.clip(y0, 0, rows - 1), np.clip(y1, 0, rows - 1)], axis=1).astype(np.int64)
-        start, cover, faces, error = _fill(
+        start, cover, faces, error, near = _fill(
             cells_x=cells_x,
             cells_y=cells_y,
             live=live,
@@ -136,6 +136,7 @@ def build(
         covers.append(np.where(cover >= 0, local[np.maximum(cover, 0)], cover))
         lists.append(local[faces])
         errors.append(error)
+        nearest.append(near)
         records.append(record[named])
         ids.append(named)
     return Screen(
@@ -152,6 +153,7 @@ def build(
         cover=np.stack(covers).astype(np.int32),
         faces=np.concatenate(lists).astype(np.int32),
         errors=np.concatenate(errors),
+        nearest=np.concatenate(nearest),
         records=np.concatenate(records),
         ids=np.concatenate(ids).astype(np.int32),
         seconds=time.perf_counter() - clock,
@@ -311,8 +313,9 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
     # ---- drop what is provably hidden, cap the lists ----
     start = np.zeros(count + 1, np.int64)
     cover = np.full(count, -1, np.int32)
-    faces = np.empty(min(len(every), count * longest), np.int32)
+    faces = np.empty(min(len(every), count * (longest + 1)), np.int32)
     errors = np.empty(len(faces), np.float32)
+    nearest_at = np.empty(len(faces), np.float32)
     corners = np.empty((4, 2))
     kept = 0
     for c in range(count):
@@ -344,18 +347,52 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
             err = spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
             if nearest < math.inf and _behind(records, f, corners, err, HIDDEN * nearest):
                 continue  # hidden: wherever Embree meets it in this cell, it is farther than the covering face
-            if kept - begin >= longest or kept >= most:
+            if kept - begin >= longest:
                 cover[c] = LONG_CELL
                 break
-            faces[kept] = f
-            errors[kept] = err
+            # front to back by the nearest Embree can place it in the cell (insertion: a list is short)
+            near = _nearest(records, f, corners, err)
+            at = kept
+            while at > begin and nearest_at[at - 1] > near:
+                faces[at] = faces[at - 1]
+                errors[at] = errors[at - 1]
+                nearest_at[at] = nearest_at[at - 1]
+                at -= 1
+            faces[at] = f
+            errors[at] = err
+            nearest_at[at] = near
             kept += 1
         if cover[c] == LONG_CELL:
             kept = begin
         elif kept - begin == 1 and _answers_all(records, faces[begin], corners, errors[begin]):
             cover[c] = faces[begin]  # alone and inside it all over the cell: every ray of the cell meets it
         start[c + 1] = kept
-    return start, cover, faces[:kept].copy(), errors[:kept].copy()
+    # ---- within the budget: the longest lists go to Embree first ----
+    lengths = np.zeros(longest + 1, np.int64)
+    for c in range(count):
+        lengths[start[c + 1] - start[c]] += 1
+    cap = longest
+    total = kept
+    while total > most and cap > 0:
+        total -= cap * lengths[cap]
+        cap -= 1
+    if cap == longest:
+        return start, cover, faces[:kept].copy(), errors[:kept].copy(), nearest_at[:kept].copy()
+    at = 0
+    begin = 0
+    for c in range(count):
+        end = start[c + 1]
+        if end - begin > cap:
+            cover[c] = LONG_CELL
+        else:
+            for k in range(begin, end):
+                faces[at] = faces[k]
+                errors[at] = errors[k]
+                nearest_at[at] = nearest_at[k]
+                at += 1
+        begin = end
+        start[c + 1] = at
+    return start, cover, faces[:at].copy(), errors[:at].copy(), nearest_at[:at].copy()
 
 
 @jit
@@ -383,6 +420,32 @@ def _answers_all(records, f, corners, err):
         if not (rel < 0.5 and records[f, OFFSET] / det > 0.0):
             return False
     return True
+
+
+@jit
+def _nearest(records, f, corners, err):
+    """The nearest depth at which Embree can place face ``f`` on a ray of the cell of ``corners`` (its edge
+    functions' error ``err``), rounded down to float32; -infinity where it cannot be bounded (grazing
+    somewhere in the cell, its depth's sign uncertain)."""
+    sign = 0.0
+    low = math.inf
+    for q in range(4):
+        a = corners[q, 0]
+        b = corners[q, 1]
+        det = 0.0
+        for i in range(9):
+            det += records[f, i] * (a if i % 3 == 0 else b if i % 3 == 1 else 1.0)
+        s = 1.0 if det > 0.0 else -1.0
+        if not abs(det) > 6.0 * err or (sign != 0.0 and s != sign):
+            return -math.inf
+        sign = s
+        rel = records[f, REL_T] + 3.0 * err / abs(det) + 1e-9
+        z = records[f, OFFSET] / det
+        if not (rel < 0.5 and z > 0.0):
+            return -math.inf
+        low = min(low, z * (1.0 - rel))
+    # 1/z is linear over the cell and |det| too: the extremes lie at the corners; float32 rounds within 6e-8
+    return np.float32(low * (1.0 - 1e-6))
 
 
 @jit

@@ -54,11 +54,12 @@ def classify(screen, origins, directions, rays, status, face):
     # unpacked once: a bundle handed to a function a ray costs more than the ray's whole test
     eyes, b, columns, rows = screen.eyes, screen.basis, screen.columns, screen.rows
     scale_x, shift_x, scale_y, shift_y = screen.scale_x, screen.shift_x, screen.scale_y, screen.shift_y
-    start, covers, faces, errors, records, ids = (
+    start, covers, faces, errors, nearest, records, ids = (
         screen.start,
         screen.cover,
         screen.faces,
         screen.errors,
+        screen.nearest,
         screen.records,
         screen.ids,
     )
@@ -99,6 +100,8 @@ def classify(screen, origins, directions, rays, status, face):
         rival_lo = math.inf  # the nearest any other face that is not missed can be
         verdict = ANSWERED
         for j in range(start[e, cell], start[e, cell + 1]):
+            if nearest[j] > best_hi:  # the list runs front to back: nothing further can come nearer
+                break
             f = faces[j]
             err = errors[j]  # Embree's error on this face's edge functions, anywhere in the cell
             u0 = records[f, 0] * pa + records[f, 1] * pb + records[f, 2]
