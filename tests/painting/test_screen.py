@@ -61,16 +61,16 @@ def test_a_stereo_painting_paints_the_same_bits_with_each_eye_its_own_cells(monk
 
 
 def _fine_scene():
-    return make_scene([sphere(subdivisions=4), facing_plane(8.0, divisions=(30, 30), color=(0.3, 0.6, 0.9))])
+    return make_scene([sphere(subdivisions=3), facing_plane(8.0, divisions=(30, 30), color=(0.3, 0.6, 0.9))])
 
 
 def test_a_fine_mesh_paints_the_same_bits_and_most_rays_are_answered_by_the_cells(monkeypatch):
     scene, params = _fine_scene(), PaintParams(lambda_p=6.0, iterations=3)
-    on, off = _both(monkeypatch, scene, CAMERA, 160, 90, params)
+    on, off = _both(monkeypatch, scene, CAMERA, 320, 180, params)
     np.testing.assert_array_equal(on, off)
     monkeypatch.setenv(screencells.VARIABLE, "on")
-    frame = raytrace.Frame.of(scene, 0.0, CAMERA, params, 160, 90)
-    counts = _paths(frame, CAMERA, params, 160, 90)
+    frame = raytrace.Frame.of(scene, 0.0, CAMERA, params, 320, 180)
+    counts = _paths(frame, CAMERA, params, 320, 180)
     assert counts[visibility.ANSWERED] > 0.6 * counts.sum()
 
 
@@ -123,5 +123,5 @@ def test_the_cells_take_no_more_bytes_than_declared(monkeypatch):
     monkeypatch.setenv(screencells.VARIABLE, "on")
     scene = load_scene("default")
     for params in (scene.paint, replace(scene.paint, lambda_p=1000.0)):
-        frame = raytrace.Frame.of(scene, 0.0, scene.camera, params, 160, 90)
-        assert 0 < frame.trace.screen.nbytes() <= pixel_bytes(params)["screen"] * 160 * 90
+        frame = raytrace.Frame.of(scene, 0.0, scene.camera, params, 320, 180)
+        assert 0 < frame.trace.screen.nbytes() <= pixel_bytes(params)["screen"] * 320 * 180
