@@ -2,9 +2,14 @@
 cameras whose eyes stay put (``lambda_e`` 0), mono or stereo, each eye its own cells. Panoramas and moving
 eyes go to Embree, and so does everything unless ``RCP_SCREEN_CELLS`` asks for cells (``screencells.MODES``,
 off by default): the pictures are the same either way.
+
+The cells of the last few eyes are kept (:data:`KEPT`): the paintings of one view (a walk's frame at rest,
+then its full painting and its samples) build them once.
 """
 
 from __future__ import annotations
+
+import threading
 
 import numpy as np
 
@@ -12,6 +17,10 @@ from ..camera.camera import Camera
 from ..engine import kernels
 from ..engine.kernels import screencells
 from ..settings.params import PaintParams
+
+KEPT = 4  # the cells kept, the most recently used last
+_kept: list[tuple[tuple, np.ndarray, kernels.Screen]] = []
+_lock = threading.Lock()
 
 
 def cells(camera: Camera, params: PaintParams, width: int, height: int, triangles: np.ndarray) -> kernels.Screen:
@@ -35,4 +44,14 @@ def cells(camera: Camera, params: PaintParams, width: int, height: int, triangle
     reach = max(abs(look.lambda_p) for look in looks)
     noise = max(look.noise for look in looks)
     guard = screencells.guard_pixels(reach, noise, eye_width, eye_height)
-    return screencells.build(triangles, eyes, basis, camera.half_height(), eye_width, eye_height, guard)
+    key = (eyes.tobytes(), basis.tobytes(), camera.half_height(), eye_width, eye_height, guard, triangles.shape)
+    with _lock:
+        for at, (known, faces, built) in enumerate(_kept):
+            if known == key and faces is triangles:
+                _kept.append(_kept.pop(at))
+                return built
+    built = screencells.build(triangles, eyes, basis, camera.half_height(), eye_width, eye_height, guard)
+    with _lock:
+        _kept.append((key, triangles, built))
+        del _kept[:-KEPT]
+    return built

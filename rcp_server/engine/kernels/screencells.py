@@ -128,10 +128,7 @@ def build(
         )
         # the listed faces renumbered in the order the lists first name them, their records in that order:
         # the faces of a cell lie side by side in memory
-        _, first = np.unique(faces, return_index=True)
-        named = faces[np.sort(first)]
-        local = np.empty(len(record), np.int32)
-        local[named] = np.arange(len(named), dtype=np.int32) + sum(len(r) for r in records)
+        named, local = _first_named(faces, len(record), sum(len(r) for r in records))
         starts.append(start + sum(len(f) for f in lists))
         covers.append(np.where(cover >= 0, local[np.maximum(cover, 0)], cover))
         lists.append(local[faces])
@@ -331,7 +328,16 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
         half = 0.5 * math.sqrt((corners[3, 0] - corners[0, 0]) ** 2 + (corners[3, 1] - corners[0, 1]) ** 2)
         nearest = math.inf  # the farthest the best covering face lies along a ray of the cell
         for k in range(first[c], first[c + 1]):
-            nearest = min(nearest, _covers(records, every[k], corners))
+            f = every[k]
+            # only a face whose projection reaches past the cell on every side can cover it: the cell lies
+            # inside its box of cells (clipped to the grid at its borders); most faces span a cell or two
+            if (
+                (cells_x[f, 0] < gx or gx == 0)
+                and (gx < cells_x[f, 1] or gx == columns - 1)
+                and (cells_y[f, 0] < gy or gy == 0)
+                and (gy < cells_y[f, 1] or gy == rows - 1)
+            ):
+                nearest = min(nearest, _covers(records, f, corners))
         reach = nearest * widest * 1.01  # no ray of the cell meets the covering face farther than this
         begin = kept
         for k in range(first[c], first[c + 1]):
@@ -396,6 +402,21 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
 
 
 @jit
+def _first_named(faces, count, offset):
+    """The faces of ``faces`` in the order the lists first name them (M,) int64, and each face's number in
+    that order plus ``offset`` (count,) int32 (-1: not named)."""
+    local = np.full(count, -1, np.int32)
+    named = np.empty(min(len(faces), count), np.int64)
+    m = 0
+    for f in faces:
+        if local[f] < 0:
+            local[f] = m + offset
+            named[m] = f
+            m += 1
+    return named[:m], local
+
+
+@jit
 def _answers_all(records, f, corners, err):
     """Whether every ray of the cell of ``corners`` meets face ``f`` provably as the kernel requires (inside by
     its margins at every corner, ``visibility._answer``), so that the kernel need not test it ray by ray."""
@@ -422,6 +443,22 @@ def _answers_all(records, f, corners, err):
     return True
 
 
+@numba.njit(inline="always")
+def _det(records, f, a, b):
+    """The sum of face ``f``'s three edge functions at ``(a, b)``, term by term in record order."""
+    det = 0.0
+    det += records[f, 0] * a
+    det += records[f, 1] * b
+    det += records[f, 2]
+    det += records[f, 3] * a
+    det += records[f, 4] * b
+    det += records[f, 5]
+    det += records[f, 6] * a
+    det += records[f, 7] * b
+    det += records[f, 8]
+    return det
+
+
 @jit
 def _nearest(records, f, corners, err):
     """The nearest depth at which Embree can place face ``f`` on a ray of the cell of ``corners`` (its edge
@@ -432,9 +469,7 @@ def _nearest(records, f, corners, err):
     for q in range(4):
         a = corners[q, 0]
         b = corners[q, 1]
-        det = 0.0
-        for i in range(9):
-            det += records[f, i] * (a if i % 3 == 0 else b if i % 3 == 1 else 1.0)
+        det = _det(records, f, a, b)
         s = 1.0 if det > 0.0 else -1.0
         if not abs(det) > 6.0 * err or (sign != 0.0 and s != sign):
             return -math.inf
@@ -458,9 +493,7 @@ def _behind(records, f, corners, err, depth):
     for q in range(4):
         a = corners[q, 0]
         b = corners[q, 1]
-        det = 0.0
-        for i in range(9):
-            det += records[f, i] * (a if i % 3 == 0 else b if i % 3 == 1 else 1.0)
+        det = _det(records, f, a, b)
         s = 1.0 if det > 0.0 else -1.0
         if not abs(det) > 6.0 * err or (sign != 0.0 and s != sign):
             return False  # grazing somewhere in the cell
