@@ -23,6 +23,12 @@ _kept: list[tuple[tuple, np.ndarray, kernels.Screen]] = []
 _lock = threading.Lock()
 
 
+def forget() -> None:
+    """Drop the cells kept (``rcp bench speed`` times a build of its own)."""
+    with _lock:
+        _kept.clear()
+
+
 def cells(camera: Camera, params: PaintParams, width: int, height: int, triangles: np.ndarray) -> kernels.Screen:
     """The screen cells of a ``width x height`` painting of ``triangles`` (F, 3, 3) float32 by ``camera``, or
     ``kernels.NO_SCREEN`` where they do not apply."""

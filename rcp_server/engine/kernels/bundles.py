@@ -156,7 +156,7 @@ class Screen(NamedTuple):
     records: np.ndarray  # (L, visibility.RECORD) float64 the edge functions and distance of each face listed,
     # for the eye whose lists name it (a face listed for two eyes has two)
     ids: np.ndarray  # (L,) int32 which face of the scene each record is
-    seconds: float  # what building them took
+    seconds: float  # what building them took, thread time
 
     def nbytes(self) -> int:
         """The bytes of the cells (starts, flags and lists; not the per-face records)."""

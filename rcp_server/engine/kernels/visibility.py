@@ -14,9 +14,9 @@ and a miss when every listed triangle is missed. Anything else goes to Embree: a
 candidates tied in depth (coplanar faces), a grazing ray, a ray from another eye (a moving eye), a ray
 outside the cells (beyond the guard band, behind the camera, not finite), a cell whose list is too long.
 
-Embree answers in the very packets it answers with the lists off: a packet of eight consecutive rays that
-has one ray the lists cannot answer goes to ``embree.intersect_rays`` whole, so that even the rays whose
-answer depends on their neighbours (two faces at exactly the same depth) come out as they do without lists.
+The rays the lists cannot answer go to ``embree.intersect_rays`` in packets of their own, eight at a time in
+screen order: a ray's answer there does not depend on the rays beside it (a hit near an edge is asked again
+alone), so it is the answer it gets with the lists off.
 """
 
 from __future__ import annotations
@@ -27,8 +27,6 @@ import numpy as np
 
 from .embree import EDGE, intersect_rays
 from .jit import jit
-
-_PACKET = 8  # as embree.intersect_rays groups rays
 
 # one face's record for one eye (``screencells.py``): its three edge functions over the image plane, each
 # ``E_i(a, b) = A_i a + B_i b + C_i`` at the point ``(a, b)`` (``d.r / d.f``, ``d.u / d.f``) of a ray ``d``
@@ -153,31 +151,22 @@ def find_faces(screen, embree, origins, directions, rays, face, queue):
 
     screen : bundles.Screen (``on`` False: every ray goes to Embree);  embree : embree.Embree
     origins, directions : (n, 3) float32;  rays : (m,) int64 in screen order;  face : (n,) int32 out
-    queue : (m,) int64 scratch: the rays of the packets that go to Embree
+    queue : (m,) int64 scratch: the rays that go to Embree
     """
     m = len(rays)
     if not screen.on:
         intersect_rays(embree, origins, directions, rays, face, True)
         return 0
-    status = queue  # the statuses first; the queue overwrites them behind the packet being read
+    status = queue  # the statuses first; the queue overwrites them behind the ray being read
     classify(screen, origins, directions, rays, status, face)
     queued = 0
-    answered = 0
-    for start in range(0, m, _PACKET):
-        lanes = min(_PACKET, m - start)
-        whole = True
-        for lane in range(lanes):
-            whole = whole and status[start + lane] == ANSWERED
-        if whole:
-            answered += lanes
-            continue
-        # the packet as it is, in the same lanes: the answers of rays that tie cannot change
-        for lane in range(lanes):
-            queue[queued] = rays[start + lane]
+    for k in range(m):
+        if status[k] != ANSWERED:
+            queue[queued] = rays[k]
             queued += 1
     if queued:
         intersect_rays(embree, origins, directions, queue[:queued], face, True)
-    return answered
+    return m - queued
 
 
 @jit
