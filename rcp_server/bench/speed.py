@@ -16,8 +16,11 @@ from dataclasses import replace
 import numpy as np
 
 from ..camera.camera import Region
-from ..engine.kernels.embree import EmbreexScene
+from ..engine.kernels import screencells, visibility
+from ..engine.kernels.embree import EmbreexScene, intersect_rays
+from ..painting import screen
 from ..painting.assign import Rays, assign_cameras, setup_tile
+from ..painting.frame import Frame
 from ..painting.loop import STAGES, default_threads, paint, tile_rows
 from ..scene.scene import Scene
 from ..scene.scenefile import load_scene
@@ -61,6 +64,9 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     origins, directions = rays.origins, rays.directions
     bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(tile_rows(region, threads))]
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0
+    if tracer is not None:
+        screen.forget()  # a build of its own, timed, the kernels compiled
+        _screen_paths(Frame.of(scene, 0.0, camera, params, width, height).trace, origins, directions, repeats)
 
     # the two references: embreex (one rtcIntersect1 a ray, from its loop) and Embree's own coherent packets
     # on the same rays, without anything around them (the limit of this machine)
@@ -117,12 +123,66 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         f"a whole painting ({iterations} iterations) / one embreex pass: {statistics.median(whole):.2f}x "
         f"median of {repeats} pairs (spread {whole[0]:.2f}-{whole[-1]:.2f}; target <= 3.0x, goal 2.0x)"
     )
+    packets = sorted(p / a for p, a in zip(painted, alone["packets"], strict=True))
+    print(
+        f"a whole painting / {iterations} passes of bare packets: {statistics.median(packets):.2f}x "
+        f"median of {repeats} pairs (spread {packets[0]:.2f}-{packets[-1]:.2f}; target <= 1.0x, goal 0.6x)"
+    )
     _own_painting(scene, width, height, replace(scene.paint, iterations=iterations), repeats, threads, alone)
+
+
+def _screen_paths(trace, origins: np.ndarray, directions: np.ndarray, repeats: int) -> None:
+    """The screen cells of the painting (``kernels.screencells``): what they cost to build and hold, which path
+    answered the samples of an iteration, and what each path costs (one thread, over the whole image)."""
+    screen, n = trace.screen, len(origins)
+    if not screen.on:
+        print(f"screen cells: none ({screencells.VARIABLE}={screencells.mode()}, or a moving eye or a panorama)")
+        return
+    print(
+        f"screen cells: built in {screen.seconds * 1e3:.1f} ms; {screen.nbytes() / 1e3:.0f} kB "
+        f"({screen.nbytes() / n:.2f} bytes a pixel; declared at most {screencells.BYTES}) and "
+        f"{screen.records.nbytes / 1e6:.1f} MB of face records; "
+        f"{(screen.cover == visibility.LONG_CELL).mean():.0%} of the cells long, "
+        f"{(screen.cover >= 0).mean():.0%} covered by one face"
+    )
+    every = np.arange(n)
+    counts = np.zeros(len(visibility.REASONS), np.int64)
+    visibility.reasons(screen, origins, directions, every, counts)
+    print(
+        "samples by path: "
+        + ", ".join(f"{name} {c / n:.1%}" for name, c in zip(visibility.REASONS, counts, strict=True))
+    )
+    face, queue = np.empty(n, np.int32), np.empty(n, np.int64)
+    whole, part, alone = [], [], []
+    for _ in range(repeats):
+        clock = time.thread_time()
+        answered = visibility.find_faces(
+            screen=screen,
+            embree=trace.embree,
+            origins=origins,
+            directions=directions,
+            rays=every,
+            face=face,
+            queue=queue,
+        )
+        whole.append(time.thread_time() - clock)
+        clock = time.thread_time()
+        intersect_rays(trace.embree, origins, directions, queue[: n - answered], face, True)
+        part.append(time.thread_time() - clock)
+        clock = time.thread_time()
+        intersect_rays(trace.embree, origins, directions, every, face, True)
+        alone.append(time.thread_time() - clock)
+    embree, lists = statistics.median(part), statistics.median(whole) - statistics.median(part)
+    print(
+        f"  the ray's face by path, thread time in ns a pixel an iteration: cells {lists / n * 1e9:.1f} "
+        f"({answered / n:.1%} of the samples), Embree {embree / n * 1e9:.1f} "
+        f"(the rest); Embree's packets for every sample {statistics.median(alone) / n * 1e9:.1f}"
+    )
 
 
 STAGE_NAMES = {
     "camera": "cameras (mapping, rays)",
-    "intersect": "ray (Embree's packets, hit points)",
+    "intersect": "ray (screen cells or Embree, hit points)",
     "shade": "shading (and recording channels)",
     "bookkeeping": "carrying pixels (kept images, result)",
 }

@@ -11,6 +11,7 @@ from ..engine import kernels
 from ..engine.kernels.embree import Embree, Tracer
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
+from . import screen
 from .alphamask import step_floor
 from .fields import Looks
 from .outlines import ink
@@ -45,5 +46,6 @@ class Frame:
             ink=ink(scene, time, camera, width, height),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
-        trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry))
+        cells = screen.cells(camera, params, width, height, geometry.triangles) if tracer else kernels.NO_SCREEN
+        trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry), cells)
         return cls(trace, shading, tracer, Looks.of(params, geometry.object_names, geometry.material_names))

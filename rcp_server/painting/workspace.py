@@ -18,6 +18,7 @@ import numpy as np
 
 from ..camera.camera import RAY_DTYPE, Region
 from ..engine import kernels
+from ..engine.kernels import screencells
 from ..engine.kernels.embree import Hits
 from ..engine.paintstate import CHANNELS, PaintState, channel_shape
 from ..settings.params import PaintParams
@@ -52,6 +53,7 @@ class TileBuffers:
             starts=np.empty((cut, 3), RAY_DTYPE),
             todo=np.empty(cut, np.int64),
             next_todo=np.empty(cut, np.int64),
+            queue=np.empty(rays, np.int64),
         )
         whole = Region(capacity, 1)
         states = (PaintState.empty(whole, channels), PaintState.empty(whole, channels))
@@ -77,6 +79,7 @@ class TileBuffers:
             starts=s.starts[cut],
             todo=s.todo[cut],
             next_todo=s.next_todo[cut],
+            queue=s.queue[:rays],
         )
         states = (self.states[0].first(n, region), self.states[1].first(n, region))
         return scratch, states, None if self.anchor is None else self.anchor[:n]
@@ -103,15 +106,18 @@ ENCODED_BYTES = 3  # the picture as 8-bit RGB, before the encoder
 def pixel_bytes(params: PaintParams, *, outlines: bool = False, shared: bool = False, kept: int = 1) -> dict[str, int]:
     """What one painted pixel costs with ``params``, buffer by buffer, bytes: ``kept`` result states (a walk
     in temporal mode holds two: the frame before and the one being painted), the ink when some material draws
-    ``outlines``, the anchor of surface noise when the eyes of a stereo painting are ``shared`` (its tiles
-    run one iteration at a time), the 8-bit picture. Tile buffers are not counted: their size is the tiles',
-    not the painting's. ``rcp bench memory`` prints these beside the measured slope."""
+    ``outlines``, the screen cells when the eyes rest, the anchor of surface noise when the eyes of a stereo
+    painting are ``shared`` (its tiles run one iteration at a time), the 8-bit picture. Tile buffers are not
+    counted: their size is the tiles', not the painting's. ``rcp bench memory`` prints these beside the
+    measured slope."""
     reads = params.reads()
     costs = {
         "result": kept * state_bytes(reads),
         "ink": INK_BYTES if outlines else 0,
         "anchor": ANCHOR_BYTES if shared and "position" in reads else 0,
         "picture": ENCODED_BYTES,
+        # the screen cells of eyes at rest (kernels.screencells), each eye's over its own pixels
+        "screen": screencells.BYTES if all(look.lambda_e == 0.0 for look in params.looks()) else 0,
     }
     if params.method == "image":
         costs["plain"] = state_bytes(reads)

@@ -43,6 +43,15 @@ def test_jpeg_round_trip_is_close():
     assert len(encode(image, "JPEG", quality=20)) < len(data)
 
 
+@pytest.mark.parametrize("quality", [30, 70, 95])
+def test_jpeg_keeps_full_resolution_color_at_every_quality(quality):
+    from PIL import JpegImagePlugin
+
+    image = np.random.default_rng(1).uniform(0, 1, (16, 16, 3)).astype(np.float32)
+    with Image.open(io.BytesIO(encode(image, "JPEG", quality=quality))) as im:
+        assert JpegImagePlugin.get_sampling(im) == 0  # 4:4:4
+
+
 def test_save_picks_the_format_from_the_suffix(tmp_path):
     image = np.full((4, 6, 3), 0.25, np.float32)
     save(tmp_path / "a" / "x.PNG", image)

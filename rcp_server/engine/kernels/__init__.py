@@ -4,9 +4,10 @@
 ``shade.py``: hits -> per-pixel data (``shade``); ``triangle.py``: where a ray meets the triangle it hits
 (``place_hits``); ``iterate.py``: one traced iteration of a tile, the steps above chained in one call
 (``paint_iteration``); ``alpha.py``: rays through cut-outs (``pass_masked``); ``lookup.py``: the
-image-space method's lookup (``look_up``); ``embree.py``: the binding to Embree's C API that the others
-call (``intersect_rays``). Each releases the GIL, so tiles run on threads side by side, and each has a plain
-numpy reference in ``tests/engine`` that it is checked against.
+image-space method's lookup (``look_up``); ``visibility.py``: the faces of rays from eyes at rest, from
+the screen cells of ``screencells.py`` where they prove Embree's answer (``find_faces``); ``embree.py``: the
+binding to Embree's C API that the others call (``intersect_rays``). Each releases the GIL, so tiles run on
+threads side by side, and each has a plain numpy reference in ``tests/engine`` that it is checked against.
 
 Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same type passed in each
 other's place must be an error, not a wrong image.
@@ -14,6 +15,7 @@ other's place must be an error, not a wrong image.
 
 from .alpha import masked_rays, pass_masked
 from .bundles import (
+    NO_SCREEN,
     Cast,
     Channels,
     Field,
@@ -21,6 +23,7 @@ from .bundles import (
     Ink,
     Records,
     Scratch,
+    Screen,
     Seen,
     Shading,
     Surfaces,
@@ -34,6 +37,7 @@ from .iterate import paint_iteration
 from .lookup import EDGE_CLAMP, EDGE_MIRROR, EDGE_WRAP, look_up
 from .shade import record_surfaces, shade
 from .triangle import place_hits
+from .visibility import find_faces
 
 __all__ = [
     "EDGE_CLAMP",
@@ -49,8 +53,10 @@ __all__ = [
     "Field",
     "ImagePlane",
     "Ink",
+    "NO_SCREEN",
     "Records",
     "Scratch",
+    "Screen",
     "Seen",
     "Shading",
     "Surfaces",
@@ -58,6 +64,7 @@ __all__ = [
     "cast_rays",
     "channels",
     "fill_field",
+    "find_faces",
     "look_up",
     "masked_rays",
     "or_dummy",

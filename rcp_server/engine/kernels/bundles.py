@@ -133,15 +133,68 @@ class Cast(NamedTuple):
     write_origins: bool
 
 
+class Screen(NamedTuple):
+    """The screen cells of eyes at rest (``screencells.py`` builds them, ``visibility.py`` reads them): per eye,
+    a grid of ``columns x rows`` cells over its image and guard band, each listing the triangles that can cover
+    it. ``on`` False: no cells (:data:`NO_SCREEN`), every ray goes to Embree."""
+
+    on: bool
+    eyes: np.ndarray  # (E, 3) float32 the rays' origins, exactly, eye by eye
+    basis: np.ndarray  # (3, 3) float64 rows r, u, f
+    scale_x: float  # a direction d lies in cell column floor(d.r / d.f * scale_x + shift_x)
+    shift_x: float
+    scale_y: float  # and row floor(d.u / d.f * scale_y + shift_y)
+    shift_y: float
+    columns: int
+    rows: int
+    start: np.ndarray  # (E, columns * rows + 1) int32 where each cell's list starts in faces
+    cover: np.ndarray  # (E, columns * rows) int32: the face (a record) that answers every ray of the cell when one
+    # provably does, -1 when its rays test its list, visibility.LONG_CELL when the list is too long to pay
+    faces: np.ndarray  # (K,) int32 the lists, one after the other
+    errors: np.ndarray  # (K,) float32 the bound of Embree's error on the listed face's edge functions in the cell
+    nearest: np.ndarray  # (K,) float32 the nearest depth Embree can place it at in the cell (lists run front to back)
+    records: np.ndarray  # (L, visibility.RECORD) float64 the edge functions and distance of each face listed,
+    # for the eye whose lists name it (a face listed for two eyes has two)
+    ids: np.ndarray  # (L,) int32 which face of the scene each record is
+    seconds: float  # what building them took, thread time
+
+    def nbytes(self) -> int:
+        """The bytes of the cells (starts, flags and lists; not the per-face records)."""
+        return self.start.nbytes + self.cover.nbytes + self.faces.nbytes + self.errors.nbytes + self.nearest.nbytes
+
+
+NO_SCREEN = Screen(
+    False,
+    np.zeros((0, 3), np.float32),
+    np.eye(3),
+    1.0,
+    0.0,
+    1.0,
+    0.0,
+    1,
+    1,
+    np.zeros((0, 2), np.int32),
+    np.zeros((0, 1), np.int32),
+    np.zeros(1, np.int32),
+    np.zeros(1, np.float32),
+    np.zeros(1, np.float32),
+    np.zeros((1, 12)),
+    np.zeros(1, np.int32),
+    0.0,
+)
+
+
 class Trace(NamedTuple):
     """The scene as intersection needs it: Embree's handle (``tracer.Embree``; scene 0 when there are no
     triangles), the triangles (F, 3, 3) float32 where hits are placed, and whether some of them have cut-outs
-    that rays pass through (``alpha.pass_masked``, stepping at least ``floor`` scene units past a hit)."""
+    that rays pass through (``alpha.pass_masked``, stepping at least ``floor`` scene units past a hit);
+    ``screen``: the screen cells that answer the rays of eyes at rest without the BVH, where they can."""
 
     embree: tuple
     triangles: np.ndarray
     masked: bool
     floor: float
+    screen: Screen = NO_SCREEN
 
 
 class Ink(NamedTuple):
@@ -180,6 +233,7 @@ class Scratch(NamedTuple):
     starts: np.ndarray  # (n*spp, 3) float32 where rays through cut-outs go on (one row when none can)
     todo: np.ndarray  # (n*spp,) int64 rays through cut-outs, two lists in turn (one entry when none can)
     next_todo: np.ndarray
+    queue: np.ndarray  # (n*spp,) int64 the rays that the screen cells leave to Embree
 
 
 class Seen(NamedTuple):

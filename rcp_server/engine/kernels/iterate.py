@@ -1,5 +1,5 @@
-"""One traced iteration of one tile in one compiled call: every pixel's cameras, their hits (Embree's
-packets) and their shading, without
+"""One traced iteration of one tile in one compiled call: every pixel's cameras, their hits (the screen
+cells of a fixed eye where they prove the answer, Embree's packets elsewhere) and their shading, without
 returning to Python in between (``raytrace.TracedTile`` calls it once an iteration). Each step is a kernel
 of its own module, tested there against its numpy reference; this one only chains them and times them.
 """
@@ -9,10 +9,10 @@ from __future__ import annotations
 from .alpha import pass_masked
 from .cast import cast_rays
 from .clock import cycles
-from .embree import intersect_rays
 from .jit import jit
 from .shade import record_surfaces, shade
 from .triangle import place_hits
+from .visibility import find_faces
 
 
 @jit
@@ -57,7 +57,15 @@ def paint_iteration(cast, source, out, trace, shading, scratch, clock):
         for s in traced:
             hits.face[s] = -1
     else:
-        intersect_rays(trace.embree, scratch.origins, scratch.directions, traced, hits.face, True)
+        find_faces(
+            screen=trace.screen,
+            embree=trace.embree,
+            origins=scratch.origins,
+            directions=scratch.directions,
+            rays=traced,
+            face=hits.face,
+            queue=scratch.queue,
+        )
         place_hits(
             origins=scratch.origins, directions=scratch.directions, rays=traced, triangles=trace.triangles, hits=hits
         )

@@ -35,6 +35,13 @@ def _inverse_length(length2):
     return 1.0 / math.sqrt(length2) if length2 > 0.0 else 0.0
 
 
+@numba.njit(inline="always")
+def _wrap(k, n):
+    """``k % n`` (n > 0), the division only off the texture's edge: a 64-bit division per texel fetch cost
+    more than the fetch, and a texture coordinate mostly lies on the texture already."""
+    return k if 0 <= k < n else k % n
+
+
 @numba.njit(inline="always")  # two call sites in shade; an out-of-line call passes the array by value
 def _bilinear(texels, offset, width, height, x, y, wrap_y):
     """Bilinear lookup at continuous texel coordinates (x, y), as an (r, g, b) tuple: x wraps; y wraps for
@@ -45,10 +52,10 @@ def _bilinear(texels, offset, width, height, x, y, wrap_y):
     fy0 = math.floor(y)
     fx = x - fx0
     fy = y - fy0
-    c0 = int(fx0) % width
+    c0 = _wrap(int(fx0), width)
     c1 = c0 + 1 if c0 + 1 < width else 0
     if wrap_y:
-        r0 = int(fy0) % height
+        r0 = _wrap(int(fy0), height)
         r1 = r0 + 1 if r0 + 1 < height else 0
     else:
         r0 = min(max(int(fy0), 0), height - 1)
@@ -98,9 +105,9 @@ def texel_color(texels, offset, width, height, u, v):
     fy0 = math.floor(y)
     fx = x - fx0
     fy = y - fy0
-    c0 = int(fx0) % width
+    c0 = _wrap(int(fx0), width)
     c1 = c0 + 1 if c0 + 1 < width else 0
-    r0 = int(fy0) % height
+    r0 = _wrap(int(fy0), height)
     r1 = r0 + 1 if r0 + 1 < height else 0
     a = offset + r0 * width
     b = offset + r1 * width

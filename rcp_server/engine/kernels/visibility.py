@@ -1,0 +1,183 @@
+"""Primary visibility without the BVH, for eyes that stay put: a ray from a fixed eye is found in the screen
+cells of ``screencells.py`` (the triangles that can cover each cell of the image plane), and its face is the
+nearest listed triangle that contains it, whenever that answer provably is Embree's.
+
+Provably: every listed triangle is tested with its three edge functions in double precision, each with a
+bound of the error Embree makes computing it in single precision (``screencells.ERROR_ULPS`` ulps of the
+corners' distance from the eye times the ray's distance from the corners). A triangle is *certain* when the
+signs of its three edge functions and of its determinant cannot differ from Embree's and the ray lies more
+than ``embree.EDGE`` inside it as Embree computes it (so that Embree's packets do not ask the ray again
+alone), *missed* when two edge functions certainly differ in sign
+or the hit lies certainly behind the eye, and *uncertain* otherwise. The answer is the nearest certain
+triangle when no other triangle that is not missed can come as near within both distances' error bounds,
+and a miss when every listed triangle is missed. Anything else goes to Embree: a ray near an edge, two
+candidates tied in depth (coplanar faces), a grazing ray, a ray from another eye (a moving eye), a ray
+outside the cells (beyond the guard band, behind the camera, not finite), a cell whose list is too long.
+
+The rays the lists cannot answer go to ``embree.intersect_rays`` in packets of their own, eight at a time in
+screen order: a ray's answer there does not depend on the rays beside it (a hit near an edge is asked again
+alone), so it is the answer it gets with the lists off.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .embree import EDGE, intersect_rays
+from .jit import jit
+
+# one face's record for one eye (``screencells.py``): its three edge functions over the image plane, each
+# ``E_i(a, b) = A_i a + B_i b + C_i`` at the point ``(a, b)`` (``d.r / d.f``, ``d.u / d.f``) of a ray ``d``
+# (the edge function of Embree's unit ray times ``|w|``, ``w = a r + b u + f``), its plane's offset
+# (``z = OFFSET / sum E_i`` is the depth of the ray's hit), and the bound of Embree's relative error on t
+EDGES, OFFSET, REL_T = 0, 9, 10
+RECORD = 12
+
+# why a ray goes to Embree (``reasons`` counts them)
+ANSWERED, OTHER_EYE, OUTSIDE, LONG, GRAZING, EDGE_OR_TIE = 0, 1, 2, 3, 4, 5
+LONG_CELL = -2  # a cell's cover when its list is too long to pay (-1: test its list, >= 0: the face of all its rays)
+REASONS = ("answered", "another eye", "outside the cells", "long list", "grazing", "edge or tie")
+
+
+@jit
+def classify(screen, origins, directions, rays, status, face):
+    """What the cells answer for each listed ray: ``status[k]`` for ray ``rays[k]`` (a reason of
+    :data:`REASONS`: ANSWERED, or why Embree must answer instead), and where ANSWERED its face into
+    ``face[rays[k]]`` (-1: it misses). One call for all the rays: the cells' arrays stay in registers.
+
+    status : (>= m,) int64 out;  face : (n,) int32 out
+    """
+    # unpacked once: a bundle handed to a function a ray costs more than the ray's whole test
+    eyes, b, columns, rows = screen.eyes, screen.basis, screen.columns, screen.rows
+    scale_x, shift_x, scale_y, shift_y = screen.scale_x, screen.shift_x, screen.scale_y, screen.shift_y
+    start, covers, faces, errors, nearest, records, ids = (
+        screen.start,
+        screen.cover,
+        screen.faces,
+        screen.errors,
+        screen.nearest,
+        screen.records,
+        screen.ids,
+    )
+    for k in range(len(rays)):
+        s = rays[k]
+        e = -1
+        for q in range(eyes.shape[0]):  # which eye the ray's (float32) origin is, exactly
+            if origins[s, 0] == eyes[q, 0] and origins[s, 1] == eyes[q, 1] and origins[s, 2] == eyes[q, 2]:
+                e = q
+        if e < 0:
+            status[k] = OTHER_EYE
+            continue
+        dx = float(directions[s, 0])
+        dy = float(directions[s, 1])
+        dz = float(directions[s, 2])
+        df = dx * b[2, 0] + dy * b[2, 1] + dz * b[2, 2]
+        if not df > 0.0:  # behind the camera, along the image plane, or not finite
+            status[k] = OUTSIDE
+            continue
+        pa = (dx * b[0, 0] + dy * b[0, 1] + dz * b[0, 2]) / df
+        pb = (dx * b[1, 0] + dy * b[1, 1] + dz * b[1, 2]) / df
+        gx = pa * scale_x + shift_x
+        gy = pb * scale_y + shift_y
+        if not (gx >= 0.0 and gx < columns and gy >= 0.0 and gy < rows):
+            status[k] = OUTSIDE  # beyond the guard band (or NaN)
+            continue
+        cell = int(gy) * columns + int(gx)
+        cover = covers[e, cell]
+        if cover >= 0:  # one face covers the whole cell, provably: no ray of it needs a test
+            status[k] = ANSWERED
+            face[s] = ids[cover]
+            continue
+        if cover == LONG_CELL:
+            status[k] = LONG
+            continue
+        best = -1
+        best_z = best_lo = best_hi = math.inf
+        rival_lo = math.inf  # the nearest any other face that is not missed can be
+        verdict = ANSWERED
+        for j in range(start[e, cell], start[e, cell + 1]):
+            if nearest[j] > best_hi:  # the list runs front to back: nothing further can come nearer
+                break
+            f = faces[j]
+            err = errors[j]  # Embree's error on this face's edge functions, anywhere in the cell
+            u0 = records[f, 0] * pa + records[f, 1] * pb + records[f, 2]
+            u1 = records[f, 3] * pa + records[f, 4] * pb + records[f, 5]
+            u2 = records[f, 6] * pa + records[f, 7] * pb + records[f, 8]
+            if (u0 > err or u1 > err or u2 > err) and (u0 < -err or u1 < -err or u2 < -err):
+                continue  # two edges certainly disagree: Embree misses it too
+            det = u0 + u1 + u2
+            spread = 3.0 * err
+            if not abs(det) > 2.0 * spread:  # grazing: the side it is met from is anybody's guess
+                verdict = GRAZING
+                break
+            z = records[f, OFFSET] / det
+            rel = records[f, REL_T] + spread / abs(det) + 1e-9
+            if not rel < 0.5:
+                verdict = GRAZING
+                break
+            if z <= 0.0:  # its plane is met behind the eye (the error cannot flip the sign of t)
+                continue
+            lo = z * (1.0 - rel)
+            hi = z * (1.0 + rel)
+            if det < 0.0:
+                u0, u1, u2 = -u0, -u1, -u2
+            # inside by more than EDGE as Embree computes it: its packets do not ask the ray again alone (and
+            # its depth known within 5%: a face dropped from the cell lies 10% deeper than one covering it)
+            margin = EDGE * (abs(det) + spread) + err
+            if u0 >= margin and u1 >= margin and u2 >= margin and rel < 0.05 and z < best_z:
+                rival_lo = min(rival_lo, best_lo)
+                best, best_z, best_lo, best_hi = f, z, lo, hi
+            else:
+                rival_lo = min(rival_lo, lo)
+        if verdict != ANSWERED:
+            status[k] = verdict
+        elif best < 0:
+            status[k] = ANSWERED if rival_lo == math.inf else EDGE_OR_TIE
+            face[s] = -1
+        elif rival_lo > best_hi:
+            status[k] = ANSWERED
+            face[s] = ids[best]
+        else:
+            status[k] = EDGE_OR_TIE
+
+
+@jit
+def find_faces(screen, embree, origins, directions, rays, face, queue):
+    """The closest triangle of each listed ray into ``face``, as ``embree.intersect_rays`` finds it (the same
+    face, bit for bit): from the screen cells where they prove the answer, else from Embree. Returns how
+    many rays the cells answered.
+
+    screen : bundles.Screen (``on`` False: every ray goes to Embree);  embree : embree.Embree
+    origins, directions : (n, 3) float32;  rays : (m,) int64 in screen order;  face : (n,) int32 out
+    queue : (m,) int64 scratch: the rays that go to Embree
+    """
+    m = len(rays)
+    if not screen.on:
+        intersect_rays(embree, origins, directions, rays, face, True)
+        return 0
+    status = queue  # the statuses first; the queue overwrites them behind the ray being read
+    classify(screen, origins, directions, rays, status, face)
+    queued = 0
+    for k in range(m):
+        if status[k] != ANSWERED:
+            queue[queued] = rays[k]
+            queued += 1
+    if queued:
+        intersect_rays(embree, origins, directions, queue[:queued], face, True)
+    return m - queued
+
+
+@jit
+def reasons(screen, origins, directions, rays, counts):
+    """Why each listed ray would go to Embree, or that the cells answer it: ``counts`` (len(REASONS),) int64
+    added to, one entry a reason (what ``rcp bench speed`` prints)."""
+    if not screen.on:
+        counts[OTHER_EYE] += len(rays)
+        return
+    status = np.empty(len(rays), np.int64)
+    face = np.empty(len(origins), np.int32)
+    classify(screen, origins, directions, rays, status, face)
+    for k in range(len(rays)):
+        counts[status[k]] += 1
