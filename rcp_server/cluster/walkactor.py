@@ -13,14 +13,15 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from functools import partial
 
 import numpy as np
 
 from ..camera.camera import Camera
-from ..painting.loop import PaintState, paint
+from ..media.walkframe import WalkCanvas, WalkFrame
+from ..painting.loop import paint
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
-from ..util import images
 from .actor import Held, WarmScenes
 
 WALK_SCENES = 2  # scenes a walk actor keeps built: the one shown and the one just left
@@ -54,8 +55,7 @@ class WalkPainter:
     def __init__(self, threads: int):
         self.threads = threads
         self.scenes = WarmScenes(WALK_SCENES)
-        self.serial: int | None = None  # the frame whose state is kept
-        self.state: PaintState | None = None
+        self.canvas = WalkCanvas()  # the frame whose state is kept, and that state
 
     def _scene(self, held: Held) -> Scene:
         return self.scenes.get(held)
@@ -82,24 +82,18 @@ class WalkPainter:
     ) -> Painted:
         """Frame ``serial``: painted from the state of frame ``after`` when this actor keeps it (temporal), else
         from ``I_0``; encoded as JPEG at ``quality``. ``width x height``: the painting's size, both eyes."""
-        wall, cpu = time.perf_counter(), time.process_time()
-        continued = after is not None and self.serial == after and self.state is not None
-        previous = self.state.resized(width, height) if continued and self.state is not None else None
-        result = paint(
-            self._scene(held), camera, width, height, params, time=scene_time, previous=previous, threads=self.threads
-        )
-        self.serial, self.state = serial, result.state
-        pixels = images.to_uint8(result.image)
-        jpeg = images.encode(pixels, "JPEG", quality)
+        cpu = time.process_time()
+        shot = WalkFrame(self._scene(held), camera, width, height, params, scene_time, quality, serial, after)
+        done = self.canvas.paint(shot, partial(paint, threads=self.threads), keep_pixels)
         return Painted(
-            jpeg,
+            done.jpeg,
             width,
             height,
             serial,
-            continued,
-            time.perf_counter() - wall,
+            done.continued,
+            done.seconds,
             time.process_time() - cpu,
-            pixels if keep_pixels else None,
+            done.pixels,
         )
 
     def pid(self) -> int:

@@ -16,6 +16,7 @@ import collections
 import logging
 import math
 import time as _time
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 
@@ -25,20 +26,18 @@ from pydantic import ValidationError
 
 from ..camera.camera import Camera, CameraError
 from ..camera.wire import camera_of
-from ..cluster.admission import Full
-from ..cluster.connection import ClusterError
-from ..cluster.walkactor import Painted
-from ..painting.loop import Abandoned, PaintState, Workspace
+from ..media.walkframe import WalkFrame, WalkPainted
+from ..painting.loop import Abandoned
 from ..painting.raytrace import object_pixels, pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
 from ..scene.walking import walk
 from ..settings.params import PaintParams
-from ..util import images
 from . import protocol
 from .asked import asked, check
 from .faults import fault_message, report_fault
 from .planner import Plan, Planner, View, frame_quality
+from .refusal import Refusal
 from .state import Service
 
 log = logging.getLogger("rcp.service")
@@ -60,19 +59,14 @@ def busy_message(limit: int) -> str:
     return f"the server is at its limit of {limit} walk-throughs; try again later"
 
 
-@dataclass
-class _Job:
-    """One frame to paint: the planner's plan, and a snapshot of the view it shows."""
+@dataclass(frozen=True)
+class Job:
+    """One frame to paint: the planner's plan, the frame as the painter takes it, and the view it shows."""
 
     plan: Plan
     epoch: int
-    scene: Scene
-    camera: Camera
     camera_id: int | None
-    previous: PaintState | None  # the last frame's state at the plan's size, when the plan continues it
-    quality: int
-    serial: int  # the frame's number in the session
-    after: int | None  # on Ray: the frame whose state the worker keeps, when the plan continues it
+    frame: WalkFrame
 
 
 class Session:
@@ -94,11 +88,8 @@ class Session:
         # ---- the painting (kept by the painter) ----
         settings = self.settings
         self.planner = Planner(settings.frame_ms, settings.settle_ms, settings.max_work, _time.monotonic())
-        self.state: PaintState | None = None  # the last frame's per-pixel data, for temporal mode
-        # the buffers every painting of this walk works in, frame after frame (one painting at a time: a result
-        # lives until the painting after next, and only self.state is kept)
-        self.workspace = Workspace()
-        self.kept: int | None = None  # on Ray: the last frame shown, whose per-pixel data its worker keeps
+        self.painter = service.painter
+        self.kept: int | None = None  # the last frame shown, whose per-pixel data the painter keeps (temporal)
         self.serial = 0  # frames asked for
         self.closed = False
         # ---- the outbox (drained by the sender) ----
@@ -125,8 +116,7 @@ class Session:
     def close(self) -> None:
         """End the walk-through's painting: one still in flight stops at its next iteration."""
         self.closed = True
-        if self.service.walks is not None:
-            self.service.walks.leave(self)
+        self.painter.leave(self)
 
     @property
     def walking(self) -> bool:
@@ -184,7 +174,7 @@ class Session:
             self.params = check(self.settings, self.scene, camera, self.width, self.height, self.overrides).params
             kind = (camera.projection, camera.stereo)
             if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
-                self.state = self.kept = None  # another kind of picture: the recursion starts again
+                self.kept = None  # another kind of picture: the recursion starts again
             self.camera = camera
             self.camera_id = msg.id
             self.planner.camera_moved(_time.monotonic())
@@ -225,15 +215,15 @@ class Session:
         if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
             raise ValueError(busy_message(self.settings.max_sessions))
         painting = asked(self.service, msg.scene, None, msg.width, msg.height, {})
-        if self.scene is None and self.service.walks is not None:  # a place on Ray, while it has room
+        if self.scene is None:  # a place with the painter (on Ray, while it has room)
             try:
-                self.service.walks.admit(self, painting.params, painting.scene)
-            except Full as full:
-                raise ValueError(str(full)) from None
+                self.painter.admit(self, painting.params, painting.scene)
+            except Refusal as refusal:
+                raise ValueError(refusal.message) from None
         self.params, self.scene = painting.params, painting.scene
         self.camera, self.camera_id = self.scene.camera, None
         self.width, self.height, self.quality = msg.width, msg.height, msg.quality
-        self.overrides, self.state, self.kept = {}, None, None
+        self.overrides, self.kept = {}, None
         self.planner.scene_started(_time.monotonic())
         self.epoch += 1
         self.frame = None  # a frame of the scene being left must not follow the new `ready`
@@ -266,7 +256,7 @@ class Session:
                     pass
                 continue
             try:
-                result, seconds = await self.workshop.run(partial(self._paint_and_encode, job))
+                painted = await self.workshop.run(partial(self.painter.walk_frame, self, job.frame, self._stop(job)))
             except Abandoned:
                 if self.workshop.stopping:
                     return  # the server is stopping: nothing will paint again
@@ -280,7 +270,7 @@ class Session:
                 continue
             if job.epoch != self.epoch:
                 continue  # painted for a scene the client has left
-            self._finished(job, result, seconds)
+            self._finished(job, painted)
 
     def _view(self) -> View:
         # hello sets the scene and its settings together
@@ -294,7 +284,7 @@ class Session:
         """Seconds until refinement starts, None when nothing is due (the planner's, once there is a scene)."""
         return None if self.scene is None else self.planner.until_rest(_time.monotonic(), self._view())
 
-    def _next_job(self) -> _Job | None:
+    def _next_job(self) -> Job | None:
         if self.scene is None:
             return None
         plan = self.planner.next_frame(_time.monotonic(), self._view())
@@ -302,17 +292,14 @@ class Session:
             return None
         assert self.camera is not None, "hello sets the camera with the scene"
         size = self.camera.image_size(plan.width, plan.height)
-        previous = self.state.resized(*size) if plan.continues and self.state is not None else None
         after = self.kept if plan.continues else None
         self.serial += 1
-        return _Job(
-            plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality, self.serial, after
-        )
+        quality = frame_quality(plan, self.quality)
+        frame = WalkFrame(self.scene, self.camera, *size, plan.params, plan.time, quality, self.serial, after)
+        return Job(plan, self.epoch, self.camera_id, frame)
 
-    def _paint_and_encode(self, job: _Job) -> tuple[tuple[Painted, PaintState | None], float]:
-        """Blocking, on a painter's thread: paint the job and encode it, on Ray when the server is joined to it
-        (the worker keeps the state), else here, or meanwhile when Ray cannot paint it (the state is ours).
-        Refinements are abandoned as soon as anything changes; walk frames are short by design and always
+    def _stop(self, job: Job) -> Callable[[], bool]:
+        """Refinements are abandoned as soon as anything changes; walk frames are short by design and always
         finish, or a camera that never rests would never see a frame."""
         plan = job.plan
 
@@ -320,52 +307,25 @@ class Session:
             stale = self.planner.version != plan.version if plan.phase == "refine" else self.epoch != job.epoch
             return self.closed or stale
 
-        clock = _time.perf_counter()
-        size = job.camera.image_size(plan.width, plan.height)
-        quality = frame_quality(plan, job.quality)
-        walks = self.service.walks
-        if walks is not None and self.service.cluster is not None and self.service.cluster.ready():
-            try:
-                args = (job.scene, job.camera, *size, plan.params, plan.time, quality, job.serial, job.after)
-                painted = walks.paint(self, *args, should_stop=should_stop)
-                return (painted, None), painted.seconds
-            except ClusterError as exc:  # painted here meanwhile
-                log.debug(
-                    "a walk frame painted on the server: %s", exc
-                )  # a failure of Ray says so once, as it backs off
-        result = self.workshop.paint(
-            job.scene,
-            job.camera,
-            *size,
-            plan.params,
-            time=plan.time,
-            previous=job.previous,
-            should_stop=should_stop,
-            workspace=self.workspace,
-        )
-        seconds = _time.perf_counter() - clock
-        jpeg = images.encode(result.image, "JPEG", quality)
-        painted = Painted(jpeg, *size, None, job.previous is not None, seconds, 0.0, seconds=seconds)
-        return (painted, result.state), seconds
+        return should_stop
 
-    def _finished(self, job: _Job, painted: tuple[Painted, PaintState | None], seconds: float) -> None:
-        frame, state = painted
+    def _finished(self, job: Job, frame: WalkPainted) -> None:
         plan = job.plan
-        self.planner.frame_painted(plan, seconds)
-        self.state, self.kept = state, frame.serial
+        self.planner.frame_painted(plan, frame.seconds)
+        self.kept = frame.serial
         self.shown_time = plan.time
         meta = protocol.Frame(
             seq=0,
             width=frame.width,
             height=frame.height,
-            render_ms=round(seconds * 1000, 2),
+            render_ms=round(frame.seconds * 1000, 2),
             iteration=plan.iteration,
             spp=plan.params.spp,
             scale=round(plan.width / self.width, 4),
             phase=plan.phase,
             final=plan.final,
             temporal=frame.continued,
-            quality=frame_quality(plan, job.quality),
+            quality=job.frame.quality,
             paint=plan.params.settings(),
             camera_id=job.camera_id,
             time=plan.time,

@@ -40,15 +40,14 @@ import numpy as np
 from PIL import Image
 
 from ..camera.camera import Camera
-from ..cluster.painter import ClusterError, PaintingFailed
 from ..media.camerapath import CameraPath
 from ..media.video import Mp4Writer
 from ..painting.loop import Abandoned, PaintState
-from ..painting.sequence import frame_params, paint_results
+from ..painting.sequence import frame_params
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
-from ..util import images
 from .faults import fault_message, report_fault
+from .painter import Painter, PainterFailed
 from .settings import Settings
 from .store import (
     Store,
@@ -191,11 +190,11 @@ class Videos:
     """The video jobs of one server: submitted, run, kept for ``video_keep_s`` once finished, then dropped; all
     of it recorded in ``store`` so that a restart resumes where the last run stopped (:meth:`resume`)."""
 
-    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter=None):
+    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter: Painter):
         self.settings = settings
-        self.workshop = workshop
+        self.workshop = workshop  # whether the server is stopping
         self.store = store
-        self.painter = painter  # a cluster.RayPainter (the service closes it), or None: the workshop's shared pool
+        self.painter = painter  # paints the films' frames (the service closes it)
         self._jobs: dict[str, VideoJob] = {}
         self._lock = threading.Lock()
         self._closing = False  # stopping the server: jobs in progress stay recorded as they are, to resume
@@ -324,10 +323,10 @@ class Videos:
                 try:
                     self._paint_frames(job)
                     break
-                except ClusterError as exc:  # Ray failed: it backs off, and the job goes on from its last frame
-                    if attempt >= RAY_ATTEMPTS or isinstance(exc, PaintingFailed):  # the latter would fail again
+                except PainterFailed as exc:  # its workers were lost: the job goes on from its last frame
+                    if attempt >= RAY_ATTEMPTS or exc.retry_s is None:  # the latter would fail again
                         raise
-                    wait = self.painter.backoff.wait_s()
+                    wait = exc.retry_s
                     job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
                     self.store.update_video(job.id, message=job.message)
                     if job.cancelled.wait(wait):
@@ -353,7 +352,7 @@ class Videos:
                 self._finish(job, "failed", f"cannot write the video: {exc.strerror or 'see the server log'}")
             elif isinstance(exc, DamagedFrame):
                 self._finish(job, "failed", str(exc))
-            elif isinstance(exc, ClusterError):  # Ray: no answer at its address, a worker lost
+            elif isinstance(exc, PainterFailed):  # Ray: no answer at its address, a worker lost
                 self._finish(job, "failed", str(exc))
             else:
                 self._finish(job, "failed", fault_message(report_fault(f"video {job.id}: {exc}")))
@@ -377,17 +376,15 @@ class Videos:
         written = 0
         while written < job.frames and regular_size(frame_file(job, written)) is not None:
             written += 1
-        if not job.temporal or self.painter is not None or written == 0:
-            return written, None  # Ray's temporal bands keep their state on the actors: they paint up to here again
+        if not job.temporal or written == 0:
+            return written, None
         saved = load_state(job.frames_dir / "state.npz", state_bytes(job.width, job.height))
         if saved is not None and saved[0] in (written - 1, written - 2):
             index, state = saved
             if index == written - 2:  # stopped between the frame and its state: that frame is painted again
                 frame_file(job, written - 1).unlink(missing_ok=True)
             return index + 1, state
-        for k in range(written):  # no state to go on from: the frames are painted again
-            frame_file(job, k).unlink(missing_ok=True)
-        return 0, None
+        return written, None  # no state to go on from (a painter that keeps it, as Ray's bands do): painted again
 
     def _paintings(
         self, job: VideoJob, start: int, previous: PaintState | None
@@ -402,37 +399,9 @@ class Videos:
         def stop() -> bool:
             return job.cancelled.is_set()
 
-        if self.painter is not None:
-            if job.temporal:  # the bands' states live on the actors: the frames before ``start`` are painted again
-                shots = job.path.frames()
-                paintings = self.painter.images(
-                    scene, shots, job.width, job.height, job.params, job.temporal, should_stop=stop
-                )
-                paintings = itertools.islice(paintings, start, None)
-            else:
-                paintings = self.painter.images(
-                    scene, job.path.frames(start), job.width, job.height, job.params, None, should_stop=stop
-                )
-            for image in paintings:
-                yield image, None
-            return
-
-        def paint_frame(camera, scene_time: float, params: PaintParams, previous: PaintState | None):
-            return self.workshop.paint(
-                scene,
-                camera,
-                job.width,
-                job.height,
-                params,
-                should_stop=stop,
-                background=True,
-                time=scene_time,
-                previous=previous,
-            )
-
-        shots = job.path.frames(start)
-        for result in paint_results(paint_frame, shots, job.params, job.temporal, start, previous):
-            yield images.to_uint8(result.image), result.state if job.temporal else None
+        yield from self.painter.film(
+            scene, job.path, job.width, job.height, job.params, job.temporal, start, previous, stop
+        )
 
     def _assemble(self, job: VideoJob) -> None:
         """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""

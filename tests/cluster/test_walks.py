@@ -141,7 +141,7 @@ def test_walkers_are_admitted_while_there_is_room_and_none_starves(runtime, scen
     at once, each gets its share of frames (painted on Ray), and a fourth is told in one line to come back."""
     with BackgroundServer(scenes=scenes, ray_address="local", walk_width=W, walk_height=H) as live:
         service = service_of(live.app)
-        walks = service.walks
+        walks = service.painter.walks
         params = service.scenes["tiny"].painting({})
         frame_s = walks.cost.frame_cpu_s(W * H * params.spp * params.iterations)
         walks.target = Target(0.6 / frame_s, W, H)  # 0.6 cores a walker at the cost measured
@@ -174,7 +174,7 @@ def test_walkers_are_admitted_while_there_is_room_and_none_starves(runtime, scen
 
 def test_an_actor_killed_mid_walk_moves_and_the_walk_goes_on(runtime, scenes, request):
     with BackgroundServer(scenes=scenes, ray_address="local", walk_width=W, walk_height=H) as live:
-        walks = service_of(live.app).walks
+        walks = service_of(live.app).painter.walks
         killed: list[float] = []
 
         def kill(count: int) -> None:
@@ -229,7 +229,7 @@ def test_the_runtime_killed_mid_walk_paints_here_and_no_connection_closes(runtim
                     with contextlib.suppress(OSError):  # gone meanwhile
                         if _rays(Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")):
                             os.kill(pid, signal.SIGKILL)
-                stopped.append((time.monotonic(), service.walks.frames))
+                stopped.append((time.monotonic(), service.painter.walks.frames))
 
         frames: list[float] = []
         errors: list[str] = []
@@ -246,5 +246,5 @@ def test_the_runtime_killed_mid_walk_paints_here_and_no_connection_closes(runtim
         after = [t for t in frames if t > stopped[0][0]]
         print(f"the walk paused {after[0] - stopped[0][0]:.2f} s")
         assert len(after) >= 20 and after[0] - stopped[0][0] < 6.0
-        assert service.walks.frames <= stopped[0][1] + 1  # painted here meanwhile (one may have been on its way)
-        assert not service.cluster.ready()  # and Ray is tried again later, off the frames' path
+        assert service.painter.walks.frames <= stopped[0][1] + 1  # painted here meanwhile (one may have been on its way)
+        assert not service.painter.cluster.ready()  # and Ray is tried again later, off the frames' path

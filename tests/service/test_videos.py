@@ -15,10 +15,11 @@ from conftest import CAMERA, SPINNING_BOX, make_scene
 from PIL import Image
 
 from rcp_server.bench.harness import BackgroundServer
-from rcp_server.cluster.painter import Backoff, ClusterError
+from rcp_server.cluster.painter import Backoff
 from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene
+from rcp_server.service.painter import PainterFailed
 from rcp_server.service.settings import Settings
 from rcp_server.service.store import Store, VideoRecord, VideoSettings
 from rcp_server.service.videos import VideoRefused, Videos, path_spec, video_bytes
@@ -213,7 +214,7 @@ def test_a_video_past_the_disk_budget_is_refused_at_submission_with_507(scenes, 
 class StillPainting:
     """A painter in place of Ray's that paints nothing until its job is stopped: the job stays running."""
 
-    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
+    def film(self, scene, path, width, height, params, temporal, start, previous, should_stop):
         while not should_stop():
             time.sleep(0.01)
         yield from ()
@@ -269,21 +270,21 @@ def test_a_video_larger_than_its_estimate_fails_at_the_budget_and_finished_jobs_
 
 
 class FlakyRay:
-    """A painter in place of Ray's: its frames are flat colours by index, and its first sequence fails after
-    three frames, as Ray does when a head goes away (Ray then backs off)."""
+    """A painter in place of Ray's port: its frames are flat colours by index, and its first sequence fails after
+    three frames, as Ray's does when a head goes away (Ray then backs off)."""
 
     def __init__(self):
         self.backoff = Backoff(first_s=0.2)
         self.asked: list[int] = []  # the first frame index of each sequence asked for
 
-    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
-        shots = list(shots)
+    def film(self, scene, path, width, height, params, temporal, start, previous, should_stop):
+        shots = list(path.frames(start))
         self.asked.append(shots[0].index)
         for n, shot in enumerate(shots):
             if len(self.asked) == 1 and n == 3:
                 self.backoff.failed("Ray went away")
-                raise ClusterError("Ray went away")
-            yield np.full((height, width, 3), 20 * shot.index, np.uint8)
+                raise PainterFailed("Ray went away", self.backoff.wait_s())
+            yield np.full((height, width, 3), 20 * shot.index, np.uint8), None
 
 
 def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(tmp_path):

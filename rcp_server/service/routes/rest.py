@@ -9,12 +9,12 @@ import time
 
 from fastapi import APIRouter, HTTPException, Request, Response
 
-from ...cluster.painter import ClusterError
 from ...painting.loop import Abandoned
 from ...util import images
 from .. import protocol
 from ..access import admits
 from ..asked import RenderAsked
+from ..refusal import Refusal
 from ..state import ServiceDep
 from ..workshop import Busy
 from . import SCENE_BODY
@@ -24,7 +24,6 @@ router = APIRouter(prefix="/api")
 
 MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
 BUSY = {"description": "every render place is taken, the render ran out of time, or Ray failed; see Retry-After"}
-CLUSTER_RETRY_S = 30  # Ray that does not answer is mended by its operator, in minutes rather than seconds
 log = logging.getLogger("rcp.service")
 
 
@@ -47,7 +46,7 @@ async def health(request: Request, service: ServiceDep) -> dict:
         "threads": service.workshop.threads,
         "renders": service.workshop.admitted,
         "painting": service.workshop.in_progress,
-        **({} if service.walks is None else {"walks": service.walks.figures()}),
+        **service.painter.figures(),
     }
 
 
@@ -73,12 +72,7 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
         return gone.is_set() or time.monotonic() > deadline or workshop.stopping
 
     def job() -> bytes:
-        cluster = service.cluster if service.on_cluster(*size, params) else None
-        if cluster is not None:  # a large render: Ray paints it, the cores here stay with the walks
-            image = cluster.render(scene, camera, *size, params, body.time, stop)
-        else:
-            image = workshop.paint(scene, camera, *size, params, time=body.time, should_stop=stop).image
-        return images.encode(image, fmt, body.quality)
+        return images.encode(service.painter.render(scene, camera, *size, params, body.time, stop), fmt, body.quality)
 
     try:
         with workshop.admission():
@@ -87,11 +81,10 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
                 return Response(await workshop.run(job), media_type=media_type)
             finally:
                 watcher.cancel()
+    except Refusal as refusal:
+        raise HTTPException(refusal.status, refusal.message, headers=refusal.headers()) from None
     except Busy as busy:
         raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
-    except ClusterError as exc:  # Ray does not answer, or lost a worker: the operator's to mend, the caller waits
-        log.error("a render on Ray failed: %s", exc)
-        raise HTTPException(503, str(exc), headers={"Retry-After": str(CLUSTER_RETRY_S)}) from None
     except Abandoned:
         if gone.is_set():
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
