@@ -22,16 +22,9 @@ from ..media.camerapath import CameraPath, PathError
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from . import protocol
+from .refusal import Refusal
 from .settings import Settings
 from .state import Service, ServiceDep
-
-
-class Refusal(ValueError):
-    """A request that cannot be painted as asked, in one line; ``status``: 404 for an unknown scene, else 422."""
-
-    def __init__(self, message: str, status: int = 422):
-        super().__init__(message)
-        self.status = status
 
 
 @dataclass(frozen=True)

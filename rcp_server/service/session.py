@@ -1,57 +1,38 @@
-"""One WebSocket walk-through: camera in, painted frames out, the newest camera always wins.
+"""One WebSocket walk-through's I/O: messages in, painted frames out, the newest camera always wins.
 
-Three tasks share a session. The receiver validates messages and updates the view; every change bumps the
-planner's ``version``, which abandons a refinement in flight between iterations. The painter asks the
-:class:`~rcp_server.service.planner.Planner` what to paint next (walk frames while the camera moves,
-refinements once it rests), paints it on the workshop and tells the planner how long it took. The sender
-keeps one slot for frames: a frame not yet sent is replaced by a newer one, so a slow client never gets a
-queue of stale frames.
+The parts are elsewhere: what a message does to the view (``walkview.apply``, pure), what to paint next
+(``planner.py``, pure), who paints (the painter port, ``painter.py``), and what waits (``outbox.py``: the newest
+frame, the newest ``move`` and ``pick``, a rate). Here, four tasks share a session: the receiver applies
+messages and bumps the planner's ``version`` (which abandons a refinement in flight), the painter paints what
+the planner asks for, the asker answers questions one at a time, and the sender drains the outbox.
 """
 
 from __future__ import annotations
 
 import asyncio
-import base64
-import collections
-import logging
-import math
 import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import partial
 
-import numpy as np
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from ..camera.camera import Camera, CameraError
-from ..camera.wire import camera_of
 from ..media.walkframe import WalkFrame, WalkPainted
 from ..painting.loop import Abandoned
-from ..painting.raytrace import object_pixels, pick
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
-from ..scene.walking import walk
-from ..settings.params import PaintParams
 from . import protocol
-from .asked import asked, check
+from .asked import find_scene
 from .faults import fault_message, report_fault
-from .planner import Plan, Planner, View, frame_quality
+from .outbox import Outbox, Questions, Rate
+from .planner import Plan, Planner, frame_quality
 from .refusal import Refusal
 from .state import Service
-
-log = logging.getLogger("rcp.service")
-
-MASK_PIXELS = 160 * 90 * 4  # a picked object's outline is traced at most this fine (a few ms of rays)
+from .walkview import WalkView, another_picture, answer, apply
 
 
-def pick_mask(scene: Scene, time: float, camera: Camera, size: tuple[int, int], name: str) -> protocol.PickMask:
-    """Where object ``name`` shows in a view of ``size`` (width, height), at most ``MASK_PIXELS`` fine."""
-    scale = min(1.0, math.sqrt(MASK_PIXELS / (size[0] * size[1])))
-    width, height = max(1, round(size[0] * scale)), max(1, round(size[1] * scale))
-    shows = object_pixels(scene, time, camera, width, height, name)
-    bits = base64.b64encode(np.packbits(shows.reshape(-1)).tobytes()).decode()
-    return protocol.PickMask(width=width, height=height, bits=bits)
+BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message rate at once
 
 
 def busy_message(limit: int) -> str:
@@ -69,47 +50,49 @@ class Job:
     frame: WalkFrame
 
 
+class Closing(Exception):
+    """The session closes the socket: ``code`` and ``reason`` (the one error line it sent before)."""
+
+    def __init__(self, code: int, reason: str):
+        super().__init__(reason)
+        self.code, self.reason = code, reason
+
+
 class Session:
     def __init__(self, ws: WebSocket, service: Service):
-        self.ws, self.service, self.workshop, self.settings = ws, service, service.workshop, service.settings
-        # ---- the view (set by the receiver) ----
-        self.scene: Scene | None = None
-        self.camera: Camera | None = None
-        self.camera_id: int | None = None
-        self.width = self.height = 0
-        self.quality = 80
-        self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
-        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
-        self.params: PaintParams | None = None  # the scene's with the overrides, validated once when they change
-        self.temporal = False  # per-frame paintings: every frame is the painting of its camera
-        self.animate = False
-        self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
+        self.ws, self.service, self.settings, self.painter = ws, service, service.settings, service.painter
+        self.view = WalkView()
         self.changed = asyncio.Event()
-        # ---- the painting (kept by the painter) ----
         settings = self.settings
         self.planner = Planner(settings.frame_ms, settings.settle_ms, settings.max_work, _time.monotonic())
-        self.painter = service.painter
         self.kept: int | None = None  # the last frame shown, whose per-pixel data the painter keeps (temporal)
+        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
         self.serial = 0  # frames asked for
         self.closed = False
-        # ---- the outbox (drained by the sender) ----
-        self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
-        self.frame: tuple[str, bytes] | None = None  # the newest frame not yet sent
-        self.seq = 0
-        self.dropped = 0
-        self.outbox = asyncio.Event()
+        self.outbox, self.questions = Outbox(), Questions()
+        self.rate = Rate(settings.max_messages_per_s, BURST_S * settings.max_messages_per_s, _time.monotonic)
 
-    # ---- the session's life ----
+    @property
+    def scene(self) -> Scene | None:
+        """The scene it shows (None before hello)."""
+        return self.view.scene
+
+    @property
+    def walking(self) -> bool:
+        """Whether it has said hello: only then does it hold one of the server's ``max_sessions`` places."""
+        return self.view.scene is not None
 
     async def run(self) -> None:
         try:
             async with asyncio.TaskGroup() as tasks:
-                tasks.create_task(self._receive())
-                tasks.create_task(self._paint())
-                tasks.create_task(self._send())
-                tasks.create_task(self._expect_hello())
+                for task in (self._receive(), self._paint(), self._ask(), self._send(), self._expect_hello()):
+                    tasks.create_task(task)
         except* WebSocketDisconnect:
             pass
+        except* Closing as closing:
+            first = closing.exceptions[0]
+            assert isinstance(first, Closing)
+            await self._send_now(first.code, first.reason)
         finally:
             self.close()
 
@@ -118,185 +101,128 @@ class Session:
         self.closed = True
         self.painter.leave(self)
 
-    @property
-    def walking(self) -> bool:
-        """Whether it has said hello: only then does it hold one of the server's ``max_sessions`` places."""
-        return self.scene is not None
+    async def _send_now(self, code: int, reason: str) -> None:
+        """The one error line, then the close with its reason (a client gone meanwhile is let be)."""
+        try:
+            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=reason).model_dump_json()})
+            await self.ws.close(code=code, reason=reason[:120])
+        except Exception:  # gone already: nobody is left to tell
+            pass
 
     async def _expect_hello(self) -> None:
-        """Close a WebSocket that has not opened a walk-through within ``hello_timeout_s`` (1008): one that
-        only holds a connection open is let go."""
+        """A WebSocket that has not opened a walk-through within ``hello_timeout_s`` is let go (1008)."""
         seconds = self.settings.hello_timeout_s
         await asyncio.sleep(seconds)
-        if self.scene is None:
-            message = f"no hello within {seconds:g} s"
-            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=message).model_dump_json()})
-            await self.ws.close(code=1008, reason=message)
-            raise WebSocketDisconnect(1008, message)
+        if self.view.scene is None:
+            raise Closing(1008, f"no hello within {seconds:g} s")
 
     async def _receive(self) -> None:
+        limit, rate = self.settings.max_message_bytes, self.settings.max_messages_per_s
         while True:
             message = await self.ws.receive()
             if message["type"] == "websocket.disconnect":
                 raise WebSocketDisconnect(message.get("code", 1000))
+            if not self.rate.allows():
+                raise Closing(1008, f"more than {rate:g} messages a second (RCP_MAX_MESSAGES_PER_S)")
             text = message.get("text")
-            limit = self.settings.max_message_bytes
             if text is None:
-                self._note(protocol.Error(message="send JSON text messages; binary messages mean nothing here"))
+                self.outbox.note(protocol.Error(message="send JSON text messages; binary messages mean nothing here"))
             elif len(text) > limit:
-                self._note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
+                self.outbox.note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
             else:
-                await self._take(text)
+                self._take(text)
 
-    async def _take(self, text: str) -> None:
+    def _take(self, text: str) -> None:
         try:
             msg = protocol.client_message.validate_json(text)
-            if isinstance(msg, protocol.MoveMessage | protocol.PickMessage) and self.scene is not None:
-                # milliseconds of rays in a big scene: off the event loop, the next message waits for the answer
-                self._note(await asyncio.to_thread(self._answer, self.scene, self.camera or self.scene.camera, msg))
-            else:
-                self._apply(msg)
         except ValidationError as exc:
-            self._note(protocol.Error(message=f"bad message: {one_line(exc)}"))
-        except (CameraError, ValueError) as exc:
-            self._note(protocol.Error(message=str(exc)))
+            self.outbox.note(protocol.Error(message=f"bad message: {one_line(exc)}"))
+            return
+        try:
+            if isinstance(msg, protocol.MoveMessage | protocol.PickMessage):
+                if self.view.scene is None:
+                    raise Refusal(f"say hello first: a '{msg.type}' message needs a scene")
+                self.questions.ask(msg)  # the newest of its kind replaces one still waiting
+                return
+            first = isinstance(msg, protocol.Hello) and self.view.scene is None
+            if first and self.service.walking() >= self.settings.max_sessions:  # others said hello first
+                raise Refusal(busy_message(self.settings.max_sessions), 503, self.settings.walk_retry_s)
+            view = apply(self.view, msg, self.settings, partial(find_scene, self.service))
+            if isinstance(view, Refusal):
+                raise view
+            if first and view.scene is not None and view.params is not None:  # its place with the painter
+                self.painter.admit(self, view.params, view.scene)  # on Ray: while the cluster has room
+            self._show(view)
+        except Refusal as refusal:
+            if isinstance(msg, protocol.Hello) and self.view.scene is None and refusal.retry_after is not None:
+                raise Closing(1013, refusal.message) from None  # the page tries again after the time it states
+            self.outbox.note(protocol.Error(message=refusal.message))
         except Exception:  # a fault of ours: this message is lost, the session is not
-            self._note(protocol.Error(message=fault_message(report_fault(f"session message {text[:200]!r}"))))
+            self.outbox.note(protocol.Error(message=fault_message(report_fault(f"session message {text[:200]!r}"))))
 
-    def _apply(self, msg) -> None:
-        if isinstance(msg, protocol.Hello):
-            self._hello(msg)
-        elif self.scene is None:
-            raise ValueError(f"say hello first: a '{msg.type}' message needs a scene")
-        elif isinstance(msg, protocol.CameraMessage):
-            camera = camera_of(msg)
-            # another projection or stereo layout is another painting: checked as the hello was (both eyes)
-            self.params = check(self.settings, self.scene, camera, self.width, self.height, self.overrides).params
-            kind = (camera.projection, camera.stereo)
-            if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
-                self.kept = None  # another kind of picture: the recursion starts again
-            self.camera = camera
-            self.camera_id = msg.id
-            self.planner.camera_moved(_time.monotonic())
-        elif isinstance(msg, protocol.PaintMessage):
-            overrides = {**self.overrides, **msg.changes()}
-            overrides = {k: v for k, v in overrides.items() if v is not None}
-            # refuse now, keep the old settings
-            self.params = check(self.settings, self.scene, self.camera, self.width, self.height, overrides).params
-            self.overrides = overrides
-        elif isinstance(msg, protocol.ModeMessage):
-            self.temporal = self.temporal if msg.temporal is None else msg.temporal
-            self.animate = self.animate if msg.animate is None else msg.animate
-        elif isinstance(msg, protocol.ViewMessage):
-            width, height = msg.width or self.width, msg.height or self.height
-            self.params = check(self.settings, self.scene, self.camera, width, height, self.overrides).params
-            self.width, self.height, self.quality = width, height, msg.quality or self.quality
-        self._changed()
-
-    def _answer(
-        self, scene: Scene, camera: Camera, msg: protocol.MoveMessage | protocol.PickMessage
-    ) -> protocol.Moved | protocol.Picked:
-        """Blocking: the answer to a question about the scene, which paints nothing: where a walker's move ends
-        (the camera message that shows it follows), or what a pixel shows, with the object's outline."""
-        if isinstance(msg, protocol.MoveMessage):
-            step = walk(scene, self.shown_time, msg.eye, msg.delta, msg.height)
-            x, y, z = (float(v) for v in step.eye)
-            body = step.body
-            return protocol.Moved(
-                id=msg.id, eye=(x, y, z), radius=body.radius, height=body.height, standing=step.standing
+    def _show(self, view: WalkView) -> None:
+        """Take ``view``: the planner, the kept state and the outbox follow what changed."""
+        before, self.view = self.view, view
+        now = _time.monotonic()
+        if another_picture(before, view):
+            self.kept = None  # the recursion starts again
+        if view.epoch != before.epoch:
+            self.planner.scene_started(now)
+            self.outbox.drop_frame()  # a frame of the scene being left must not follow the new `ready`
+            info = self.service.info(view.scene.name) if view.scene is not None else None
+            ready = {"width": view.width, "height": view.height, "quality": view.quality}
+            self.outbox.note(
+                protocol.Ready(scene=info, temporal=view.temporal, animate=view.animate, **ready)  # type: ignore[arg-type]
             )
-        size = camera.image_size(self.width, self.height)  # the painting the client shows: both eyes
-        shown = pick(scene, self.shown_time, camera, *size, msg.x, msg.y)
-        names = (None, None) if shown is None else shown
-        mask = None if shown is None else pick_mask(scene, self.shown_time, camera, size, shown[0])
-        return protocol.Picked(x=msg.x, y=msg.y, object=names[0], material=names[1], mask=mask)
-
-    def _hello(self, msg: protocol.Hello) -> None:
-        if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
-            raise ValueError(busy_message(self.settings.max_sessions))
-        painting = asked(self.service, msg.scene, None, msg.width, msg.height, {})
-        if self.scene is None:  # a place with the painter (on Ray, while it has room)
-            try:
-                self.painter.admit(self, painting.params, painting.scene)
-            except Refusal as refusal:
-                raise ValueError(refusal.message) from None
-        self.params, self.scene = painting.params, painting.scene
-        self.camera, self.camera_id = self.scene.camera, None
-        self.width, self.height, self.quality = msg.width, msg.height, msg.quality
-        self.overrides, self.kept = {}, None
-        self.planner.scene_started(_time.monotonic())
-        self.epoch += 1
-        self.frame = None  # a frame of the scene being left must not follow the new `ready`
-        self._note(
-            protocol.Ready(
-                scene=self.service.info(msg.scene),
-                width=self.width,
-                height=self.height,
-                quality=self.quality,
-                temporal=self.temporal,
-                animate=self.animate,
-            )
-        )
-
-    def _changed(self) -> None:
+        elif view.camera is not before.camera:
+            self.planner.camera_moved(now)
         self.planner.view_changed()
         self.changed.set()
 
-    # ---- painting ----
+    # ---- painting and answering ----
 
     async def _paint(self) -> None:
         while True:
             job = self._next_job()
             if job is None:
                 self.changed.clear()
-                wait = self._until_rest()
+                wait = (
+                    None if self.view.scene is None else self.planner.until_rest(_time.monotonic(), self.view.planned())
+                )
                 try:
                     await asyncio.wait_for(self.changed.wait(), wait)
                 except TimeoutError:
                     pass
                 continue
             try:
-                painted = await self.workshop.run(partial(self.painter.walk_frame, self, job.frame, self._stop(job)))
+                run = partial(self.painter.walk_frame, self, job.frame, self._stop(job))
+                painted = await self.service.workshop.run(run)
             except Abandoned:
-                if self.workshop.stopping:
+                if self.service.workshop.stopping:
                     return  # the server is stopping: nothing will paint again
                 continue
             except Exception as exc:  # this view cannot be painted: say why, and wait for the next change
-                self.planner.frame_failed(job.plan, self._view())
-                if isinstance(exc, (CameraError, ValueError)):  # e.g. a painting setting the scene cannot take
-                    self._note(protocol.Error(message=str(exc)))
-                else:
-                    self._note(protocol.Error(message=fault_message(report_fault(f"painting {job.plan.phase} frame"))))
+                self.planner.frame_failed(job.plan, self.view.planned())
+                message = str(exc) if isinstance(exc, ValueError | Refusal) else None  # CameraError among them
+                where = f"painting {job.plan.phase} frame"
+                self.outbox.note(protocol.Error(message=message or fault_message(report_fault(where))))
                 continue
-            if job.epoch != self.epoch:
-                continue  # painted for a scene the client has left
-            self._finished(job, painted)
-
-    def _view(self) -> View:
-        # hello sets the scene and its settings together
-        assert self.scene is not None and self.params is not None, "a view is asked for only after hello"
-        moving = self.animate and self.scene.animated
-        camera = self.camera or self.scene.camera
-        eyes = 1 if camera.stereo == "mono" else 2
-        return View(self.width, self.height, self.params, self.temporal, moving, eyes)
-
-    def _until_rest(self) -> float | None:
-        """Seconds until refinement starts, None when nothing is due (the planner's, once there is a scene)."""
-        return None if self.scene is None else self.planner.until_rest(_time.monotonic(), self._view())
+            if job.epoch == self.view.epoch:  # else painted for a scene the client has left
+                self._finished(job, painted)
 
     def _next_job(self) -> Job | None:
-        if self.scene is None:
+        view = self.view
+        if view.scene is None or view.camera is None:
             return None
-        plan = self.planner.next_frame(_time.monotonic(), self._view())
+        plan = self.planner.next_frame(_time.monotonic(), view.planned())
         if plan is None:
             return None
-        assert self.camera is not None, "hello sets the camera with the scene"
-        size = self.camera.image_size(plan.width, plan.height)
+        size = view.camera.image_size(plan.width, plan.height)
         after = self.kept if plan.continues else None
         self.serial += 1
-        quality = frame_quality(plan, self.quality)
-        frame = WalkFrame(self.scene, self.camera, *size, plan.params, plan.time, quality, self.serial, after)
-        return Job(plan, self.epoch, self.camera_id, frame)
+        quality = frame_quality(plan, view.quality)
+        frame = WalkFrame(view.scene, view.camera, *size, plan.params, plan.time, quality, self.serial, after)
+        return Job(plan, view.epoch, view.camera_id, frame)
 
     def _stop(self, job: Job) -> Callable[[], bool]:
         """Refinements are abandoned as soon as anything changes; walk frames are short by design and always
@@ -304,7 +230,7 @@ class Session:
         plan = job.plan
 
         def should_stop() -> bool:
-            stale = self.planner.version != plan.version if plan.phase == "refine" else self.epoch != job.epoch
+            stale = self.planner.version != plan.version if plan.phase == "refine" else self.view.epoch != job.epoch
             return self.closed or stale
 
         return should_stop
@@ -312,51 +238,32 @@ class Session:
     def _finished(self, job: Job, frame: WalkPainted) -> None:
         plan = job.plan
         self.planner.frame_painted(plan, frame.seconds)
-        self.kept = frame.serial
-        self.shown_time = plan.time
+        self.kept, self.shown_time = frame.serial, plan.time
         meta = protocol.Frame(
-            seq=0,
-            width=frame.width,
-            height=frame.height,
-            render_ms=round(frame.seconds * 1000, 2),
-            iteration=plan.iteration,
-            spp=plan.params.spp,
-            scale=round(plan.width / self.width, 4),
-            phase=plan.phase,
-            final=plan.final,
-            temporal=frame.continued,
-            quality=job.frame.quality,
-            paint=plan.params.settings(),
-            camera_id=job.camera_id,
-            time=plan.time,
-            dropped=0,
-        )
-        self._post_frame(meta, frame.jpeg)
+            seq=0, width=frame.width, height=frame.height, render_ms=round(frame.seconds * 1000, 2),
+            iteration=plan.iteration, spp=plan.params.spp, scale=round(plan.width / self.view.width, 4),
+            phase=plan.phase, final=plan.final, temporal=frame.continued, quality=job.frame.quality,
+            paint=plan.params.settings(), camera_id=job.camera_id, time=plan.time, dropped=0,
+        )  # fmt: skip
+        self.outbox.post_frame(meta, frame.jpeg)
+
+    async def _ask(self) -> None:
+        """Answer the questions, one at a time (milliseconds of rays in a big scene: off the event loop)."""
+        while True:
+            question = await self.questions.next()
+            try:
+                self.outbox.note(await asyncio.to_thread(answer, self.view, self.shown_time, question))
+            except ValueError as exc:  # CameraError among them
+                self.outbox.note(protocol.Error(message=str(exc)))
+            except Exception:  # a fault of ours: this question is lost, the session is not
+                self.outbox.note(protocol.Error(message=fault_message(report_fault(f"answering a {question.type}"))))
 
     # ---- sending ----
 
-    def _note(self, message) -> None:
-        self.notes.append(message.model_dump_json())
-        self.outbox.set()
-
-    def _post_frame(self, meta: protocol.Frame, jpeg: bytes) -> None:
-        if self.frame is not None:
-            self.dropped += 1  # never sent: this newer frame replaces it
-        self.seq += 1
-        self.frame = (meta.model_copy(update={"seq": self.seq, "dropped": self.dropped}).model_dump_json(), jpeg)
-        self.outbox.set()
-
     async def _send(self) -> None:
         while True:
-            await self.outbox.wait()
-            self.outbox.clear()
-            while self.notes:
-                await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
-            if self.frame is not None:
-                text, jpeg = self.frame
-                self.frame = None
-                await self._deliver({"type": "websocket.send", "text": text})
-                await self._deliver({"type": "websocket.send", "bytes": jpeg})
+            for message in await self.outbox.take():
+                await self._deliver(message)
 
     async def _deliver(self, message: dict) -> None:
         """A send waits while the client's buffers are full (newer frames replace the unsent one meanwhile);

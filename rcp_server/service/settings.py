@@ -106,6 +106,12 @@ class Settings(BaseSettings):
         description="a request's headers and body must all be there this long after the connection opened or the "
         "last response ended; else 408 and closed",
     )
+    max_messages_per_s: float = Field(
+        1000.0,
+        gt=0,
+        description="WebSocket messages a second one walk-through may send on average (four times that at once); past "
+        "it an error and close 1008",
+    )
     hello_timeout_s: float = Field(
         10.0, gt=0, description="a WebSocket that has not said hello by then gets an error and close 1008"
     )

@@ -38,7 +38,10 @@ log = logging.getLogger("rcp.service")
 class Walkthrough(Protocol):
     """An open walk-through, as the service sees it (``session.Session``): one it can close, showing a scene."""
 
-    scene: Scene | None
+    @property
+    def scene(self) -> Scene | None:
+        """The scene it shows, None before hello."""
+        ...
 
     @property
     def walking(self) -> bool:

@@ -246,5 +246,7 @@ def test_the_runtime_killed_mid_walk_paints_here_and_no_connection_closes(runtim
         after = [t for t in frames if t > stopped[0][0]]
         print(f"the walk paused {after[0] - stopped[0][0]:.2f} s")
         assert len(after) >= 20 and after[0] - stopped[0][0] < 6.0
-        assert service.painter.walks.frames <= stopped[0][1] + 1  # painted here meanwhile (one may have been on its way)
+        assert (
+            service.painter.walks.frames <= stopped[0][1] + 1
+        )  # painted here meanwhile (one may have been on its way)
         assert not service.painter.cluster.ready()  # and Ray is tried again later, off the frames' path
