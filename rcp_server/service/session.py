@@ -190,7 +190,8 @@ class Session:
                     None if self.view.scene is None else self.planner.until_rest(_time.monotonic(), self.view.planned())
                 )
                 try:
-                    await asyncio.wait_for(self.changed.wait(), wait)
+                    async with asyncio.timeout(wait):
+                        await self.changed.wait()
                 except TimeoutError:
                     pass
                 continue
@@ -268,7 +269,8 @@ class Session:
     async def _deliver(self, message: dict) -> None:
         """A send waits while the client's buffers are full (newer frames replace the unsent one meanwhile);
         a client that takes nothing for ``send_timeout_s`` has gone and is let go."""
-        try:
-            await asyncio.wait_for(self.ws.send(message), self.settings.send_timeout_s)
+        try:  # asyncio.timeout, not wait_for: 3.11's wait_for may swallow the task group's cancel as a send ends
+            async with asyncio.timeout(self.settings.send_timeout_s):
+                await self.ws.send(message)
         except TimeoutError:
             raise WebSocketDisconnect(1001, "the client took no data") from None
