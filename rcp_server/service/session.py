@@ -31,7 +31,6 @@ from .refusal import Refusal
 from .state import Service
 from .walkview import WalkView, another_picture, answer, apply
 
-
 BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message rate at once
 
 
