@@ -11,9 +11,10 @@ refused alike, in the same line, whichever door it comes through.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Any
+from pathlib import Path
+from typing import Annotated, Any, BinaryIO
 
-from fastapi import Depends, HTTPException
+from fastapi import Depends
 from starlette.concurrency import run_in_threadpool
 
 from ..camera.camera import Camera
@@ -25,6 +26,7 @@ from . import protocol
 from .refusal import Refusal
 from .settings import Settings
 from .state import Service, ServiceDep
+from .uploads import Limits, Refused, read_refusal, read_scene
 
 
 @dataclass(frozen=True)
@@ -79,19 +81,12 @@ def asked(
     return check(service.settings, scene, chosen, width, height, overrides)
 
 
-def http_error(refusal: Refusal) -> HTTPException:
-    return HTTPException(refusal.status, str(refusal))
-
-
 # ---- the dependencies of the REST routes ----
 
 
 async def render_asked(body: protocol.RenderRequest, service: ServiceDep) -> Asked:
     """``POST /api/render``'s painting (the route reads the same ``body``: FastAPI parses it once)."""
-    try:
-        return asked(service, body.scene, body.camera, body.width, body.height, body.paint.given())
-    except Refusal as refusal:
-        raise http_error(refusal) from None
+    return asked(service, body.scene, body.camera, body.width, body.height, body.paint.given())
 
 
 @dataclass(frozen=True)
@@ -105,24 +100,43 @@ class VideoAsked:
 
 async def video_asked(body: protocol.VideoRequest, service: ServiceDep) -> VideoAsked:
     """``POST /api/videos``' path and painting; the whole film's work is the video queue's to check."""
+    scene = find_scene(service, body.scene)
     try:
-        scene = find_scene(service, body.scene)
-        try:
-            path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
-        except PathError as exc:
-            raise Refusal(str(exc)) from None
-        frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
-        return VideoAsked(frame, path)
-    except Refusal as refusal:
-        raise http_error(refusal) from None
+        path = await run_in_threadpool(body.path.resolve, scene.camera)  # checks every frame: up to a second
+    except PathError as exc:
+        raise Refusal(str(exc)) from None
+    frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
+    return VideoAsked(frame, path)
 
 
 async def scene_named(body: protocol.PathRequest, service: ServiceDep) -> Scene:
     """The scene of a request that paints nothing itself (``POST /api/paths``)."""
+    return find_scene(service, body.scene)
+
+
+# ---- uploads ----
+
+UPLOADS_QUEUED = 3  # uploads reading or waiting to; more are told to come back (each reading takes a core)
+
+
+def upload_door(service: Service) -> None:
+    """Whether an upload may be read now: uploads on, a place among the scenes kept and among those reading;
+    else :class:`Refusal` (403, or 503 with a time to try again)."""
+    settings, uploads = service.settings, service.uploads
+    if not settings.uploads:
+        raise Refusal("uploads are off on this server (RCP_UPLOADS=0)", 403)
+    service.sweep_uploads()  # before counting
+    uploads.check_room(settings.upload_max_scenes, settings.upload_idle_s)
+    if uploads.queued >= UPLOADS_QUEUED:
+        raise Refusal("other uploads are being read; try again in a few seconds", 503, 5)
+
+
+def read_upload(body: BinaryIO, filename: str, limits: Limits, keep: Path | None) -> tuple[Scene, int]:
+    """Blocking: :func:`~.uploads.read_scene`, its reader's refusal as the service's (the one place it maps)."""
     try:
-        return find_scene(service, body.scene)
-    except Refusal as refusal:
-        raise http_error(refusal) from None
+        return read_scene(body, filename, limits, keep)
+    except Refused as exc:
+        raise read_refusal(exc) from None
 
 
 RenderAsked = Annotated[Asked, Depends(render_asked)]

@@ -48,6 +48,7 @@ from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .faults import fault_message, report_fault
 from .painter import Painter, PainterFailed
+from .refusal import Refusal
 from .settings import Settings
 from .store import (
     Store,
@@ -62,7 +63,7 @@ from .store import (
     save_state,
     write_whole,
 )
-from .workshop import Busy, Workshop
+from .workshop import Workshop
 
 log = logging.getLogger("rcp.service")
 
@@ -77,12 +78,7 @@ MP4_BYTES = 64 * 1024  # the container and the encoder's headers, at most, for t
 RAY_ATTEMPTS = 8  # Ray failures a job outlives, waiting each time as Ray backs off (a quarter of an hour in all)
 
 
-class VideoRefused(ValueError):
-    """A job that cannot be taken as asked (over a limit, out of disk budget); said to the caller in one line."""
-
-    def __init__(self, message: str, status: int = 422):
-        super().__init__(message)
-        self.status = status
+VideoRefused = Refusal  # the one refusal (refusal.py), by the name the films' callers knew
 
 
 def job_work(width: int, height: int, params: PaintParams, temporal: int | None, frames: int) -> int:
@@ -117,6 +113,7 @@ class VideoJob:
     created: float = field(default_factory=time.time)  # wall clock: it means the same after a restart
     finished: float | None = None
     cancelled: threading.Event = field(default_factory=threading.Event)
+    written: int = 0  # bytes of its frames (and state) on disk, while it paints and once stopped out of disk
 
     @property
     def frames(self) -> int:
@@ -151,6 +148,28 @@ def path_spec(path: CameraPath) -> dict:
     return {"fps": path.fps, "keyframes": keyframes, "loop": path.loop}
 
 
+def film_door(
+    settings: Settings, camera: Camera, width: int, height: int, params: PaintParams, temporal: int | None, frames: int
+) -> tuple[int, int]:
+    """Every check of a film's own, for a new job and a stored record alike: its painting's size (both eyes of
+    a stereo pair, the pixels one painting may have), even for H.264, and the work of all its frames; the
+    painting's size, or :class:`~.refusal.Refusal` (422) in one line."""
+    try:
+        width, height = settings.painting_size(camera, width, height, params)
+    except ValueError as exc:  # CameraError among them
+        raise Refusal(str(exc)) from None
+    if width % 2 or height % 2:
+        raise Refusal(f"an MP4 (H.264, yuv420p) needs an even width and height, got {width}x{height}")
+    work = job_work(width, height, params, temporal, frames)
+    if work > settings.max_video_work:
+        raise Refusal(
+            f"{frames} frames of {width}x{height} pixels x {params.spp} spp x their iterations is {work:,} rays, more "
+            f"than the {settings.max_video_work:,} one video may take: ask for fewer frames, pixels, samples or "
+            "iterations"
+        )
+    return width, height
+
+
 def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Settings) -> VideoJob:
     """The job a stored record describes, checked as a new one is at the door (the same limits: a record is
     untrusted input); ``ValueError`` in one line for one that cannot be painted as it says."""
@@ -163,10 +182,12 @@ def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Set
         raise ValueError(f"its painting settings: {exc}") from None
     camera = path.cameras[0]
     eye = camera.eye_size(given.width, given.height)
-    if settings.painting_size(camera, *eye, params) != (given.width, given.height):
+    try:
+        size = film_door(settings, camera, *eye, params, temporal, path.frame_count)
+    except Refusal as refusal:
+        raise ValueError(refusal.message) from None
+    if size != (given.width, given.height):
         raise ValueError(f"{given.width}x{given.height} is no {camera.stereo} painting")
-    if job_work(given.width, given.height, params, temporal, path.frame_count) > settings.max_video_work:
-        raise ValueError(f"its work is more than the {settings.max_video_work:,} rays one video may take")
     return VideoJob(
         record.id,
         record.scene,
@@ -229,18 +250,11 @@ class Videos:
     def submit(
         self, scene: Scene, path: CameraPath, width: int, height: int, params: PaintParams, temporal: int | None
     ) -> VideoJob:
-        """Queue a job of ``width x height`` eye images (a stereo film's frames hold two), or refuse it:
-        ``ValueError`` (a frame over the limits of one painting), :class:`VideoRefused` (the film over a limit,
-        the disk budget used up) or :class:`~.workshop.Busy` (every place in the queue taken)."""
+        """Queue a job of ``width x height`` eye images (a stereo film's frames hold two), or refuse it
+        (:class:`~.refusal.Refusal`: 422 over a limit (:func:`film_door`), 507 the disk budget used up, 503 every
+        place in the queue taken)."""
         settings = self.settings
-        width, height = settings.painting_size(path.cameras[0], width, height, params)
-        work = job_work(width, height, params, temporal, path.frame_count)
-        if work > settings.max_video_work:
-            raise VideoRefused(
-                f"{path.frame_count} frames of {width}x{height} pixels x {params.spp} spp x their iterations is "
-                f"{work:,} rays, more than the {settings.max_video_work:,} one video may take: ask for fewer "
-                "frames, pixels, samples or iterations"
-            )
+        width, height = film_door(settings, path.cameras[0], width, height, params, temporal, path.frame_count)
         self.sweep()
         job_id = new_video_id()
         store = self.store
@@ -252,7 +266,7 @@ class Videos:
             waiting = [j for j in self._jobs.values() if j.state in ("queued", "running")]
             room = settings.video_disk_bytes - self.disk_used() - sum(j.estimate for j in waiting)
             if job.estimate > room:
-                raise VideoRefused(
+                raise Refusal(
                     f"the video would take about {job.estimate:,} bytes and the videos have {max(room, 0):,} of "
                     f"their {settings.video_disk_bytes:,} left (RCP_VIDEO_DISK_BYTES, with the videos in progress): "
                     f"ask for fewer frames or pixels, delete videos (DELETE /api/videos/ID) or wait until they "
@@ -260,7 +274,8 @@ class Videos:
                     507,
                 )
             if len(waiting) >= settings.max_videos + settings.max_videos_waiting:
-                raise Busy(RETRY_AFTER_S)
+                message = f"every place in the video queue is taken; try again in {RETRY_AFTER_S} s"
+                raise Refusal(message, 503, RETRY_AFTER_S)
             self._jobs[job_id] = job
         store.add_video(
             VideoRecord(
@@ -284,11 +299,14 @@ class Videos:
         return self._jobs.get(job_id)
 
     def delete(self, job_id: str) -> VideoJob | None:
-        """Cancel a job in progress (it stops at its next tile); forget a finished one and delete its file."""
+        """Cancel a job in progress (it stops at its next tile; cancelled, it stays to be seen until it expires, and
+        cancelling it again changes nothing); forget a finished one and delete its file."""
         job = self._jobs.get(job_id)
         if job is None:
             return None
         with self._lock:
+            if job.state == "cancelled" or job.cancelled.is_set():
+                return job
             if job.state in FINISHED:
                 self._jobs.pop(job_id, None)
                 self.store.remove_video(job_id)
@@ -350,6 +368,8 @@ class Videos:
             elif isinstance(exc, OSError):  # the disk: full, or over the budget; said without the server's paths
                 log.warning("video %s: cannot write the video: %s", job.id, exc)
                 self._finish(job, "failed", f"cannot write the video: {exc.strerror or 'see the server log'}")
+            elif isinstance(exc, Refusal):  # out of disk: what it made is kept (and counted) until it expires
+                self._finish(job, "failed", f"{exc.status}: {exc.message}", keep=True)
             elif isinstance(exc, DamagedFrame):
                 self._finish(job, "failed", str(exc))
             elif isinstance(exc, PainterFailed):  # Ray: no answer at its address, a worker lost
@@ -363,12 +383,28 @@ class Videos:
         if start > 0:
             log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
         job.done_frames = start
+        job.written = _folder_bytes(job.frames_dir)  # counted once here, then frame by frame
+        state_file = job.frames_dir / "state.npz"
         for image, state in self._paintings(job, start, previous):
-            write_whole(frame_file(job, job.done_frames), partial(_save_png, image))
+            frame, kept = frame_file(job, job.done_frames), _size(state_file)
+            write_whole(frame, partial(_save_png, image))
             if state is not None:
-                save_state(job.frames_dir / "state.npz", job.done_frames, state)
+                save_state(state_file, job.done_frames, state)
+            job.written += _size(frame) + _size(state_file) - kept
+            if self.disk_used() > self.settings.video_disk_bytes:  # this frame would pass the bound: it goes
+                job.written -= _size(frame)
+                frame.unlink(missing_ok=True)
+                raise self._out_of_disk(job)
             job.done_frames += 1
             self.store.update_video(job.id, done_frames=job.done_frames)
+
+    def _out_of_disk(self, job: VideoJob) -> Refusal:
+        limit = self.settings.video_disk_bytes
+        return Refusal(
+            f"the videos would use more than the {limit:,} bytes of RCP_VIDEO_DISK_BYTES: stopped after "
+            f"{job.done_frames} frames, kept until the video expires or is deleted",
+            507,
+        )
 
     def _resume_point(self, job: VideoJob) -> tuple[int, PaintState | None]:
         """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
@@ -417,19 +453,23 @@ class Videos:
             writer.abort()
             raise
 
-    def _finish(self, job: VideoJob, state: State, message: str = "") -> None:
+    def _finish(self, job: VideoJob, state: State, message: str = "", keep: bool = False) -> None:
+        """``keep``: its frames stay on disk (and count) until the job expires or is deleted."""
         job.finish(state, message)
-        size = _size(job.file) if state == "done" else 0
+        size = _size(job.file) if state == "done" else job.written if keep else 0
         self.store.update_video(job.id, state=state, message=message, finished=job.finished, bytes=size)
-        shutil.rmtree(job.frames_dir, ignore_errors=True)
+        if not keep:
+            shutil.rmtree(job.frames_dir, ignore_errors=True)
+            job.written = 0
         if state != "done":
             job.file.unlink(missing_ok=True)
 
     # ---- keeping house ----
 
     def disk_used(self) -> int:
-        """Bytes of the finished videos kept (a video in progress counts once it is done)."""
-        return sum(_size(j.file) for j in list(self._jobs.values()) if j.state == "done")
+        """Bytes the videos take: the finished ones kept, and every byte a film in progress (or stopped, its
+        frames kept) has written."""
+        return sum(_size(j.file) if j.state == "done" else j.written for j in list(self._jobs.values()))
 
     def sweep(self) -> None:
         """Forget the jobs finished more than ``video_keep_s`` ago, and delete their files."""
@@ -484,6 +524,14 @@ def kept_frame(job: VideoJob, index: int) -> np.ndarray:
 
 def frame_file(job: VideoJob, index: int) -> Path:
     return job.frames_dir / f"frame_{index:06d}.png"
+
+
+def _folder_bytes(folder: Path) -> int:
+    """Bytes of the regular files in ``folder`` (0 when there is none)."""
+    try:
+        return sum(regular_size(f) or 0 for f in folder.iterdir())
+    except OSError:
+        return 0
 
 
 def _size(file: Path) -> int:

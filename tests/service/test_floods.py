@@ -27,13 +27,13 @@ url, count, seconds = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 def flood():
     with connect(url, max_size=None) as ws:
         threading.Thread(target=lambda: [ws.recv() for _ in iter(int, 1)], daemon=True).start()
-        ws.send(json.dumps({"type": "hello", "scene": "default", "width": 320, "height": 180}))
+        ws.send(json.dumps({"type": "hello", "scene": "default", "width": 32, "height": 18}))
         end = time.monotonic() + seconds
         for k in range(count):
             if time.monotonic() > end:
                 break
             ws.send(json.dumps({"type": "move", "id": k, "eye": [0, 1.6, 3], "delta": [0.01, 0, -0.01]}))
-            ws.send(json.dumps({"type": "pick", "x": k % 320, "y": k % 180}))
+            ws.send(json.dumps({"type": "pick", "x": k % 32, "y": k % 18}))
 threads = [threading.Thread(target=flood) for _ in range(int(sys.argv[4]))]
 [t.start() for t in threads]
 [t.join() for t in threads]

@@ -7,7 +7,7 @@ import logging
 import threading
 import time
 
-from fastapi import APIRouter, HTTPException, Request, Response
+from fastapi import APIRouter, Request, Response
 
 from ...painting.loop import Abandoned
 from ...util import images
@@ -16,7 +16,6 @@ from ..access import admits
 from ..asked import RenderAsked
 from ..refusal import Refusal
 from ..state import ServiceDep
-from ..workshop import Busy
 from . import SCENE_BODY
 
 public = APIRouter(prefix="/api")  # the one route without the token (app.py puts it on the others)
@@ -81,10 +80,6 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
                 return Response(await workshop.run(job), media_type=media_type)
             finally:
                 watcher.cancel()
-    except Refusal as refusal:
-        raise HTTPException(refusal.status, refusal.message, headers=refusal.headers()) from None
-    except Busy as busy:
-        raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
     except Abandoned:
         if gone.is_set():
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
@@ -92,7 +87,7 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
             message = "the server is stopping"
         else:
             message = f"the render ran past the server's {settings.render_timeout_s:g} s limit; ask for less, or later"
-        raise HTTPException(503, message, headers={"Retry-After": "10"}) from None
+        raise Refusal(message, 503, 10) from None
 
 
 async def _hang_up(request: Request, gone: threading.Event) -> None:
