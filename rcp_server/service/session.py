@@ -34,9 +34,9 @@ from .walkview import WalkView, another_picture, answer, apply
 BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message rate at once
 
 
-def busy_message(limit: int) -> str:
+def busy_message(limit: int, retry_s: int) -> str:
     """What a walk-through turned away for the server's ``max_sessions`` is told."""
-    return f"the server is at its limit of {limit} walk-throughs; try again later"
+    return f"the server is at its limit of {limit} walk-throughs; try again in {retry_s} s"
 
 
 @dataclass(frozen=True)
@@ -145,7 +145,8 @@ class Session:
                 return
             first = isinstance(msg, protocol.Hello) and self.view.scene is None
             if first and self.service.walking() >= self.settings.max_sessions:  # others said hello first
-                raise Refusal(busy_message(self.settings.max_sessions), 503, self.settings.walk_retry_s)
+                retry_s = self.settings.walk_retry_s
+                raise Refusal(busy_message(self.settings.max_sessions, retry_s), 503, retry_s)
             view = apply(self.view, msg, self.settings, partial(find_scene, self.service))
             if isinstance(view, Refusal):
                 raise view

@@ -175,7 +175,7 @@ class Settings(BaseSettings):
     walk_width: int = Field(320, ge=1, le=4096, description="the walk frame size a walker on Ray is admitted for")
     walk_height: int = Field(180, ge=1, le=4096, description="the walk frame size a walker on Ray is admitted for")
     walk_retry_s: int = Field(
-        30, ge=1, description="a walker the cluster has no room for is told to try again after this"
+        30, ge=1, description="a walker the server or its cluster has no room for is told to try again after this"
     )
     # ---- uploaded scenes (POST /api/scenes) ----
     uploads: bool = Field(True, description="0 turns uploads off (403)")

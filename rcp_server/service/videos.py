@@ -233,6 +233,8 @@ class Videos:
                 self.store.remove_video(record.id)
                 continue
             self._jobs[job.id] = job
+            if job.state == "failed":  # stopped out of disk: its frames are kept, and counted, until it expires
+                job.written = _folder_bytes(job.frames_dir)
             if job.state in FINISHED:
                 if job.state == "done" and regular_size(job.file) is None:
                     self._finish(job, "failed", "its file was lost while the server was down")
