@@ -276,7 +276,7 @@ class Videos:
                     507,
                 )
             if len(waiting) >= settings.max_videos + settings.max_videos_waiting:
-                message = f"every place in the video queue is taken; try again in {RETRY_AFTER_S} s"
+                message = f"the video queue is busy, every place in it taken; try again in {RETRY_AFTER_S} s"
                 raise Refusal(message, 503, RETRY_AFTER_S)
             self._jobs[job_id] = job
         store.add_video(

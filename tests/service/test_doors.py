@@ -151,7 +151,7 @@ def test_a_full_queue_is_refused_with_its_status_its_line_and_a_time_to_try_agai
         assert httpx.post(f"{live.url}/api/videos", json=body, timeout=60).status_code == 202
         full = httpx.post(f"{live.url}/api/videos", json=body, timeout=60)
         assert full.status_code == 503 and full.headers["retry-after"] == "30"
-        assert full.json() == {"detail": "every place in the video queue is taken; try again in 30 s"}
+        assert full.json() == {"detail": "the video queue is busy, every place in it taken; try again in 30 s"}
 
 
 def test_a_walker_refused_at_hello_is_closed_at_once_with_the_reason_and_a_code_to_retry(tmp_path):
