@@ -261,7 +261,7 @@ def test_a_film_counts_every_byte_it_writes_and_stops_at_the_budget_keeping_its_
     as they are written, and the frame that would pass it stops the film with 507 naming the setting. What it
     made stays on disk, counted, until the job expires (then it goes)."""
     monkeypatch.setattr("rcp_server.service.videos.video_bytes", lambda width, height, frames: 0)  # falls short
-    settings = {"scenes": scenes, "video_disk_bytes": 20_000, "video_keep_s": 1.0, "data": tmp_path}
+    settings = {"scenes": scenes, "video_disk_bytes": 4_000, "video_keep_s": 1.0, "data": tmp_path}
     path = {**PATH, "fps": 24}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
         created = client.post("/api/videos", json={"scene": "tiny", "path": path, "width": 32, "height": 32}).json()
@@ -269,12 +269,12 @@ def test_a_film_counts_every_byte_it_writes_and_stops_at_the_budget_keeping_its_
         made = status["done_frames"]
         assert status["state"] == "failed" and 0 < made < status["frames"] == 25, status
         assert status["message"] == (
-            f"507: the videos would use more than the 20,000 bytes of RCP_VIDEO_DISK_BYTES: stopped after {made} "
+            f"507: the videos would use more than the 4,000 bytes of RCP_VIDEO_DISK_BYTES: stopped after {made} "
             "frames, kept until the video expires or is deleted"
         )
         kept = sorted((tmp_path / "videos" / created["id"]).iterdir())
         assert [f.name for f in kept] == [f"frame_{k:06d}.png" for k in range(made)]
-        assert sum(f.stat().st_size for f in kept) <= 20_000
+        assert sum(f.stat().st_size for f in kept) <= 4_000
         time.sleep(1.2)
         assert client.get(f"/api/videos/{created['id']}").status_code == 404  # expired
         assert list((tmp_path / "videos").iterdir()) == []  # and its frames with it
