@@ -12,13 +12,12 @@ from __future__ import annotations
 import asyncio
 import time as _time
 from collections.abc import Callable
-from dataclasses import dataclass
 from functools import partial
 
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from ..media.walkframe import WalkFrame, WalkPainted
+from ..media.walkframe import WalkPainted
 from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
@@ -26,10 +25,10 @@ from . import protocol
 from .asked import find_scene
 from .faults import fault_message, report_fault
 from .outbox import Outbox, Questions, Rate
-from .planner import Plan, Planner, frame_quality
+from .planner import Planner
 from .refusal import Refusal
 from .state import Service
-from .walkview import WalkView, another_picture, answer, apply
+from .walkview import Job, WalkView, another_picture, answer, apply, job_of
 
 BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message rate at once
 
@@ -37,16 +36,6 @@ BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message
 def busy_message(limit: int, retry_s: int) -> str:
     """What a walk-through turned away for the server's ``max_sessions`` is told."""
     return f"the server is at its limit of {limit} walk-throughs; try again in {retry_s} s"
-
-
-@dataclass(frozen=True)
-class Job:
-    """One frame to paint: the planner's plan, the frame as the painter takes it, and the view it shows."""
-
-    plan: Plan
-    epoch: int
-    camera_id: int | None
-    frame: WalkFrame
 
 
 class Closing(Exception):
@@ -218,12 +207,8 @@ class Session:
         plan = self.planner.next_frame(_time.monotonic(), view.planned())
         if plan is None:
             return None
-        size = view.camera.image_size(plan.width, plan.height)
-        after = self.kept if plan.continues else None
         self.serial += 1
-        quality = frame_quality(plan, view.quality)
-        frame = WalkFrame(view.scene, view.camera, *size, plan.params, plan.time, quality, self.serial, after)
-        return Job(plan, view.epoch, view.camera_id, frame)
+        return job_of(view, plan, self.serial, self.kept)
 
     def _stop(self, job: Job) -> Callable[[], bool]:
         """Refinements are abandoned as soon as anything changes; walk frames are short by design and always
@@ -240,13 +225,7 @@ class Session:
         plan = job.plan
         self.planner.frame_painted(plan, frame.seconds)
         self.kept, self.shown_time = frame.serial, plan.time
-        meta = protocol.Frame(
-            seq=0, width=frame.width, height=frame.height, render_ms=round(frame.seconds * 1000, 2),
-            iteration=plan.iteration, spp=plan.params.spp, scale=round(plan.width / self.view.width, 4),
-            phase=plan.phase, final=plan.final, temporal=frame.continued, quality=job.frame.quality,
-            paint=plan.params.settings(), camera_id=job.camera_id, time=plan.time, dropped=0,
-        )  # fmt: skip
-        self.outbox.post_frame(meta, frame.jpeg)
+        self.outbox.post_frame(job.meta(frame, self.view.width), frame.jpeg)
 
     async def _ask(self) -> None:
         """Answer the questions, one at a time (milliseconds of rays in a big scene: off the event loop)."""

@@ -18,13 +18,14 @@ import numpy as np
 
 from ..camera.camera import Camera
 from ..camera.wire import camera_of
+from ..media.walkframe import WalkFrame, WalkPainted
 from ..painting.raytrace import object_pixels, pick
 from ..scene.scene import Scene
 from ..scene.walking import walk
 from ..settings.params import PaintParams
 from . import protocol
 from .asked import check
-from .planner import View
+from .planner import Plan, View, frame_quality
 from .refusal import Refusal
 from .settings import Settings
 
@@ -139,3 +140,34 @@ def answer(
     names = (None, None) if shown is None else shown
     mask = None if shown is None else pick_mask(scene, time, camera, size, shown[0])
     return protocol.Picked(x=message.x, y=message.y, object=names[0], material=names[1], mask=mask)
+
+
+@dataclass(frozen=True)
+class Job:
+    """One frame to paint: the planner's plan, the frame as the painter takes it, and the view it shows."""
+
+    plan: Plan
+    epoch: int
+    camera_id: int | None
+    frame: WalkFrame
+
+    def meta(self, painted: WalkPainted, canvas_width: int) -> protocol.Frame:
+        """The ``frame`` message that goes before the painted frame's JPEG (``seq`` and ``dropped`` are the
+        outbox's)."""
+        plan = self.plan
+        return protocol.Frame(
+            seq=0, width=painted.width, height=painted.height, render_ms=round(painted.seconds * 1000, 2),
+            iteration=plan.iteration, spp=plan.params.spp, scale=round(plan.width / canvas_width, 4),
+            phase=plan.phase, final=plan.final, temporal=painted.continued, quality=self.frame.quality,
+            paint=plan.params.settings(), camera_id=self.camera_id, time=plan.time, dropped=0,
+        )  # fmt: skip
+
+
+def job_of(view: WalkView, plan: Plan, serial: int, kept: int | None) -> Job:
+    """Frame ``serial`` of ``view`` as ``plan`` paints it, going on from frame ``kept`` when the plan continues."""
+    assert view.scene is not None and view.camera is not None, "painted after hello"
+    size = view.camera.image_size(plan.width, plan.height)
+    after = kept if plan.continues else None
+    quality = frame_quality(plan, view.quality)
+    frame = WalkFrame(view.scene, view.camera, *size, plan.params, plan.time, quality, serial, after)
+    return Job(plan, view.epoch, view.camera_id, frame)
