@@ -138,9 +138,10 @@ class Settings(BaseSettings):
     video_disk_bytes: int = Field(
         2 << 30,
         ge=1,
-        description="disk the finished videos may use together; a new job whose estimate (0.25 bytes a pixel a "
-        "frame) does not fit beside the kept videos and the jobs in progress gets 507 with the estimate and the room "
-        "left; a video larger than its estimate fails with a message",
+        description="disk the videos may use together, the frames of those in progress included; a new job whose "
+        "estimate (its frames' PNGs at 3 bytes a pixel beside 0.25 bytes a pixel a frame of MP4) does not fit beside "
+        "the kept videos and the jobs in progress gets 507 with the estimate and the room left; a film whose next "
+        "frame would pass it stops, failed with 507 naming the setting, and keeps what it made until it expires",
     )
     video_keep_s: float = Field(
         3600.0, gt=0, description="a finished video (and its job) is deleted this long after it finished"

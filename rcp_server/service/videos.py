@@ -34,10 +34,9 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import BinaryIO, Literal
+from typing import Literal
 
 import numpy as np
-from PIL import Image
 
 from ..camera.camera import Camera
 from ..media.camerapath import CameraPath
@@ -47,6 +46,7 @@ from ..painting.sequence import frame_params
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .faults import fault_message, report_fault
+from .filmfiles import DamagedFrame, file_bytes, folder_bytes, frame_file, kept_frame, save_png, state_bytes
 from .painter import Painter, PainterFailed
 from .refusal import Refusal
 from .settings import Settings
@@ -57,7 +57,6 @@ from .store import (
     VideoSettings,
     load_state,
     new_video_id,
-    open_regular,
     real_dir,
     regular_size,
     save_state,
@@ -75,6 +74,7 @@ BYTES_PER_PIXEL = 0.25
 """An H.264 frame's bytes per pixel at CRF 18, estimated: about three times what a moving painting takes
 (0.08 at 320x180); the noisiest styles may take more, which the check while writing still catches."""
 MP4_BYTES = 64 * 1024  # the container and the encoder's headers, at most, for the estimate
+PNG_BYTES = 1024  # a kept frame's PNG headers and chunks beyond its pixels, at most
 RAY_ATTEMPTS = 8  # Ray failures a job outlives, waiting each time as Ray backs off (a quarter of an hour in all)
 
 
@@ -89,8 +89,10 @@ def job_work(width: int, height: int, params: PaintParams, temporal: int | None,
 
 
 def video_bytes(width: int, height: int, frames: int) -> int:
-    """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk."""
-    return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames)
+    """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk at its peak: its
+    frames kept as PNGs (at most their raw RGB, and a header each) beside the MP4 assembled from them."""
+    pngs = frames * (3 * width * height + PNG_BYTES)
+    return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames) + pngs
 
 
 @dataclass
@@ -234,7 +236,7 @@ class Videos:
                 continue
             self._jobs[job.id] = job
             if job.state == "failed":  # stopped out of disk: its frames are kept, and counted, until it expires
-                job.written = _folder_bytes(job.frames_dir)
+                job.written = folder_bytes(job.frames_dir)
             if job.state in FINISHED:
                 if job.state == "done" and regular_size(job.file) is None:
                     self._finish(job, "failed", "its file was lost while the server was down")
@@ -385,16 +387,16 @@ class Videos:
         if start > 0:
             log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
         job.done_frames = start
-        job.written = _folder_bytes(job.frames_dir)  # counted once here, then frame by frame
+        job.written = folder_bytes(job.frames_dir)  # counted once here, then frame by frame
         state_file = job.frames_dir / "state.npz"
         for image, state in self._paintings(job, start, previous):
-            frame, kept = frame_file(job, job.done_frames), _size(state_file)
-            write_whole(frame, partial(_save_png, image))
+            frame, kept = frame_file(job.frames_dir, job.done_frames), file_bytes(state_file)
+            write_whole(frame, partial(save_png, image))
             if state is not None:
                 save_state(state_file, job.done_frames, state)
-            job.written += _size(frame) + _size(state_file) - kept
+            job.written += file_bytes(frame) + file_bytes(state_file) - kept
             if self.disk_used() > self.settings.video_disk_bytes:  # this frame would pass the bound: it goes
-                job.written -= _size(frame)
+                job.written -= file_bytes(frame)
                 frame.unlink(missing_ok=True)
                 raise self._out_of_disk(job)
             job.done_frames += 1
@@ -412,7 +414,7 @@ class Videos:
         """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
         here the state it continues from. A frame written without its state is painted again."""
         written = 0
-        while written < job.frames and regular_size(frame_file(job, written)) is not None:
+        while written < job.frames and regular_size(frame_file(job.frames_dir, written)) is not None:
             written += 1
         if not job.temporal or written == 0:
             return written, None
@@ -420,7 +422,7 @@ class Videos:
         if saved is not None and saved[0] in (written - 1, written - 2):
             index, state = saved
             if index == written - 2:  # stopped between the frame and its state: that frame is painted again
-                frame_file(job, written - 1).unlink(missing_ok=True)
+                frame_file(job.frames_dir, written - 1).unlink(missing_ok=True)
             return index + 1, state
         return written, None  # no state to go on from (a painter that keeps it, as Ray's bands do): painted again
 
@@ -449,7 +451,7 @@ class Videos:
             for k in range(job.frames):
                 if job.cancelled.is_set():
                     raise Abandoned
-                writer.write(kept_frame(job, k))
+                writer.write(kept_frame(job.frames_dir, k, job.width, job.height))
             writer.close()
         except BaseException:
             writer.abort()
@@ -458,7 +460,7 @@ class Videos:
     def _finish(self, job: VideoJob, state: State, message: str = "", keep: bool = False) -> None:
         """``keep``: its frames stay on disk (and count) until the job expires or is deleted."""
         job.finish(state, message)
-        size = _size(job.file) if state == "done" else job.written if keep else 0
+        size = file_bytes(job.file) if state == "done" else job.written if keep else 0
         self.store.update_video(job.id, state=state, message=message, finished=job.finished, bytes=size)
         if not keep:
             shutil.rmtree(job.frames_dir, ignore_errors=True)
@@ -471,7 +473,7 @@ class Videos:
     def disk_used(self) -> int:
         """Bytes the videos take: the finished ones kept, and every byte a film in progress (or stopped, its
         frames kept) has written."""
-        return sum(_size(j.file) if j.state == "done" else j.written for j in list(self._jobs.values()))
+        return sum(file_bytes(j.file) if j.state == "done" else j.written for j in list(self._jobs.values()))
 
     def sweep(self) -> None:
         """Forget the jobs finished more than ``video_keep_s`` ago, and delete their files."""
@@ -494,47 +496,3 @@ class Videos:
         for job in list(self._jobs.values()):
             job.cancelled.set()
         self._runners.shutdown(wait=True, cancel_futures=True)
-
-
-class DamagedFrame(ValueError):
-    """A frame kept in the data folder that is not the image it should be; the message gives its number only."""
-
-
-def _save_png(image: np.ndarray, sink: BinaryIO) -> None:
-    Image.fromarray(image).save(sink, "PNG", compress_level=1)  # lossless, and fast: a frame waits for it
-
-
-def state_bytes(width: int, height: int) -> int:
-    """The most a temporal job's kept state may take: every channel of every pixel, with room to spare."""
-    return 1024 * width * height + (1 << 20)
-
-
-def kept_frame(job: VideoJob, index: int) -> np.ndarray:
-    """Frame ``index`` as kept on disk, (height, width, 3) uint8; :class:`DamagedFrame` (or ``UnsafeFile``) for
-    one that is not a PNG of the job's size."""
-    try:
-        with open_regular(frame_file(job, index), 4 * job.width * job.height + (1 << 20)) as source:
-            with Image.open(source) as frame:
-                if frame.size != (job.width, job.height):
-                    raise ValueError
-                return np.asarray(frame.convert("RGB"))
-    except UnsafeFile:
-        raise
-    except (OSError, ValueError, Image.DecompressionBombError):
-        raise DamagedFrame(f"frame {index} kept in the data folder is damaged; ask for the video again") from None
-
-
-def frame_file(job: VideoJob, index: int) -> Path:
-    return job.frames_dir / f"frame_{index:06d}.png"
-
-
-def _folder_bytes(folder: Path) -> int:
-    """Bytes of the regular files in ``folder`` (0 when there is none)."""
-    try:
-        return sum(regular_size(f) or 0 for f in folder.iterdir())
-    except OSError:
-        return 0
-
-
-def _size(file: Path) -> int:
-    return regular_size(file) or 0  # 0: deleted meanwhile (or not a file of its own)
