@@ -169,3 +169,24 @@ def test_no_test_module_imports_another_test_module_or_a_conftest():
             if bad:
                 found.append(f"{path.relative_to(TESTS)}:{node.lineno} imports {bad[0]}")
     assert found == []
+
+
+# where the service picks its painter, here or on Ray, and the settings that declare the address it reads
+SERVICE_PORT_CHOICE = ("rcp_server.service.state", "rcp_server.service.settings")
+RAY_WORDS = {"cluster", "walks", "on_cluster", "ray_address", "RayPainter", "RayPort", "ClusterError"}
+
+
+def test_nothing_in_the_service_but_the_painters_choice_asks_about_ray():
+    """The walk, the routes and the films call the painter port; only the service's opening picks it."""
+    found = []
+    for name, path in MODULES.items():
+        if not name.startswith("rcp_server.service") or name in SERVICE_PORT_CHOICE:
+            continue
+        for target, _, line in GRAPH[name]:
+            if target.startswith("rcp_server.cluster"):
+                found.append(f"{name}:{line} imports {target}")
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            word = node.attr if isinstance(node, ast.Attribute) else node.id if isinstance(node, ast.Name) else None
+            if word in RAY_WORDS:
+                found.append(f"{name}:{node.lineno} reads {word}")
+    assert found == []

@@ -17,6 +17,7 @@ from starlette.routing import Match, Mount
 from .access import NO_TOKEN, HostCheck, require_token
 from .faults import InternalErrors
 from .guard import BodyLimit, Capacity
+from .refusal import Refusal
 from .routes import docs, prints, rest, scenes, styles, videos, walk
 from .settings import Settings
 from .startup import Starting, Startup
@@ -58,6 +59,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             allow_headers=["Authorization", "Content-Type"],
         )
     app.add_middleware(HostCheck, settings=settings)  # outermost: a name the server is not served under, nothing
+    app.add_exception_handler(Refusal, _refused)  # every door's no, answered here once
     app.add_exception_handler(RequestValidationError, _invalid)
     app.add_exception_handler(StarletteHTTPException, _http_error)
     app.include_router(rest.public)  # /api/health: open to all
@@ -101,6 +103,12 @@ async def _http_error(request: Request, exc: Exception) -> Response:
 def app_routes(request: Request) -> list:
     """The API's routes (the client's files, which take every path outside /api/, left out)."""
     return [route for route in request.app.routes if not isinstance(route, _ClientFiles)]
+
+
+async def _refused(request: Request, exc: Exception) -> Response:
+    """A :class:`~.refusal.Refusal`: its status, its line as ``detail`` (FastAPI's shape), its ``Retry-After``."""
+    assert isinstance(exc, Refusal)  # the handler of that class
+    return JSONResponse({"detail": exc.message}, exc.status, headers=exc.headers())
 
 
 async def _invalid(request: Request, exc: Exception) -> Response:

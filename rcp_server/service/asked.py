@@ -11,10 +11,11 @@ refused alike, in the same line, whichever door it comes through.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Annotated, Any
+from pathlib import Path
+from typing import Annotated, Any, BinaryIO
 
 import numpy as np
-from fastapi import Depends, HTTPException
+from fastapi import Depends
 from starlette.concurrency import run_in_threadpool
 
 from ..camera.camera import Camera
@@ -23,17 +24,11 @@ from ..media.camerapath import CAMERA_PREFIX, CameraPath, PathError, PathSpec, m
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from . import protocol
+from .refusal import Refusal
 from .settings import Settings
-from .state import Service, ServiceDep
+from .state import Service, ServiceDep, on_ray
+from .uploads import Limits, Refused, read_refusal, read_scene
 from .videos import job_work
-
-
-class Refusal(ValueError):
-    """A request that cannot be painted as asked, in one line; ``status``: 404 for an unknown scene, else 422."""
-
-    def __init__(self, message: str, status: int = 422):
-        super().__init__(message)
-        self.status = status
 
 
 @dataclass(frozen=True)
@@ -88,19 +83,12 @@ def asked(
     return check(service.settings, scene, chosen, width, height, overrides)
 
 
-def http_error(refusal: Refusal) -> HTTPException:
-    return HTTPException(refusal.status, str(refusal))
-
-
 # ---- the dependencies of the REST routes ----
 
 
 async def render_asked(body: protocol.RenderRequest, service: ServiceDep) -> Asked:
     """``POST /api/render``'s painting (the route reads the same ``body``: FastAPI parses it once)."""
-    try:
-        return asked(service, body.scene, body.camera, body.width, body.height, body.paint.given())
-    except Refusal as refusal:
-        raise http_error(refusal) from None
+    return asked(service, body.scene, body.camera, body.width, body.height, body.paint.given())
 
 
 @dataclass(frozen=True)
@@ -114,13 +102,10 @@ class VideoAsked:
 
 async def video_asked(body: protocol.VideoRequest, service: ServiceDep) -> VideoAsked:
     """``POST /api/videos``' path and painting; the whole film's work is the video queue's to check."""
-    try:
-        scene = find_scene(service, body.scene)
-        path = await resolved(body.path, scene)
-        frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
-        return VideoAsked(frame, keyed(service, path, frame, body.temporal))
-    except Refusal as refusal:
-        raise http_error(refusal) from None
+    scene = find_scene(service, body.scene)
+    path = await resolved(body.path, scene)
+    frame = check(service.settings, scene, path.cameras[0], body.width, body.height, body.paint.given())
+    return VideoAsked(frame, keyed(service, path, frame, body.temporal))
 
 
 async def resolved(spec: PathSpec | protocol.CameraPathRef, scene: Scene) -> CameraPath:
@@ -146,7 +131,7 @@ def keyed(service: Service, path: CameraPath, frame: Asked, temporal: int | None
         raise Refusal(str(exc)) from None
     if path.track is None:
         return path
-    if service.videos.painter is not None:
+    if on_ray(service.painter):
         raise Refusal("this server paints films on Ray, one painting a film: a path that keys its painting cannot")
     paintings = path.track.paintings()
     work = max(job_work(frame.width, frame.height, p, temporal, path.frame_count) for p in paintings)
@@ -161,10 +146,32 @@ def keyed(service: Service, path: CameraPath, frame: Asked, temporal: int | None
 
 async def scene_named(body: protocol.PathRequest, service: ServiceDep) -> Scene:
     """The scene of a request that paints nothing itself (``POST /api/paths``)."""
+    return find_scene(service, body.scene)
+
+
+# ---- uploads ----
+
+UPLOADS_QUEUED = 3  # uploads reading or waiting to; more are told to come back (each reading takes a core)
+
+
+def upload_door(service: Service) -> None:
+    """Whether an upload may be read now: uploads on, a place among the scenes kept and among those reading;
+    else :class:`Refusal` (403, or 503 with a time to try again)."""
+    settings, uploads = service.settings, service.uploads
+    if not settings.uploads:
+        raise Refusal("uploads are off on this server (RCP_UPLOADS=0)", 403)
+    service.sweep_uploads()  # before counting
+    uploads.check_room(settings.upload_max_scenes, settings.upload_idle_s)
+    if uploads.queued >= UPLOADS_QUEUED:
+        raise Refusal("other uploads are being read; try again in a few seconds", 503, 5)
+
+
+def read_upload(body: BinaryIO, filename: str, limits: Limits, keep: Path | None) -> tuple[Scene, int]:
+    """Blocking: :func:`~.uploads.read_scene`, its reader's refusal as the service's (the one place it maps)."""
     try:
-        return find_scene(service, body.scene)
-    except Refusal as refusal:
-        raise http_error(refusal) from None
+        return read_scene(body, filename, limits, keep)
+    except Refused as exc:
+        raise read_refusal(exc) from None
 
 
 RenderAsked = Annotated[Asked, Depends(render_asked)]

@@ -26,6 +26,7 @@ from typing import Protocol, TypeVar
 
 from ..painting.workspace import pixel_bytes
 from ..settings.params import PaintParams
+from .refusal import Refusal
 
 MB = 1 << 20
 SHARE_OF_THE_MACHINE = 0.5  # the default budget: this much of the memory the machine (or container) has left
@@ -33,22 +34,12 @@ RETRY_AFTER_S = 5  # a painting that does not fit beside the others now: about o
 WALK_KEEPS = 2  # a walk's workspace alternates two results: the frame shown (kept for temporal mode) and the next
 
 
-class NoRoom(ValueError):
-    """A painting the budget has no room for, in one line. ``retry_after`` (s) when it would fit once others end;
-    None when it can never fit (then the caller must ask for less)."""
+class NoRoom(Refusal):
+    """A painting the budget has no room for, in one line: 503 with ``retry_after`` (s) when it would fit once
+    others end; 422 when it can never fit (then the caller must ask for less)."""
 
     def __init__(self, message: str, retry_after: int | None):
-        super().__init__(message)
-        self.retry_after = retry_after
-
-    @property
-    def status(self) -> int:
-        """The HTTP status of a REST render refused: 503 (try again) or 422 (ask for less)."""
-        return 422 if self.retry_after is None else 503
-
-    @property
-    def headers(self) -> dict[str, str] | None:
-        return None if self.retry_after is None else {"Retry-After": str(self.retry_after)}
+        super().__init__(message, 422 if retry_after is None else 503, retry_after)
 
 
 def painting_bytes(params: PaintParams, width: int, height: int, kept: int = 1) -> int:

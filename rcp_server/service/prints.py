@@ -22,10 +22,10 @@ from ..media import prints
 from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
+from .refusal import Refusal
 from .settings import Settings
 from .store import new_video_id
-from .videos import VideoRefused
-from .workshop import Busy, Workshop
+from .workshop import Workshop
 
 log = logging.getLogger("rcp")
 State = Literal["queued", "running", "done", "failed", "cancelled"]
@@ -85,12 +85,12 @@ class Prints:
         self, scene: Scene, camera: Camera, width: int, height: int, params: PaintParams, time_s: float, bits: int,
         alpha: bool,
     ) -> PrintJob:  # fmt: skip
-        """Queue a print or refuse it: ``ValueError`` (a print that cannot be made), :class:`VideoRefused` (over
-        the work limit, 422; or the disk, 507) or :class:`Busy` (the queue full)."""
+        """Queue a print or refuse it: ``ValueError`` (a print that cannot be made), :class:`~.refusal.Refusal` (over
+        the work limit, 422; or the disk, 507) (503: the queue full)."""
         prints.check_print(width, height, params, bits)
         work = print_work(width, height, params, alpha)
         if work > self.settings.max_print_work:
-            raise VideoRefused(
+            raise Refusal(
                 f"{width}x{height} pixels x {params.spp} spp x their iterations is {work:,} rays, more than the "
                 f"{self.settings.max_print_work:,} one print may take (RCP_MAX_PRINT_WORK)"
             )
@@ -102,14 +102,14 @@ class Prints:
             kept = sum(_size(j.file) for j in self._jobs.values() if j.state == "done")
             room = self.settings.video_disk_bytes - self._videos_disk() - kept - sum(j.estimate for j in waiting)
             if job.estimate > room:
-                raise VideoRefused(
+                raise Refusal(
                     f"the print may take {job.estimate:,} bytes and the videos and prints have {max(room, 0):,} of "
                     f"their {self.settings.video_disk_bytes:,} left (RCP_VIDEO_DISK_BYTES): ask for fewer pixels, "
                     "or wait until others expire",
                     507,
                 )
             if len(waiting) > self.settings.max_videos_waiting:
-                raise Busy(RETRY_AFTER_S)
+                raise Refusal("other prints are waiting; try again later", 503, RETRY_AFTER_S)
             self._jobs[job_id] = job
         self._runner.submit(self._run, job)
         return job

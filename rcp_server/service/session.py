@@ -1,439 +1,279 @@
-"""One WebSocket walk-through: camera in, painted frames out, the newest camera always wins.
+"""One WebSocket walk-through's I/O: messages in, painted frames out, the newest camera always wins.
 
-Three tasks share a session. The receiver validates messages and updates the view; every change bumps the
-planner's ``version``, which abandons a refinement in flight between iterations. The painter asks the
-:class:`~rcp_server.service.planner.Planner` what to paint next (walk frames while the camera moves,
-refinements once it rests), paints it on the workshop and tells the planner how long it took. The sender
-keeps one slot for frames: a frame not yet sent is replaced by a newer one, so a slow client never gets a
-queue of stale frames.
+The parts are elsewhere: what a message does to the view (``walkview.apply``, pure), what to paint next
+(``planner.py``, pure), who paints (the painter port, ``painter.py``), and what waits (``outbox.py``: the newest
+frame, the newest ``move`` and ``pick``, a rate). Here, four tasks share a session: the receiver applies
+messages and bumps the planner's ``version`` (which abandons a refinement in flight), the painter paints what
+the planner asks for, the asker answers questions one at a time, and the sender drains the outbox.
 """
 
 from __future__ import annotations
 
 import asyncio
-import base64
-import collections
-import logging
-import math
 import time as _time
-from dataclasses import dataclass
+from collections.abc import Callable
 from functools import partial
+from typing import NamedTuple
 
-import numpy as np
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from ..camera.camera import Camera, CameraError
-from ..camera.wire import camera_of
-from ..cluster.admission import Full
-from ..cluster.connection import ClusterError
-from ..cluster.walkactor import Painted
-from ..painting.loop import Abandoned, PaintState, Workspace
-from ..painting.picking import object_pixels, pick
+from ..media.walkframe import WalkPainted
+from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
-from ..scene.walking import walk
 from ..settings.params import PaintParams
-from ..util import images
 from . import protocol
-from .asked import Asked, asked, check
+from .asked import find_scene
 from .faults import fault_message, report_fault
 from .memory import admit
-from .planner import Plan, Planner, View, frame_quality
+from .outbox import Outbox, Questions, Rate
+from .planner import Planner
+from .refusal import Refusal
 from .state import Service
+from .walkview import Job, WalkView, another_picture, answer, apply, job_of
 
-log = logging.getLogger("rcp.service")
-
-MASK_PIXELS = 160 * 90 * 4  # a picked object's outline is traced at most this fine (a few ms of rays)
-
-
-def pick_mask(scene: Scene, time: float, camera: Camera, size: tuple[int, int], name: str) -> protocol.PickMask:
-    """Where object ``name`` shows in a view of ``size`` (width, height), at most ``MASK_PIXELS`` fine."""
-    scale = min(1.0, math.sqrt(MASK_PIXELS / (size[0] * size[1])))
-    width, height = max(1, round(size[0] * scale)), max(1, round(size[1] * scale))
-    shows = object_pixels(scene, time, camera, width, height, name)
-    bits = base64.b64encode(np.packbits(shows.reshape(-1)).tobytes()).decode()
-    return protocol.PickMask(width=width, height=height, bits=bits)
+BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message rate at once
 
 
-def busy_message(limit: int) -> str:
+def busy_message(limit: int, retry_s: int) -> str:
     """What a walk-through turned away for the server's ``max_sessions`` is told."""
-    return f"the server is at its limit of {limit} walk-throughs; try again later"
+    return f"the server is at its limit of {limit} walk-throughs; try again in {retry_s} s"
 
 
-@dataclass
-class _Job:
-    """One frame to paint: the planner's plan, and a snapshot of the view it shows."""
+class Painting(NamedTuple):
+    """A walk's painting as the memory budget counts it: its settings and its size, both eyes."""
 
-    plan: Plan
-    epoch: int
-    scene: Scene
-    camera: Camera
-    camera_id: int | None
-    previous: PaintState | None  # the last frame's state at the plan's size, when the plan continues it
-    quality: int
-    serial: int  # the frame's number in the session
-    after: int | None  # on Ray: the frame whose state the worker keeps, when the plan continues it
+    params: PaintParams
+    width: int
+    height: int
+
+
+def painting_of(view: WalkView) -> Painting:
+    assert view.params is not None and view.camera is not None, "after hello"
+    return Painting(view.params, *view.camera.image_size(view.width, view.height))
+
+
+class Closing(Exception):
+    """The session closes the socket: ``code`` and ``reason`` (the one error line it sent before)."""
+
+    def __init__(self, code: int, reason: str):
+        super().__init__(reason)
+        self.code, self.reason = code, reason
 
 
 class Session:
     def __init__(self, ws: WebSocket, service: Service):
-        self.ws, self.service, self.workshop, self.settings = ws, service, service.workshop, service.settings
-        # ---- the view (set by the receiver) ----
-        self.scene: Scene | None = None
-        self.camera: Camera | None = None
-        self.camera_id: int | None = None
-        self.width = self.height = 0
-        self.quality = 80
-        self.overrides: dict = {}  # painting settings the client changed from the scene's (a style among them)
-        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
-        self.params: PaintParams | None = None  # the scene's with the overrides, validated once when they change
-        self.temporal = False  # per-frame paintings: every frame is the painting of its camera
-        self.animate = False
-        self.epoch = 0  # bumped by every hello: a painting of an older epoch shows another scene
+        self.ws, self.service, self.settings, self.painter = ws, service, service.settings, service.painter
+        self.view = WalkView()
         self.changed = asyncio.Event()
-        # ---- the painting (kept by the painter) ----
         settings = self.settings
         self.planner = Planner(settings.frame_ms, settings.settle_ms, settings.max_work, _time.monotonic())
-        self.state: PaintState | None = None  # the last frame's per-pixel data, for temporal mode
-        # the buffers every painting of this walk works in, frame after frame (one painting at a time: a result
-        # lives until the painting after next, and only self.state is kept)
-        self.workspace = Workspace()
-        self.kept: int | None = None  # on Ray: the last frame shown, whose per-pixel data its worker keeps
+        self.kept: int | None = None  # the last frame shown, whose per-pixel data the painter keeps (temporal)
+        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
         self.serial = 0  # frames asked for
         self.closed = False
-        self.refused: Full | None = None  # the hello was refused for want of room: the socket closes
-        # ---- the outbox (drained by the sender) ----
-        self.notes: collections.deque[str] = collections.deque(maxlen=64)  # text messages, in order
-        self.frame: tuple[str, list[bytes]] | None = None  # the newest frame not yet sent (its JPEG, or its bands')
-        self.seq = 0
-        self.dropped = 0
-        self.outbox = asyncio.Event()
+        self.outbox, self.questions = Outbox(), Questions()
+        self.rate = Rate(settings.max_messages_per_s, BURST_S * settings.max_messages_per_s, _time.monotonic)
 
-    # ---- the session's life ----
+    @property
+    def scene(self) -> Scene | None:
+        """The scene it shows (None before hello)."""
+        return self.view.scene
+
+    @property
+    def walking(self) -> bool:
+        """Whether it has said hello: only then does it hold one of the server's ``max_sessions`` places."""
+        return self.view.scene is not None
 
     async def run(self) -> None:
         try:
             async with asyncio.TaskGroup() as tasks:
-                tasks.create_task(self._receive())
-                tasks.create_task(self._paint())
-                tasks.create_task(self._send())
-                tasks.create_task(self._expect_hello())
+                for task in (self._receive(), self._paint(), self._ask(), self._send(), self._expect_hello()):
+                    tasks.create_task(task)
         except* WebSocketDisconnect:
             pass
+        except* Closing as closing:
+            first = closing.exceptions[0]
+            assert isinstance(first, Closing)
+            await self._send_now(first.code, first.reason)
         finally:
             self.close()
 
     def close(self) -> None:
         """End the walk-through's painting: one still in flight stops at its next iteration."""
         self.closed = True
-        self.state, workspace, self.workspace = None, self.workspace, Workspace()  # its buffers go once unused
-        workspace.close()
+        self.painter.leave(self)
         self.service.memory.release(self)
-        self.service.give_back.after(workspace)  # to the system, once its last painting has stopped
-        if self.service.walks is not None:
-            self.service.walks.leave(self)
 
-    @property
-    def walking(self) -> bool:
-        """Whether it has said hello: only then does it hold one of the server's ``max_sessions`` places."""
-        return self.scene is not None
+    async def _send_now(self, code: int, reason: str) -> None:
+        """The one error line, then the close with its reason (a client gone meanwhile is let be)."""
+        try:
+            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=reason).model_dump_json()})
+            await self.ws.close(code=code, reason=reason[:120])
+        except Exception:  # gone already: nobody is left to tell
+            pass
 
     async def _expect_hello(self) -> None:
-        """Close a WebSocket that has not opened a walk-through within ``hello_timeout_s`` (1008): one that
-        only holds a connection open is let go."""
+        """A WebSocket that has not opened a walk-through within ``hello_timeout_s`` is let go (1008)."""
         seconds = self.settings.hello_timeout_s
         await asyncio.sleep(seconds)
-        if self.scene is None:
-            message = f"no hello within {seconds:g} s"
-            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=message).model_dump_json()})
-            await self.ws.close(code=1008, reason=message)
-            raise WebSocketDisconnect(1008, message)
+        if self.view.scene is None:
+            raise Closing(1008, f"no hello within {seconds:g} s")
 
     async def _receive(self) -> None:
+        limit, rate = self.settings.max_message_bytes, self.settings.max_messages_per_s
         while True:
             message = await self.ws.receive()
             if message["type"] == "websocket.disconnect":
                 raise WebSocketDisconnect(message.get("code", 1000))
+            if not self.rate.allows():
+                raise Closing(1008, f"more than {rate:g} messages a second (RCP_MAX_MESSAGES_PER_S)")
             text = message.get("text")
-            limit = self.settings.max_message_bytes
             if text is None:
-                self._note(protocol.Error(message="send JSON text messages; binary messages mean nothing here"))
+                self.outbox.note(protocol.Error(message="send JSON text messages; binary messages mean nothing here"))
             elif len(text) > limit:
-                self._note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
+                self.outbox.note(protocol.Error(message=f"a message of {len(text)} characters; the limit is {limit}"))
             else:
-                await self._take(text)
+                self._take(text)
 
-    async def _take(self, text: str) -> None:
+    def _take(self, text: str) -> None:
         try:
             msg = protocol.client_message.validate_json(text)
-            if isinstance(msg, protocol.MoveMessage | protocol.PickMessage) and self.scene is not None:
-                # milliseconds of rays in a big scene: off the event loop, the next message waits for the answer
-                self._note(await asyncio.to_thread(self._answer, self.scene, self.camera or self.scene.camera, msg))
-            else:
-                self._apply(msg)
         except ValidationError as exc:
-            self._note(protocol.Error.answering(text, f"bad message: {one_line(exc)}"))
-        except (CameraError, ValueError) as exc:
-            self._note(protocol.Error.answering(text, str(exc)))
-            if self.refused is not None:  # no room for this walker anywhere: told, then closed at once
-                await self._refuse(self.refused)
+            self.outbox.note(protocol.Error.answering(text, f"bad message: {one_line(exc)}"))
+            return
+        try:
+            if isinstance(msg, protocol.MoveMessage | protocol.PickMessage):
+                if self.view.scene is None:
+                    raise Refusal(f"say hello first: a '{msg.type}' message needs a scene")
+                self.questions.ask(msg)  # the newest of its kind replaces one still waiting
+                return
+            first = isinstance(msg, protocol.Hello) and self.view.scene is None
+            if first and self.service.walking() >= self.settings.max_sessions:  # others said hello first
+                retry_s = self.settings.walk_retry_s
+                raise Refusal(busy_message(self.settings.max_sessions, retry_s), 503, retry_s)
+            view = apply(self.view, msg, self.settings, partial(find_scene, self.service))
+            if isinstance(view, Refusal):
+                raise view
+            if view.params is not None and (view.width, view.height, view.params) != (
+                self.view.width,
+                self.view.height,
+                self.view.params,
+            ):
+                admit(self.service.memory, self, painting_of(view))  # its paintings' memory, or NoRoom (a Refusal)
+            if first and view.scene is not None and view.params is not None:  # its place with the painter
+                self.painter.admit(self, view.params, view.scene)  # on Ray: while the cluster has room
+            self._show(view)
+        except Refusal as refusal:
+            if isinstance(msg, protocol.Hello) and self.view.scene is None and refusal.retry_after is not None:
+                raise Closing(1013, refusal.message) from None  # the page tries again after the time it states
+            self.outbox.note(protocol.Error.answering(text, refusal.message))
         except Exception:  # a fault of ours: this message is lost, the session is not
-            self._note(protocol.Error.answering(text, fault_message(report_fault(f"session message {text[:200]!r}"))))
+            fault = fault_message(report_fault(f"session message {text[:200]!r}"))
+            self.outbox.note(protocol.Error.answering(text, fault))
 
-    async def _refuse(self, full: Full) -> None:
-        """Send the refusal line now and close with a reason that says when to try again (1013)."""
-        while self.notes:
-            await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
-        reason = f"no room for another walker; try again in {full.retry_after} s"
-        await self.ws.close(code=1013, reason=reason)
-        raise WebSocketDisconnect(1013, reason)
-
-    def _apply(self, msg) -> None:
-        if isinstance(msg, protocol.Hello):
-            self._hello(msg)
-        elif self.scene is None:
-            raise ValueError(f"say hello first: a '{msg.type}' message needs a scene")
-        elif isinstance(msg, protocol.CameraMessage):
-            camera = camera_of(msg)
-            # another projection or stereo layout is another painting: checked as the hello was (both eyes)
-            self.params = self._held(check(self.settings, self.scene, camera, self.width, self.height, self.overrides))
-            kind = (camera.projection, camera.stereo)
-            if self.camera is None or kind != (self.camera.projection, self.camera.stereo):
-                self.state = self.kept = None  # another kind of picture: the recursion starts again
-            self.camera = camera
-            self.camera_id = msg.id
-            self.planner.camera_moved(_time.monotonic())
-        elif isinstance(msg, protocol.PaintMessage):
-            overrides = {**self.overrides, **msg.changes()}
-            overrides = {k: v for k, v in overrides.items() if v is not None}
-            # refuse now, keep the old settings
-            self.params = self._held(check(self.settings, self.scene, self.camera, self.width, self.height, overrides))
-            self.overrides = overrides
-        elif isinstance(msg, protocol.ModeMessage):
-            self.temporal = self.temporal if msg.temporal is None else msg.temporal
-            self.animate = self.animate if msg.animate is None else msg.animate
-        elif isinstance(msg, protocol.ViewMessage):
-            width, height = msg.width or self.width, msg.height or self.height
-            self.params = self._held(check(self.settings, self.scene, self.camera, width, height, self.overrides))
-            self.width, self.height, self.quality = width, height, msg.quality or self.quality
-        self._changed()
-
-    def _held(self, painting: Asked) -> PaintParams:
-        """The settings of a painting once the walk holds the memory it takes (memory.py), or ``NoRoom``; a walk
-        that takes less from now on drops its buffers, and their memory goes back to the system."""
-        memory, held = self.service.memory, self.service.memory.held(self)
-        params = admit(memory, self, painting).params
-        if memory.held(self) < held:  # the kept state stays: a temporal walk goes on from it
-            workspace, self.workspace = self.workspace, Workspace()
-            workspace.close()
-            self.service.give_back.after(workspace)
-        return params
-
-    def _answer(
-        self, scene: Scene, camera: Camera, msg: protocol.MoveMessage | protocol.PickMessage
-    ) -> protocol.Moved | protocol.Picked:
-        """Blocking: the answer to a question about the scene, which paints nothing: where a walker's move ends
-        (the camera message that shows it follows), or what a pixel shows, with the object's outline."""
-        if isinstance(msg, protocol.MoveMessage):
-            step = walk(scene, self.shown_time, msg.eye, msg.delta, msg.height)
-            x, y, z = (float(v) for v in step.eye)
-            body = step.body
-            return protocol.Moved(
-                id=msg.id, eye=(x, y, z), radius=body.radius, height=body.height, standing=step.standing
+    def _show(self, view: WalkView) -> None:
+        """Take ``view``: the planner, the kept state and the outbox follow what changed."""
+        before, self.view = self.view, view
+        now = _time.monotonic()
+        if another_picture(before, view):
+            self.kept = None  # the recursion starts again
+        if view.epoch != before.epoch:
+            self.planner.scene_started(now)
+            self.outbox.drop_frame()  # a frame of the scene being left must not follow the new `ready`
+            info = self.service.info(view.scene.name) if view.scene is not None else None
+            ready = {"width": view.width, "height": view.height, "quality": view.quality}
+            self.outbox.note(
+                protocol.Ready(scene=info, temporal=view.temporal, animate=view.animate, **ready)  # type: ignore[arg-type]
             )
-        size = camera.image_size(self.width, self.height)  # the painting the client shows: both eyes
-        shown = pick(scene, self.shown_time, camera, *size, msg.x, msg.y)
-        names = (None, None) if shown is None else shown
-        mask = None if shown is None else pick_mask(scene, self.shown_time, camera, size, shown[0])
-        return protocol.Picked(x=msg.x, y=msg.y, object=names[0], material=names[1], mask=mask)
-
-    def _hello(self, msg: protocol.Hello) -> None:
-        if self.scene is None and self.service.walking() >= self.settings.max_sessions:  # others said hello first
-            raise ValueError(busy_message(self.settings.max_sessions))
-        painting = admit(self.service.memory, self, asked(self.service, msg.scene, None, msg.width, msg.height, {}))
-        if self.scene is None and self.service.walks is not None:  # a place on Ray, while it has room
-            try:
-                self.service.walks.admit(self, painting.params, painting.scene)
-            except Full as full:
-                self.refused = full  # said in one line, then the socket closes with its retry time (_take)
-                raise ValueError(str(full)) from None
-        self.params, self.scene = painting.params, painting.scene
-        self.camera, self.camera_id = self.scene.camera, None
-        self.width, self.height, self.quality = msg.width, msg.height, msg.quality
-        self.overrides, self.state, self.kept = {}, None, None
-        self.planner.scene_started(_time.monotonic())
-        self.epoch += 1
-        self.frame = None  # a frame of the scene being left must not follow the new `ready`
-        self._note(
-            protocol.Ready(
-                scene=self.service.info(msg.scene),
-                width=self.width,
-                height=self.height,
-                quality=self.quality,
-                temporal=self.temporal,
-                animate=self.animate,
-            )
-        )
-
-    def _changed(self) -> None:
+        elif view.camera is not before.camera:
+            self.planner.camera_moved(now)
         self.planner.view_changed()
         self.changed.set()
 
-    # ---- painting ----
+    # ---- painting and answering ----
 
     async def _paint(self) -> None:
         while True:
             job = self._next_job()
             if job is None:
                 self.changed.clear()
-                wait = self._until_rest()
+                wait = (
+                    None if self.view.scene is None else self.planner.until_rest(_time.monotonic(), self.view.planned())
+                )
                 try:
-                    await asyncio.wait_for(self.changed.wait(), wait)
+                    async with asyncio.timeout(wait):
+                        await self.changed.wait()
                 except TimeoutError:
                     pass
                 continue
             try:
-                result, seconds = await self.workshop.run(partial(self._paint_and_encode, job))
+                run = partial(self.painter.walk_frame, self, job.frame, self._stop(job))
+                painted = await self.service.workshop.run(run)
             except Abandoned:
-                if self.workshop.stopping:
+                if self.service.workshop.stopping:
                     return  # the server is stopping: nothing will paint again
                 continue
             except Exception as exc:  # this view cannot be painted: say why, and wait for the next change
-                self.planner.frame_failed(job.plan, self._view())
-                if isinstance(exc, (CameraError, ValueError)):  # e.g. a painting setting the scene cannot take
-                    self._note(protocol.Error(message=str(exc)))
-                else:
-                    self._note(protocol.Error(message=fault_message(report_fault(f"painting {job.plan.phase} frame"))))
+                self.planner.frame_failed(job.plan, self.view.planned())
+                message = str(exc) if isinstance(exc, ValueError | Refusal) else None  # CameraError among them
+                where = f"painting {job.plan.phase} frame"
+                self.outbox.note(protocol.Error(message=message or fault_message(report_fault(where))))
                 continue
-            if job.epoch != self.epoch:
-                continue  # painted for a scene the client has left
-            self._finished(job, result, seconds)
+            if job.epoch == self.view.epoch:  # else painted for a scene the client has left
+                self._finished(job, painted)
 
-    def _view(self) -> View:
-        # hello sets the scene and its settings together
-        assert self.scene is not None and self.params is not None, "a view is asked for only after hello"
-        moving = self.animate and self.scene.animated
-        camera = self.camera or self.scene.camera
-        eyes = 1 if camera.stereo == "mono" else 2
-        return View(self.width, self.height, self.params, self.temporal, moving, eyes)
-
-    def _until_rest(self) -> float | None:
-        """Seconds until refinement starts, None when nothing is due (the planner's, once there is a scene)."""
-        return None if self.scene is None else self.planner.until_rest(_time.monotonic(), self._view())
-
-    def _next_job(self) -> _Job | None:
-        if self.scene is None:
+    def _next_job(self) -> Job | None:
+        view = self.view
+        if view.scene is None or view.camera is None:
             return None
-        plan = self.planner.next_frame(_time.monotonic(), self._view())
+        plan = self.planner.next_frame(_time.monotonic(), view.planned())
         if plan is None:
             return None
-        assert self.camera is not None, "hello sets the camera with the scene"
-        size = self.camera.image_size(plan.width, plan.height)
-        previous = self.state.resized(*size) if plan.continues and self.state is not None else None
-        after = self.kept if plan.continues else None
         self.serial += 1
-        return _Job(
-            plan, self.epoch, self.scene, self.camera, self.camera_id, previous, self.quality, self.serial, after
-        )
+        return job_of(view, plan, self.serial, self.kept)
 
-    def _paint_and_encode(self, job: _Job) -> tuple[tuple[Painted, PaintState | None], float]:
-        """Blocking, on a painter's thread: paint the job and encode it, on Ray when the server is joined to it
-        (the worker keeps the state), else here, or meanwhile when Ray cannot paint it (the state is ours).
-        Refinements are abandoned as soon as anything changes; walk frames are short by design and always
+    def _stop(self, job: Job) -> Callable[[], bool]:
+        """Refinements are abandoned as soon as anything changes; walk frames are short by design and always
         finish, or a camera that never rests would never see a frame."""
         plan = job.plan
 
         def should_stop() -> bool:
-            stale = self.planner.version != plan.version if plan.phase == "refine" else self.epoch != job.epoch
+            stale = self.planner.version != plan.version if plan.phase == "refine" else self.view.epoch != job.epoch
             return self.closed or stale
 
-        clock = _time.perf_counter()
-        size = job.camera.image_size(plan.width, plan.height)
-        quality = frame_quality(plan, job.quality)
-        walks = self.service.walks
-        if walks is not None and self.service.cluster is not None and self.service.cluster.ready():
-            try:
-                args = (job.scene, job.camera, *size, plan.params, plan.time, quality, job.serial, job.after)
-                painted = walks.paint(self, *args, should_stop=should_stop)
-                return (painted, None), painted.seconds
-            except ClusterError as exc:  # painted here meanwhile
-                log.debug(
-                    "a walk frame painted on the server: %s", exc
-                )  # a failure of Ray says so once, as it backs off
-        result = self.workshop.paint(
-            job.scene,
-            job.camera,
-            *size,
-            plan.params,
-            time=plan.time,
-            previous=job.previous,
-            should_stop=should_stop,
-            workspace=self.workspace,
-        )
-        seconds = _time.perf_counter() - clock
-        jpeg = images.encode(result.image, "JPEG", quality)
-        painted = Painted(jpeg, *size, None, job.previous is not None, seconds, 0.0, seconds=seconds)
-        return (painted, result.state), seconds
+        return should_stop
 
-    def _finished(self, job: _Job, painted: tuple[Painted, PaintState | None], seconds: float) -> None:
-        frame, state = painted
+    def _finished(self, job: Job, frame: WalkPainted) -> None:
         plan = job.plan
-        self.planner.frame_painted(plan, seconds)
-        self.state, self.kept = state, frame.serial
-        self.shown_time = plan.time
-        meta = protocol.Frame(
-            seq=0,
-            width=frame.width,
-            height=frame.height,
-            render_ms=round(seconds * 1000, 2),
-            iteration=plan.iteration,
-            spp=plan.params.spp,
-            scale=round(plan.width / self.width, 4),
-            phase=plan.phase,
-            final=plan.final,
-            temporal=frame.continued,
-            quality=frame_quality(plan, job.quality),
-            paint=plan.params.settings(),
-            camera_id=job.camera_id,
-            time=plan.time,
-            dropped=0,
-            projection=job.camera.projection,
-            stereo=job.camera.stereo,
-            bands=[(band.y, band.rows) for band in frame.bands] or None,
-        )
-        self._post_frame(meta, [band.jpeg for band in frame.bands] or [frame.jpeg])
+        self.planner.frame_painted(plan, frame.seconds)
+        self.kept, self.shown_time = frame.serial, plan.time
+        self.outbox.post_frame(job.meta(frame, self.view.width), [jpeg for _, _, jpeg in frame.bands] or [frame.jpeg])
+
+    async def _ask(self) -> None:
+        """Answer the questions, one at a time (milliseconds of rays in a big scene: off the event loop)."""
+        while True:
+            question = await self.questions.next()
+            try:
+                self.outbox.note(await asyncio.to_thread(answer, self.view, self.shown_time, question))
+            except ValueError as exc:  # CameraError among them
+                self.outbox.note(protocol.Error(message=str(exc)))
+            except Exception:  # a fault of ours: this question is lost, the session is not
+                self.outbox.note(protocol.Error(message=fault_message(report_fault(f"answering a {question.type}"))))
 
     # ---- sending ----
 
-    def _note(self, message) -> None:
-        self.notes.append(message.model_dump_json())
-        self.outbox.set()
-
-    def _post_frame(self, meta: protocol.Frame, jpegs: list[bytes]) -> None:
-        if self.frame is not None:
-            self.dropped += 1  # never sent: this newer frame replaces it
-        self.seq += 1
-        self.frame = (meta.model_copy(update={"seq": self.seq, "dropped": self.dropped}).model_dump_json(), jpegs)
-        self.outbox.set()
-
     async def _send(self) -> None:
         while True:
-            await self.outbox.wait()
-            self.outbox.clear()
-            while self.notes:
-                await self._deliver({"type": "websocket.send", "text": self.notes.popleft()})
-            if self.frame is not None:
-                text, jpegs = self.frame
-                self.frame = None
-                await self._deliver({"type": "websocket.send", "text": text})
-                for jpeg in jpegs:  # one, or a band's each (forwarded as the workers encoded them)
-                    await self._deliver({"type": "websocket.send", "bytes": jpeg})
+            for message in await self.outbox.take():
+                await self._deliver(message)
 
     async def _deliver(self, message: dict) -> None:
         """A send waits while the client's buffers are full (newer frames replace the unsent one meanwhile);
         a client that takes nothing for ``send_timeout_s`` has gone and is let go."""
-        try:
-            await asyncio.wait_for(self.ws.send(message), self.settings.send_timeout_s)
+        try:  # asyncio.timeout, not wait_for: 3.11's wait_for may swallow the task group's cancel as a send ends
+            async with asyncio.timeout(self.settings.send_timeout_s):
+                await self.ws.send(message)
         except TimeoutError:
             raise WebSocketDisconnect(1001, "the client took no data") from None

@@ -118,6 +118,12 @@ class Settings(BaseSettings):
         description="a request's headers and body must all be there this long after the connection opened or the "
         "last response ended; else 408 and closed",
     )
+    max_messages_per_s: float = Field(
+        1000.0,
+        gt=0,
+        description="WebSocket messages a second one walk-through may send on average (four times that at once); past "
+        "it an error and close 1008",
+    )
     hello_timeout_s: float = Field(
         10.0, gt=0, description="a WebSocket that has not said hello by then gets an error and close 1008"
     )
@@ -150,9 +156,10 @@ class Settings(BaseSettings):
     video_disk_bytes: int = Field(
         2 << 30,
         ge=1,
-        description="disk the finished videos may use together; a new job whose estimate (0.25 bytes a pixel a "
-        "frame) does not fit beside the kept videos and the jobs in progress gets 507 with the estimate and the room "
-        "left; a video larger than its estimate fails with a message",
+        description="disk the videos may use together, the frames of those in progress included; a new job whose "
+        "estimate (its frames' PNGs at 3 bytes a pixel beside 0.25 bytes a pixel a frame of MP4) does not fit beside "
+        "the kept videos and the jobs in progress gets 507 with the estimate and the room left; a film whose next "
+        "frame would pass it stops, failed with 507 naming the setting, and keeps what it made until it expires",
     )
     video_keep_s: float = Field(
         3600.0, gt=0, description="a finished video (and its job) is deleted this long after it finished"
@@ -187,7 +194,7 @@ class Settings(BaseSettings):
     walk_width: int = Field(320, ge=1, le=4096, description="the walk frame size a walker on Ray is admitted for")
     walk_height: int = Field(180, ge=1, le=4096, description="the walk frame size a walker on Ray is admitted for")
     walk_retry_s: int = Field(
-        30, ge=1, description="a walker the cluster has no room for is told to try again after this"
+        30, ge=1, description="a walker the server or its cluster has no room for is told to try again after this"
     )
     # ---- uploaded scenes (POST /api/scenes) ----
     uploads: bool = Field(True, description="0 turns uploads off (403)")

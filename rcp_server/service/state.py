@@ -8,7 +8,7 @@ import threading
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Protocol
+from typing import TYPE_CHECKING, Annotated, Protocol, TypeGuard
 
 from fastapi import Depends
 from starlette.applications import Starlette
@@ -18,9 +18,9 @@ from ..camera.wire import spec_of
 from ..painting import warmup
 from ..scene.scene import Scene, material_names, object_names
 from ..scene.scenefile import SceneError, load_scene, scene_names
-from ..settings.params import PaintParams
 from . import protocol
 from .memory import Budget, GiveBack, default_memory_bytes
+from .painter import LocalPainter, Painter
 from .prints import Prints
 from .settings import Settings
 from .startup import Startup
@@ -30,6 +30,7 @@ from .videos import Videos
 from .workshop import Workshop
 
 if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and Ray loads) only when told to use Ray
+    from ..cluster.port import RayPort
     from ..cluster.remote import RemoteRay, RemoteWalks
 
 log = logging.getLogger("rcp.service")
@@ -38,7 +39,10 @@ log = logging.getLogger("rcp.service")
 class Walkthrough(Protocol):
     """An open walk-through, as the service sees it (``session.Session``): one it can close, showing a scene."""
 
-    scene: Scene | None
+    @property
+    def scene(self) -> Scene | None:
+        """The scene it shows, None before hello."""
+        ...
 
     @property
     def walking(self) -> bool:
@@ -59,8 +63,7 @@ class Service:
     workshop: Workshop
     videos: Videos
     store: Store  # the data folder (RCP_DATA): uploads and videos kept across restarts
-    cluster: RemoteRay | None = None  # with RCP_RAY_ADDRESS: paints the video jobs and the large REST renders
-    walks: RemoteWalks | None = None  # with RCP_RAY_ADDRESS (and RCP_RAY_WALKS): the walk-throughs painted on Ray
+    painter: Painter  # who paints walk frames, renders and films: here, or on Ray (chosen once, in open)
     prints: Prints | None = None  # stills at print size, painted in the background (opened with the service)
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
@@ -76,21 +79,19 @@ class Service:
         join Ray when told to (:class:`~rcp_server.cluster.painter.ClusterError` if it does not answer in bounded
         time) and open the workshop. The rest, slow on a first start, is :meth:`start`'s."""
         store = Store(settings.data)
-        cluster = workshop = None
+        painter: Painter | None = None
+        workshop = None
         try:
-            if settings.ray_address is not None:  # joined before serving: healthy means Ray is there
-                from ..cluster.remote import RemoteRay
-
-                # Ray's driver runs in a child process: the server outlives its cluster
-                cluster = RemoteRay(settings.ray_address, walk_target(settings), settings.walk_retry_s)
-                cluster.start(settings.ray_join_s)
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
-            videos = Videos(settings, workshop, store, cluster)
-            service = cls(settings, {}, {}, workshop, videos, store, cluster, memory=Budget(settings.memory_bytes))
+            give_back = GiveBack()
+            painter = open_painter(settings, workshop, give_back)
+            videos = Videos(settings, workshop, store, painter)
+            memory = Budget(settings.memory_bytes)
+            service = cls(settings, {}, {}, workshop, videos, store, painter, memory=memory, give_back=give_back)
             service.prints = Prints(settings, workshop, store.folder / "prints", videos.disk_used)
             return service
         except BaseException:
-            for opened in (workshop, cluster, store):
+            for opened in (painter, workshop, store):
                 if opened is not None:
                     opened.close()
             raise
@@ -117,14 +118,14 @@ class Service:
             except Exception:  # the kernels compile at the first painting instead: slower, not broken
                 log.exception("the kernels could not be compiled ahead")
             compiled = time.monotonic()
-            if self.cluster is not None and self.settings.ray_walks:
+            if on_ray(self.painter) and self.settings.ray_walks:
                 startup.enter("measuring a walk frame on Ray")
-                walks = open_walks(self.settings, self.cluster, scenes)
+                walks = open_walks(self.settings, self.painter.cluster, scenes)
                 with self._closing:
                     if self.closed:
                         walks.close()
                         return
-                    self.walks = walks
+                    self.painter.walks = walks
             startup.enter("loading uploads")
             with self._closing:
                 if self.closed:
@@ -187,20 +188,36 @@ class Service:
         self.videos.close()
         if self.prints is not None:
             self.prints.close()
-        if self.walks is not None:
-            self.walks.close()
-        if self.cluster is not None:
-            self.cluster.close()
+        self.painter.close()
         self.workshop.close()
         self.give_back.close()
         self.uploads.flush()
         self.store.close()
 
-    def on_cluster(self, width: int, height: int, params: PaintParams) -> bool:
-        """Whether a REST render of this size goes to Ray: with a cluster, from ``ray_min_work`` rays on, unless
-        Ray failed a moment ago (it backs off: meanwhile the render is painted here rather than refused)."""
-        work = width * height * params.spp * params.iterations
-        return self.cluster is not None and work >= self.settings.ray_min_work and self.cluster.ready()
+
+def open_painter(settings: Settings, workshop: Workshop, give_back: GiveBack | None = None) -> Painter:
+    """The service's painter, chosen once: on this machine's threads, or with ``RCP_RAY_ADDRESS`` on Ray (joined
+    now, before serving: healthy means Ray is there; :class:`~rcp_server.cluster.painter.ClusterError` if it does
+    not answer in bounded time), which paints here what Ray cannot paint now."""
+    local = LocalPainter(workshop, give_back)
+    if settings.ray_address is None:
+        return local
+    from ..cluster.port import RayPort
+    from ..cluster.remote import RemoteRay
+
+    # Ray's driver runs in a child process: the server outlives its cluster
+    cluster = RemoteRay(settings.ray_address, walk_target(settings), settings.walk_retry_s)
+    try:
+        cluster.start(settings.ray_join_s)
+    except BaseException:
+        cluster.close()
+        raise
+    return RayPort(cluster, local, settings.ray_min_work)
+
+
+def on_ray(painter: Painter) -> TypeGuard[RayPort]:
+    """Whether the service paints on Ray: asked once, at start-up, to place the walkers there too."""
+    return hasattr(painter, "cluster")
 
 
 def walk_target(settings: Settings):

@@ -27,6 +27,7 @@ from ..scene.scene import Scene
 from ..scene.scenefile import SceneError, model_scene
 from ..scene.untrusted import Limits, NoRoom, Refused, model_of_arrays, read_model
 from . import protocol
+from .refusal import Refusal
 from .store import Store, UnsafeFile, UploadRecord, load_npz, new_upload_name, real_dir, regular_size
 
 RECORD_USE_S = 60.0  # an upload's last use is written to the store at most this often (idle expiry is in minutes)
@@ -34,12 +35,16 @@ BVH_BYTES_PER_TRIANGLE = 160  # Embree: its copy of the triangles and its tree (
 MEMORY_RETRY_S = 60  # a caller turned away for the uploads' memory: scenes expire, or are deleted, in minutes
 
 
-class Full(Exception):
-    """No room for another uploaded scene; the message says which limit, ``retry_after`` when it frees itself."""
+def full(message: str, retry_after: int) -> Refusal:
+    """No room for another uploaded scene (503): the message says which limit, ``retry_after`` when it frees
+    itself."""
+    return Refusal(message, 503, retry_after)
 
-    def __init__(self, message: str, retry_after: int):
-        super().__init__(message)
-        self.retry_after = retry_after
+
+def read_refusal(exc: Refused) -> Refusal:
+    """What the reader's refusal of a file answers: 503 when what it declares would not fit in the memory left
+    (:class:`NoRoom`: refused before it is built), else 422."""
+    return Refusal(str(exc), 503, MEMORY_RETRY_S) if isinstance(exc, NoRoom) else Refusal(str(exc))
 
 
 @dataclass
@@ -107,10 +112,10 @@ class Uploads:
         return idle
 
     def check_room(self, max_scenes: int, idle_s: float) -> None:
-        """Refuses (:class:`Full`) a new upload when ``max_scenes`` are kept already."""
+        """Refuses (:class:`~.refusal.Refusal` 503) a new upload when ``max_scenes`` are kept already."""
         if len(self.scenes) >= max_scenes:
             oldest = min(upload.used for upload in self.scenes.values())
-            raise Full(
+            raise full(
                 f"the server keeps at most {max_scenes} uploaded scenes and has them all; delete one of yours, "
                 "or try again later",
                 max(1, int(idle_s - (time.time() - oldest)) + 1),
@@ -126,10 +131,11 @@ class Uploads:
         owner: str | None = None,
     ) -> None:
         """Keeps ``scene`` under its name (recorded in the store, whose folder holds its files already), or
-        refuses (:class:`Full`) past the count or the memory budget. ``owner``: the token it came with."""
+        refuses (:class:`~.refusal.Refusal` 503) past the count or the memory budget.
+        ``owner``: the token it came with."""
         self.check_room(max_scenes, 0)
         if self.weight + weight > total_bytes:
-            raise Full(
+            raise full(
                 f"the scene needs {weight >> 20} MiB and the uploaded scenes may take {total_bytes >> 20} MiB "
                 f"together, {self.weight >> 20} MiB of which are taken; try again later, or a smaller model",
                 MEMORY_RETRY_S,
@@ -237,7 +243,8 @@ def scene_of(model: Model, name: str, title: str) -> Scene:
 
 __all__ = [
     "MEMORY_RETRY_S",
-    "Full",
+    "full",
+    "read_refusal",
     "NoRoom",
     "Refused",
     "Upload",

@@ -34,21 +34,21 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import BinaryIO, Literal
+from typing import Literal
 
 import numpy as np
-from PIL import Image
 
 from ..camera.camera import Camera
-from ..cluster.painter import ClusterError, PaintingFailed
 from ..media.camerapath import CameraPath
 from ..media.video import Mp4Writer
 from ..painting.loop import Abandoned, PaintState
-from ..painting.sequence import frame_params, paint_results
+from ..painting.sequence import frame_params
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
-from ..util import images
 from .faults import fault_message, report_fault
+from .filmfiles import DamagedFrame, file_bytes, folder_bytes, frame_file, kept_frame, save_png, state_bytes
+from .painter import Painter, PainterFailed
+from .refusal import Refusal
 from .settings import Settings
 from .store import (
     Store,
@@ -57,13 +57,12 @@ from .store import (
     VideoSettings,
     load_state,
     new_video_id,
-    open_regular,
     real_dir,
     regular_size,
     save_state,
     write_whole,
 )
-from .workshop import Busy, Workshop
+from .workshop import Workshop
 
 log = logging.getLogger("rcp.service")
 
@@ -75,15 +74,11 @@ BYTES_PER_PIXEL = 0.25
 """An H.264 frame's bytes per pixel at CRF 18, estimated: about three times what a moving painting takes
 (0.08 at 320x180); the noisiest styles may take more, which the check while writing still catches."""
 MP4_BYTES = 64 * 1024  # the container and the encoder's headers, at most, for the estimate
+PNG_BYTES = 1024  # a kept frame's PNG headers and chunks beyond its pixels, at most
 RAY_ATTEMPTS = 8  # Ray failures a job outlives, waiting each time as Ray backs off (a quarter of an hour in all)
 
 
-class VideoRefused(ValueError):
-    """A job that cannot be taken as asked (over a limit, out of disk budget); said to the caller in one line."""
-
-    def __init__(self, message: str, status: int = 422):
-        super().__init__(message)
-        self.status = status
+VideoRefused = Refusal  # the one refusal (refusal.py), by the name the films' callers knew
 
 
 def job_work(width: int, height: int, params: PaintParams, temporal: int | None, frames: int) -> int:
@@ -94,8 +89,10 @@ def job_work(width: int, height: int, params: PaintParams, temporal: int | None,
 
 
 def video_bytes(width: int, height: int, frames: int) -> int:
-    """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk."""
-    return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames)
+    """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk at its peak: its
+    frames kept as PNGs (at most their raw RGB, and a header each) beside the MP4 assembled from them."""
+    pngs = frames * (3 * width * height + PNG_BYTES)
+    return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames) + pngs
 
 
 @dataclass
@@ -118,6 +115,7 @@ class VideoJob:
     created: float = field(default_factory=time.time)  # wall clock: it means the same after a restart
     finished: float | None = None
     cancelled: threading.Event = field(default_factory=threading.Event)
+    written: int = 0  # bytes of its frames (and state) on disk, while it paints and once stopped out of disk
 
     @property
     def frames(self) -> int:
@@ -152,6 +150,28 @@ def path_spec(path: CameraPath) -> dict:
     return {"fps": path.fps, "keyframes": path.keyed(keyframes), "loop": path.loop}
 
 
+def film_door(
+    settings: Settings, camera: Camera, width: int, height: int, params: PaintParams, temporal: int | None, frames: int
+) -> tuple[int, int]:
+    """Every check of a film's own, for a new job and a stored record alike: its painting's size (both eyes of
+    a stereo pair, the pixels one painting may have), even for H.264, and the work of all its frames; the
+    painting's size, or :class:`~.refusal.Refusal` (422) in one line."""
+    try:
+        width, height = settings.painting_size(camera, width, height, params)
+    except ValueError as exc:  # CameraError among them
+        raise Refusal(str(exc)) from None
+    if width % 2 or height % 2:
+        raise Refusal(f"an MP4 (H.264, yuv420p) needs an even width and height, got {width}x{height}")
+    work = job_work(width, height, params, temporal, frames)
+    if work > settings.max_video_work:
+        raise Refusal(
+            f"{frames} frames of {width}x{height} pixels x {params.spp} spp x their iterations is {work:,} rays, more "
+            f"than the {settings.max_video_work:,} one video may take: ask for fewer frames, pixels, samples or "
+            "iterations"
+        )
+    return width, height
+
+
 def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Settings) -> VideoJob:
     """The job a stored record describes, checked as a new one is at the door (the same limits: a record is
     untrusted input); ``ValueError`` in one line for one that cannot be painted as it says."""
@@ -165,10 +185,12 @@ def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Set
     path = path.with_painting(params)  # keyed settings as the door let them through
     camera = path.cameras[0]
     eye = camera.eye_size(given.width, given.height)
-    if settings.painting_size(camera, *eye, params) != (given.width, given.height):
+    try:
+        size = film_door(settings, camera, *eye, params, temporal, path.frame_count)
+    except Refusal as refusal:
+        raise ValueError(refusal.message) from None
+    if size != (given.width, given.height):
         raise ValueError(f"{given.width}x{given.height} is no {camera.stereo} painting")
-    if job_work(given.width, given.height, params, temporal, path.frame_count) > settings.max_video_work:
-        raise ValueError(f"its work is more than the {settings.max_video_work:,} rays one video may take")
     return VideoJob(
         record.id,
         record.scene,
@@ -192,11 +214,11 @@ class Videos:
     """The video jobs of one server: submitted, run, kept for ``video_keep_s`` once finished, then dropped; all
     of it recorded in ``store`` so that a restart resumes where the last run stopped (:meth:`resume`)."""
 
-    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter=None):
+    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter: Painter):
         self.settings = settings
-        self.workshop = workshop
+        self.workshop = workshop  # whether the server is stopping
         self.store = store
-        self.painter = painter  # a cluster.RayPainter (the service closes it), or None: the workshop's shared pool
+        self.painter = painter  # paints the films' frames (the service closes it)
         self._jobs: dict[str, VideoJob] = {}
         self._lock = threading.Lock()
         self._closing = False  # stopping the server: jobs in progress stay recorded as they are, to resume
@@ -214,6 +236,8 @@ class Videos:
                 self.store.remove_video(record.id)
                 continue
             self._jobs[job.id] = job
+            if job.state == "failed":  # stopped out of disk: its frames are kept, and counted, until it expires
+                job.written = folder_bytes(job.frames_dir)
             if job.state in FINISHED:
                 if job.state == "done" and regular_size(job.file) is None:
                     self._finish(job, "failed", "its file was lost while the server was down")
@@ -231,18 +255,11 @@ class Videos:
     def submit(
         self, scene: Scene, path: CameraPath, width: int, height: int, params: PaintParams, temporal: int | None
     ) -> VideoJob:
-        """Queue a job of ``width x height`` eye images (a stereo film's frames hold two), or refuse it:
-        ``ValueError`` (a frame over the limits of one painting), :class:`VideoRefused` (the film over a limit,
-        the disk budget used up) or :class:`~.workshop.Busy` (every place in the queue taken)."""
+        """Queue a job of ``width x height`` eye images (a stereo film's frames hold two), or refuse it
+        (:class:`~.refusal.Refusal`: 422 over a limit (:func:`film_door`), 507 the disk budget used up, 503 every
+        place in the queue taken)."""
         settings = self.settings
-        width, height = settings.painting_size(path.cameras[0], width, height, params)
-        work = job_work(width, height, params, temporal, path.frame_count)
-        if work > settings.max_video_work:
-            raise VideoRefused(
-                f"{path.frame_count} frames of {width}x{height} pixels x {params.spp} spp x their iterations is "
-                f"{work:,} rays, more than the {settings.max_video_work:,} one video may take: ask for fewer "
-                "frames, pixels, samples or iterations"
-            )
+        width, height = film_door(settings, path.cameras[0], width, height, params, temporal, path.frame_count)
         self.sweep()
         job_id = new_video_id()
         store = self.store
@@ -254,7 +271,7 @@ class Videos:
             waiting = [j for j in self._jobs.values() if j.state in ("queued", "running")]
             room = settings.video_disk_bytes - self.disk_used() - sum(j.estimate for j in waiting)
             if job.estimate > room:
-                raise VideoRefused(
+                raise Refusal(
                     f"the video would take about {job.estimate:,} bytes and the videos have {max(room, 0):,} of "
                     f"their {settings.video_disk_bytes:,} left (RCP_VIDEO_DISK_BYTES, with the videos in progress): "
                     f"ask for fewer frames or pixels, delete videos (DELETE /api/videos/ID) or wait until they "
@@ -262,7 +279,8 @@ class Videos:
                     507,
                 )
             if len(waiting) >= settings.max_videos + settings.max_videos_waiting:
-                raise Busy(RETRY_AFTER_S)
+                message = f"the video queue is busy, every place in it taken; try again in {RETRY_AFTER_S} s"
+                raise Refusal(message, 503, RETRY_AFTER_S)
             self._jobs[job_id] = job
         store.add_video(
             VideoRecord(
@@ -286,11 +304,14 @@ class Videos:
         return self._jobs.get(job_id)
 
     def delete(self, job_id: str) -> VideoJob | None:
-        """Cancel a job in progress (it stops at its next tile); forget a finished one and delete its file."""
+        """Cancel a job in progress (it stops at its next tile; cancelled, it stays to be seen until it expires, and
+        cancelling it again changes nothing); forget a finished one and delete its file."""
         job = self._jobs.get(job_id)
         if job is None:
             return None
         with self._lock:
+            if job.state == "cancelled" or job.cancelled.is_set():
+                return job
             if job.state in FINISHED:
                 self._jobs.pop(job_id, None)
                 self.store.remove_video(job_id)
@@ -325,10 +346,10 @@ class Videos:
                 try:
                     self._paint_frames(job)
                     break
-                except ClusterError as exc:  # Ray failed: it backs off, and the job goes on from its last frame
-                    if attempt >= RAY_ATTEMPTS or isinstance(exc, PaintingFailed):  # the latter would fail again
+                except PainterFailed as exc:  # its workers were lost: the job goes on from its last frame
+                    if attempt >= RAY_ATTEMPTS or exc.retry_s is None:  # the latter would fail again
                         raise
-                    wait = self.painter.backoff.wait_s()
+                    wait = exc.retry_s
                     job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
                     self.store.update_video(job.id, message=job.message)
                     if job.cancelled.wait(wait):
@@ -352,9 +373,11 @@ class Videos:
             elif isinstance(exc, OSError):  # the disk: full, or over the budget; said without the server's paths
                 log.warning("video %s: cannot write the video: %s", job.id, exc)
                 self._finish(job, "failed", f"cannot write the video: {exc.strerror or 'see the server log'}")
+            elif isinstance(exc, Refusal):  # out of disk: what it made is kept (and counted) until it expires
+                self._finish(job, "failed", f"{exc.status}: {exc.message}", keep=True)
             elif isinstance(exc, DamagedFrame):
                 self._finish(job, "failed", str(exc))
-            elif isinstance(exc, ClusterError):  # Ray: no answer at its address, a worker lost
+            elif isinstance(exc, PainterFailed):  # Ray: no answer at its address, a worker lost
                 self._finish(job, "failed", str(exc))
             else:
                 self._finish(job, "failed", fault_message(report_fault(f"video {job.id}: {exc}")))
@@ -365,30 +388,44 @@ class Videos:
         if start > 0:
             log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
         job.done_frames = start
+        job.written = folder_bytes(job.frames_dir)  # counted once here, then frame by frame
+        state_file = job.frames_dir / "state.npz"
         for image, state in self._paintings(job, start, previous):
-            write_whole(frame_file(job, job.done_frames), partial(_save_png, image))
+            frame, kept = frame_file(job.frames_dir, job.done_frames), file_bytes(state_file)
+            write_whole(frame, partial(save_png, image))
             if state is not None:
-                save_state(job.frames_dir / "state.npz", job.done_frames, state)
+                save_state(state_file, job.done_frames, state)
+            job.written += file_bytes(frame) + file_bytes(state_file) - kept
+            if self.disk_used() > self.settings.video_disk_bytes:  # this frame would pass the bound: it goes
+                job.written -= file_bytes(frame)
+                frame.unlink(missing_ok=True)
+                raise self._out_of_disk(job)
             job.done_frames += 1
             self.store.update_video(job.id, done_frames=job.done_frames)
+
+    def _out_of_disk(self, job: VideoJob) -> Refusal:
+        limit = self.settings.video_disk_bytes
+        return Refusal(
+            f"the videos would use more than the {limit:,} bytes of RCP_VIDEO_DISK_BYTES: stopped after "
+            f"{job.done_frames} frames, kept until the video expires or is deleted",
+            507,
+        )
 
     def _resume_point(self, job: VideoJob) -> tuple[int, PaintState | None]:
         """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
         here the state it continues from. A frame written without its state is painted again."""
         written = 0
-        while written < job.frames and regular_size(frame_file(job, written)) is not None:
+        while written < job.frames and regular_size(frame_file(job.frames_dir, written)) is not None:
             written += 1
-        if not job.temporal or self.painter is not None or written == 0:
-            return written, None  # Ray's temporal bands keep their state on the actors: they paint up to here again
+        if not job.temporal or written == 0:
+            return written, None
         saved = load_state(job.frames_dir / "state.npz", state_bytes(job.width, job.height))
         if saved is not None and saved[0] in (written - 1, written - 2):
             index, state = saved
             if index == written - 2:  # stopped between the frame and its state: that frame is painted again
-                frame_file(job, written - 1).unlink(missing_ok=True)
+                frame_file(job.frames_dir, written - 1).unlink(missing_ok=True)
             return index + 1, state
-        for k in range(written):  # no state to go on from: the frames are painted again
-            frame_file(job, k).unlink(missing_ok=True)
-        return 0, None
+        return written, None  # no state to go on from (a painter that keeps it, as Ray's bands do): painted again
 
     def _paintings(
         self, job: VideoJob, start: int, previous: PaintState | None
@@ -403,37 +440,9 @@ class Videos:
         def stop() -> bool:
             return job.cancelled.is_set()
 
-        if self.painter is not None:
-            if job.temporal:  # the bands' states live on the actors: the frames before ``start`` are painted again
-                shots = job.path.frames()
-                paintings = self.painter.images(
-                    scene, shots, job.width, job.height, job.params, job.temporal, should_stop=stop
-                )
-                paintings = itertools.islice(paintings, start, None)
-            else:
-                paintings = self.painter.images(
-                    scene, job.path.frames(start), job.width, job.height, job.params, None, should_stop=stop
-                )
-            for image in paintings:
-                yield image, None
-            return
-
-        def paint_frame(camera, scene_time: float, params: PaintParams, previous: PaintState | None):
-            return self.workshop.paint(
-                scene,
-                camera,
-                job.width,
-                job.height,
-                params,
-                should_stop=stop,
-                background=True,
-                time=scene_time,
-                previous=previous,
-            )
-
-        shots = job.path.frames(start)
-        for result in paint_results(paint_frame, shots, job.params, job.temporal, start, previous):
-            yield images.to_uint8(result.image), result.state if job.temporal else None
+        yield from self.painter.film(
+            scene, job.path, job.width, job.height, job.params, job.temporal, start, previous, stop
+        )
 
     def _assemble(self, job: VideoJob) -> None:
         """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""
@@ -443,25 +452,29 @@ class Videos:
             for k in range(job.frames):
                 if job.cancelled.is_set():
                     raise Abandoned
-                writer.write(kept_frame(job, k))
+                writer.write(kept_frame(job.frames_dir, k, job.width, job.height))
             writer.close()
         except BaseException:
             writer.abort()
             raise
 
-    def _finish(self, job: VideoJob, state: State, message: str = "") -> None:
+    def _finish(self, job: VideoJob, state: State, message: str = "", keep: bool = False) -> None:
+        """``keep``: its frames stay on disk (and count) until the job expires or is deleted."""
         job.finish(state, message)
-        size = _size(job.file) if state == "done" else 0
+        size = file_bytes(job.file) if state == "done" else job.written if keep else 0
         self.store.update_video(job.id, state=state, message=message, finished=job.finished, bytes=size)
-        shutil.rmtree(job.frames_dir, ignore_errors=True)
+        if not keep:
+            shutil.rmtree(job.frames_dir, ignore_errors=True)
+            job.written = 0
         if state != "done":
             job.file.unlink(missing_ok=True)
 
     # ---- keeping house ----
 
     def disk_used(self) -> int:
-        """Bytes of the finished videos kept (a video in progress counts once it is done)."""
-        return sum(_size(j.file) for j in list(self._jobs.values()) if j.state == "done")
+        """Bytes the videos take: the finished ones kept, and every byte a film in progress (or stopped, its
+        frames kept) has written."""
+        return sum(file_bytes(j.file) if j.state == "done" else j.written for j in list(self._jobs.values()))
 
     def sweep(self) -> None:
         """Forget the jobs finished more than ``video_keep_s`` ago, and delete their files."""
@@ -484,39 +497,3 @@ class Videos:
         for job in list(self._jobs.values()):
             job.cancelled.set()
         self._runners.shutdown(wait=True, cancel_futures=True)
-
-
-class DamagedFrame(ValueError):
-    """A frame kept in the data folder that is not the image it should be; the message gives its number only."""
-
-
-def _save_png(image: np.ndarray, sink: BinaryIO) -> None:
-    Image.fromarray(image).save(sink, "PNG", compress_level=1)  # lossless, and fast: a frame waits for it
-
-
-def state_bytes(width: int, height: int) -> int:
-    """The most a temporal job's kept state may take: every channel of every pixel, with room to spare."""
-    return 1024 * width * height + (1 << 20)
-
-
-def kept_frame(job: VideoJob, index: int) -> np.ndarray:
-    """Frame ``index`` as kept on disk, (height, width, 3) uint8; :class:`DamagedFrame` (or ``UnsafeFile``) for
-    one that is not a PNG of the job's size."""
-    try:
-        with open_regular(frame_file(job, index), 4 * job.width * job.height + (1 << 20)) as source:
-            with Image.open(source) as frame:
-                if frame.size != (job.width, job.height):
-                    raise ValueError
-                return np.asarray(frame.convert("RGB"))
-    except UnsafeFile:
-        raise
-    except (OSError, ValueError, Image.DecompressionBombError):
-        raise DamagedFrame(f"frame {index} kept in the data folder is damaged; ask for the video again") from None
-
-
-def frame_file(job: VideoJob, index: int) -> Path:
-    return job.frames_dir / f"frame_{index:06d}.png"
-
-
-def _size(file: Path) -> int:
-    return regular_size(file) or 0  # 0: deleted meanwhile (or not a file of its own)

@@ -6,7 +6,7 @@ each one waits on a thread of its own (at most ``max_renders`` at once); its til
 turns tile by tile: a small walk-through frame is not stuck behind every tile of a large render that came
 first. A video's tiles go in the pool's background lane: they take only the cores that walks and REST
 renders leave, and a walk's tile waits at most for the video tiles already in progress. REST renders are
-admitted at the door (:meth:`Workshop.admission`) or turned away (:class:`Busy`).
+admitted at the door (:meth:`Workshop.admission`) or turned away (:func:`busy`).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from typing import TypeVar
 from ..painting.loop import paint
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
+from .refusal import Refusal
 
 T = TypeVar("T")
 
@@ -105,19 +106,16 @@ class Lane(Executor):
         return results()
 
 
-class Busy(Exception):
-    """Every render slot and waiting place is taken; ``retry_after`` is a fair guess in seconds."""
-
-    def __init__(self, retry_after: int):
-        super().__init__(f"the server is busy with other renders; try again in {retry_after} s")
-        self.retry_after = retry_after
+def busy(retry_after: int) -> Refusal:
+    """Every render slot and waiting place is taken (503); ``retry_after`` is a fair guess in seconds."""
+    return Refusal(f"the server is busy with other renders; try again in {retry_after} s", 503, retry_after)
 
 
 class Workshop:
     """Runs paintings (and whatever goes with them, such as encoding) off the event loop, on shared workers.
 
     Walk-throughs are limited by their count (one painting each at a time); REST renders are admitted up
-    to ``max_renders + max_waiting`` at once, and past that refused with :class:`Busy` rather than queued
+    to ``max_renders + max_waiting`` at once, and past that refused (:func:`busy`) rather than queued
     without bound."""
 
     def __init__(self, threads: int, max_renders: int, max_waiting: int = 0):
@@ -173,9 +171,9 @@ class Workshop:
 
     @contextlib.contextmanager
     def admission(self) -> Iterator[None]:
-        """A REST render's place: raises :class:`Busy` when there is none, else holds one while it runs."""
+        """A REST render's place: raises the :func:`busy` refusal when there is none, else holds one while it runs."""
         if self.admitted >= self._places:
-            raise Busy(max(1, math.ceil(self._seconds * self.admitted / self._places)))
+            raise busy(max(1, math.ceil(self._seconds * self.admitted / self._places)))
         self.admitted += 1
         clock = time.monotonic()
         try:

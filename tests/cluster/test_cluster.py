@@ -384,7 +384,7 @@ def test_a_server_whose_ray_failed_paints_here_meanwhile_and_says_so_at_once(pai
     large = {"scene": "tiny", "width": 64, "height": 48, "paint": {"spp": 2, "iterations": 2}}
     painter.close()  # the server's actors need the runtime's CPUs
     with BackgroundServer(scenes=tmp_path, ray_address="local", ray_min_work=1) as live:
-        cluster = service_of(live.app).cluster
+        cluster = service_of(live.app).painter.cluster
         with httpx.Client(base_url=live.url, timeout=60) as client:
             on_ray = client.post("/api/render", json=large)
             assert on_ray.status_code == 200

@@ -156,7 +156,7 @@ def test_walkers_are_admitted_while_there_is_room_and_none_starves(scenes, reque
     for one there), and a fifth is told in one line to come back."""
     with BackgroundServer(scenes=scenes, ray_address="local", walk_width=W, walk_height=H) as live:
         service = service_of(live.app)
-        walks, driver = service.walks, service.cluster
+        walks, driver = service.painter.walks, service.painter.cluster
         walks.local_room = 1
         params = service.scenes["tiny"].painting({})
         frame_s, ray_s = driver.call("cost")
@@ -237,10 +237,10 @@ def walk_through_failure(live, request, fail, frames_after: int = 20, seconds: f
     """A walker walks; ``fail()`` once it walked on Ray for a while; the frames' times after it."""
     service = service_of(live.app)
     failed: list[float] = []
-    start = service.walks.frames
+    start = service.painter.walks.frames
 
     def after_frame(count: int) -> None:
-        if not failed and service.walks.frames > start + 5:
+        if not failed and service.painter.walks.frames > start + 5:
             fail()
             failed.append(time.monotonic())
 
@@ -269,10 +269,10 @@ def test_a_crew_member_killed_mid_walk_leaves_and_the_walk_goes_on(scenes, reque
         service = service_of(live.app)
 
         def kill() -> None:
-            assert kill_rays(service.cluster.pid, lambda args: args[0].startswith(b"ray::WalkPainter")) == 1
+            assert kill_rays(service.painter.cluster.pid, lambda args: args[0].startswith(b"ray::WalkPainter")) == 1
 
         walk_through_failure(live, request, kill, frames_after=5)
-        assert service.cluster.call("figures")["moved"] == 1
+        assert service.painter.cluster.call("figures")["moved"] == 1
 
 
 def test_the_raylet_killed_and_the_runtime_stopped_mid_walk_leave_the_server_painting(scenes, request):
@@ -280,7 +280,7 @@ def test_the_raylet_killed_and_the_runtime_stopped_mid_walk_leave_the_server_pai
     its own) once it answers; then every process of that runtime killed, as ``ray stop --force`` does."""
     with BackgroundServer(scenes=scenes, ray_address="local", walk_width=W, walk_height=H) as live:
         service = service_of(live.app)
-        driver = service.cluster
+        driver = service.painter.cluster
         driver.backoff.first_s = 1.0
         first = driver.pid
 
@@ -292,7 +292,7 @@ def test_the_raylet_killed_and_the_runtime_stopped_mid_walk_leave_the_server_pai
         while (not driver.ready() or driver.pid == first) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert driver.pid != first and driver.ready()  # a new driver, on a new runtime
-        on_ray = service.walks.frames
+        on_ray = service.painter.walks.frames
         walk_through_failure(live, request, lambda: kill_rays(driver.pid))  # back on Ray first, then stopped
-        assert service.walks.frames > on_ray
+        assert service.painter.walks.frames > on_ray
         assert get_json(f"{live.url}/api/health")["status"] == "ok"

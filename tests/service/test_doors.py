@@ -122,3 +122,55 @@ def test_a_stereo_walk_refines_with_the_samples_both_eyes_afford(tmp_path):
             assert (final["camera_id"], final["width"], final["height"], final["spp"]) == (1, 64, 128, 3)
         finally:
             walk.close()
+
+
+def test_an_unknown_scene_is_refused_alike_by_every_door(server):
+    line = "unknown scene 'nowhere'; known: tiny"
+    for route, body in (
+        ("/api/render", {"width": 32, "height": 32}),
+        ("/api/videos", {"width": 32, "height": 32, "path": PATH}),
+        ("/api/paths", {"path": PATH}),
+    ):
+        answer = httpx.post(f"{server.url}{route}", json={"scene": "nowhere", **body}, timeout=60)
+        assert (answer.status_code, answer.json()) == (404, {"detail": line}), route
+    walk = Walk(server)
+    try:
+        walk.send(type="hello", scene="nowhere", width=32, height=32)
+        assert refusal(walk) == line
+    finally:
+        walk.close()
+
+
+def test_a_full_queue_is_refused_with_its_status_its_line_and_a_time_to_try_again(tmp_path):
+    """A 503 of every door says when to try again, in its line and in ``Retry-After``."""
+    (tmp_path / "tiny.toml").write_text(SPINNING_BOX)
+    long = {**PATH, "fps": 30, "keyframes": [PATH["keyframes"][0], {**PATH["keyframes"][1], "t": 60}]}
+    body = {"scene": "tiny", "width": 64, "height": 48, "path": long}
+    with BackgroundServer(scenes=tmp_path, data=tmp_path / "data", max_videos=1, max_videos_waiting=0) as live:
+        assert httpx.post(f"{live.url}/api/videos", json=body, timeout=60).status_code == 202
+        full = httpx.post(f"{live.url}/api/videos", json=body, timeout=60)
+        assert full.status_code == 503 and full.headers["retry-after"] == "30"
+        assert full.json() == {"detail": "the video queue is busy, every place in it taken; try again in 30 s"}
+
+
+def test_a_walker_refused_at_hello_is_closed_at_once_with_the_reason_and_a_code_to_retry(tmp_path):
+    """Refused for want of a place (here the server's walk-throughs; on Ray the cluster's room), the walker gets
+    one error line and its socket closes with that reason and 1013 (try again later), long before the hello
+    timeout would close it."""
+    from websockets.exceptions import ConnectionClosed
+
+    (tmp_path / "tiny.toml").write_text(SPINNING_BOX)
+    line = "the server is at its limit of 1 walk-throughs; try again in 30 s"
+    with BackgroundServer(scenes=tmp_path, data=tmp_path / "data", max_sessions=1, hello_timeout_s=3600) as live:
+        first, second = Walk(live), Walk(live)  # both let in: neither holds a place yet
+        try:
+            first.send(type="hello", scene="tiny", width=32, height=32)
+            assert first.next()["type"] == "ready"
+            second.send(type="hello", scene="tiny", width=32, height=32)
+            assert second.next() == {"type": "error", "message": line}
+            with pytest.raises(ConnectionClosed) as closed:
+                second.next()
+            assert (closed.value.rcvd.code, closed.value.rcvd.reason) == (1013, line)
+        finally:
+            first.close()
+            second.close()

@@ -244,8 +244,8 @@ def test_a_client_that_stops_reading_is_dropped_and_never_buffered(walk_to):
         other.send(type="hello", scene="sky", width=32, height=18)
         other.next()
         (session,) = (s for s in server.app.state.service.sessions if s.scene.name == "sea")
-        until(lambda: session.dropped > 0, 30, "a frame to be dropped for the slow reader")
-        assert len(session.notes) <= session.notes.maxlen
+        until(lambda: session.outbox.dropped > 0, 30, "a frame to be dropped for the slow reader")
+        assert len(session.outbox.notes) <= session.outbox.notes.maxlen
         assert other.until_final()  # everyone else is served meanwhile
         until(lambda: len(server.app.state.service.sessions) == 1, 30, "the slow reader to be let go")
         until(lambda: health(server)["painting"] == 0, 10, "its painting to stop")

@@ -145,7 +145,7 @@ def test_the_walk_through_places_go_to_those_that_say_hello_first(walk_to):
         second.send(type="hello", scene="sky", width=32, height=18)
         assert second.next() == {
             "type": "error",
-            "message": "the server is at its limit of 1 walk-throughs; try again later",
+            "message": "the server is at its limit of 1 walk-throughs; try again in 30 s",
             "answers": "hello",
             "id": None,
         }

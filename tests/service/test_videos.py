@@ -15,10 +15,11 @@ from helpers.scenes import CAMERA, SPINNING_BOX, make_scene
 from PIL import Image
 
 from rcp_server.bench.harness import BackgroundServer
-from rcp_server.cluster.painter import Backoff, ClusterError
+from rcp_server.cluster.painter import Backoff
 from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene
+from rcp_server.service.painter import PainterFailed
 from rcp_server.service.settings import Settings
 from rcp_server.service.store import Store, VideoRecord, VideoSettings
 from rcp_server.service.videos import VideoRefused, Videos, path_spec, video_bytes
@@ -213,7 +214,7 @@ def test_a_video_past_the_disk_budget_is_refused_at_submission_with_507(scenes, 
 class StillPainting:
     """A painter in place of Ray's that paints nothing until its job is stopped: the job stays running."""
 
-    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
+    def film(self, scene, path, width, height, params, temporal, start, previous, should_stop):
         while not should_stop():
             time.sleep(0.01)
         yield from ()
@@ -255,35 +256,61 @@ def test_a_job_resumed_from_the_last_run_reserves_its_estimate_at_submission(tmp
             workshop.close()
 
 
-def test_a_video_larger_than_its_estimate_fails_at_the_budget_and_finished_jobs_expire(scenes, tmp_path, monkeypatch):
+def test_a_film_counts_every_byte_it_writes_and_stops_at_the_budget_keeping_its_frames(scenes, tmp_path, monkeypatch):
+    """The estimate lets it in (it falls short here); the PNG frames it writes count against RCP_VIDEO_DISK_BYTES
+    as they are written, and the frame that would pass it stops the film with 507 naming the setting. What it
+    made stays on disk, counted, until the job expires (then it goes)."""
     monkeypatch.setattr("rcp_server.service.videos.video_bytes", lambda width, height, frames: 0)  # falls short
-    settings = {"scenes": scenes, "video_disk_bytes": 1, "video_keep_s": 1.0, "data": tmp_path}
+    settings = {"scenes": scenes, "video_disk_bytes": 4_000, "video_keep_s": 1.0, "data": tmp_path}
+    path = {**PATH, "fps": 24}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
-        created = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 32, "height": 32}).json()
+        created = client.post("/api/videos", json={"scene": "tiny", "path": path, "width": 32, "height": 32}).json()
         status = wait_until(client, created["id"])
-        assert status["state"] == "failed"
-        assert status["message"] == "cannot write the video: the videos would use more than the 1 bytes allowed"
-        assert list((tmp_path / "videos").iterdir()) == []  # its frames and the video are gone
+        made = status["done_frames"]
+        assert status["state"] == "failed" and 0 < made < status["frames"] == 25, status
+        assert status["message"] == (
+            f"507: the videos would use more than the 4,000 bytes of RCP_VIDEO_DISK_BYTES: stopped after {made} "
+            "frames, kept until the video expires or is deleted"
+        )
+        kept = sorted((tmp_path / "videos" / created["id"]).iterdir())
+        assert [f.name for f in kept] == [f"frame_{k:06d}.png" for k in range(made)]
+        assert sum(f.stat().st_size for f in kept) <= 4_000
         time.sleep(1.2)
         assert client.get(f"/api/videos/{created['id']}").status_code == 404  # expired
+        assert list((tmp_path / "videos").iterdir()) == []  # and its frames with it
+
+
+def test_cancelling_twice_keeps_the_cancelled_job_until_it_expires(scenes, tmp_path):
+    settings = {"scenes": scenes, "max_videos": 1, "max_videos_waiting": 1, "video_keep_s": 600, "data": tmp_path}
+    with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
+        running = client.post("/api/videos", json={"scene": "tiny", "path": LONG, "width": 64, "height": 48}).json()
+        waiting = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 64, "height": 48}).json()
+        for video in (waiting, running):
+            first = client.delete(f"/api/videos/{video['id']}")
+            wait_until(client, video["id"], states=("cancelled",))
+            second = client.delete(f"/api/videos/{video['id']}")
+            assert first.status_code == second.status_code == 200
+            assert second.json()["state"] == "cancelled" and second.json()["id"] == video["id"]
+            again = client.get(f"/api/videos/{video['id']}")
+            assert again.status_code == 200 and again.json() == second.json()
 
 
 class FlakyRay:
-    """A painter in place of Ray's: its frames are flat colours by index, and its first sequence fails after
-    three frames, as Ray does when a head goes away (Ray then backs off)."""
+    """A painter in place of Ray's port: its frames are flat colours by index, and its first sequence fails after
+    three frames, as Ray's does when a head goes away (Ray then backs off)."""
 
     def __init__(self):
         self.backoff = Backoff(first_s=0.2)
         self.asked: list[int] = []  # the first frame index of each sequence asked for
 
-    def images(self, scene, shots, width, height, params, temporal=None, should_stop=None):
-        shots = list(shots)
+    def film(self, scene, path, width, height, params, temporal, start, previous, should_stop):
+        shots = list(path.frames(start))
         self.asked.append(shots[0].index)
         for n, shot in enumerate(shots):
             if len(self.asked) == 1 and n == 3:
                 self.backoff.failed("Ray went away")
-                raise ClusterError("Ray went away")
-            yield np.full((height, width, 3), 20 * shot.index, np.uint8)
+                raise PainterFailed("Ray went away", self.backoff.wait_s())
+            yield np.full((height, width, 3), 20 * shot.index, np.uint8), None
 
 
 def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(tmp_path):

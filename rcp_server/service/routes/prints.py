@@ -9,12 +9,11 @@ from fastapi.responses import FileResponse
 
 from ...camera.wire import camera_of
 from .. import protocol
-from ..asked import Refusal, find_scene, http_error
+from ..asked import find_scene
 from ..prints import PrintJob, Prints
+from ..refusal import Refusal
 from ..state import ServiceDep
 from ..store import open_regular
-from ..videos import VideoRefused
-from ..workshop import Busy
 from . import SCENE_BODY, Responses
 
 router = APIRouter(prefix="/api/prints", tags=["prints"])
@@ -50,24 +49,14 @@ def _job(service, print_id: str) -> PrintJob:
 )
 async def create(body: protocol.PrintRequest, service: ServiceDep) -> protocol.PrintStatus:
     """Queue a print; watch it at ``GET /api/prints/{id}`` (rows painted), fetch it from ``.../file``."""
+    scene = find_scene(service, body.scene)
     try:
-        scene = find_scene(service, body.scene)
-        try:
-            camera = scene.camera if body.camera is None else camera_of(body.camera)
-            params = scene.painting(body.paint.given())
-            width, height = camera.image_size(body.width, body.height)
-        except ValueError as exc:
-            raise Refusal(str(exc)) from None
-    except Refusal as refusal:
-        raise http_error(refusal) from None
-    try:
+        camera = scene.camera if body.camera is None else camera_of(body.camera)
+        params = scene.painting(body.paint.given())
+        width, height = camera.image_size(body.width, body.height)
         job = _prints(service).submit(scene, camera, width, height, params, body.time, body.bits, body.alpha)
-    except VideoRefused as exc:
-        raise HTTPException(exc.status, str(exc)) from None
-    except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
-    except Busy as busy:
-        raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
+    except ValueError as exc:  # CameraError among them; the queue's and the disk's answers are Refusals
+        raise Refusal(str(exc)) from None
     return _status(job)
 
 

@@ -7,17 +7,16 @@ import logging
 import threading
 import time
 
-from fastapi import APIRouter, HTTPException, Request, Response
+from fastapi import APIRouter, Request, Response
 
-from ...cluster.painter import ClusterError
 from ...painting.loop import Abandoned
 from ...util import images
 from .. import protocol
 from ..access import admits
 from ..asked import RenderAsked
-from ..memory import NoRoom, painting_bytes
+from ..memory import painting_bytes
+from ..refusal import Refusal
 from ..state import ServiceDep
-from ..workshop import Busy
 from . import SCENE_BODY
 
 public = APIRouter(prefix="/api")  # the one route without the token (app.py puts it on the others)
@@ -25,7 +24,6 @@ router = APIRouter(prefix="/api")
 
 MEDIA_TYPES = {"png": ("PNG", "image/png"), "jpeg": ("JPEG", "image/jpeg")}
 BUSY = {"description": "every render place is taken, the render ran out of time, or Ray failed; see Retry-After"}
-CLUSTER_RETRY_S = 30  # Ray that does not answer is mended by its operator, in minutes rather than seconds
 log = logging.getLogger("rcp.service")
 
 
@@ -48,7 +46,7 @@ async def health(request: Request, service: ServiceDep) -> dict:
         "threads": service.workshop.threads,
         "renders": service.workshop.admitted,
         "painting": service.workshop.in_progress,
-        **({} if service.walks is None else {"walks": service.walks.figures()}),
+        **service.painter.figures(),
     }
 
 
@@ -74,12 +72,7 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
         return gone.is_set() or time.monotonic() > deadline or workshop.stopping
 
     def job() -> bytes:
-        cluster = service.cluster if service.on_cluster(*size, params) else None
-        if cluster is not None:  # a large render: Ray paints it, the cores here stay with the walks
-            image = cluster.render(scene, camera, *size, params, body.time, stop)
-        else:
-            image = workshop.paint(scene, camera, *size, params, time=body.time, should_stop=stop).image
-        return images.encode(image, fmt, body.quality)
+        return images.encode(service.painter.render(scene, camera, *size, params, body.time, stop), fmt, body.quality)
 
     try:
         with workshop.admission(), service.memory.reserved(painting_bytes(params, *size), size, "this render"):
@@ -88,13 +81,6 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
                 return Response(await workshop.run(job), media_type=media_type)
             finally:
                 watcher.cancel()
-    except Busy as busy:
-        raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
-    except NoRoom as full:  # the memory the paintings may take (RCP_MEMORY_BYTES)
-        raise HTTPException(full.status, str(full), headers=full.headers) from None
-    except ClusterError as exc:  # Ray does not answer, or lost a worker: the operator's to mend, the caller waits
-        log.error("a render on Ray failed: %s", exc)
-        raise HTTPException(503, str(exc), headers={"Retry-After": str(CLUSTER_RETRY_S)}) from None
     except Abandoned:
         if gone.is_set():
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
@@ -102,7 +88,7 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
             message = "the server is stopping"
         else:
             message = f"the render ran past the server's {settings.render_timeout_s:g} s limit; ask for less, or later"
-        raise HTTPException(503, message, headers={"Retry-After": "10"}) from None
+        raise Refusal(message, 503, 10) from None
 
 
 async def _hang_up(request: Request, gone: threading.Event) -> None:

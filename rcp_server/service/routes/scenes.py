@@ -9,18 +9,18 @@ from __future__ import annotations
 
 from typing import Annotated
 
-from fastapi import APIRouter, HTTPException, Path, Request, Response, UploadFile
+from fastapi import APIRouter, Path, Request, Response, UploadFile
 from starlette.concurrency import run_in_threadpool
 
 from ...scene.scenefile import SCENE_NAME
 from .. import protocol
 from ..access import presented
+from ..asked import read_upload, upload_door
+from ..refusal import Refusal
 from ..state import Service, ServiceDep, scene_info
-from ..uploads import MEMORY_RETRY_S, Full, NoRoom, Refused, read_scene
 
 router = APIRouter(prefix="/api")
 NamePath = Annotated[str, Path(pattern=f"^{SCENE_NAME.pattern}$")]
-MAX_QUEUED = 3  # uploads reading or waiting to; more are told to come back (each reading takes a core)
 
 
 @router.get("/scenes")
@@ -46,36 +46,24 @@ async def upload(file: UploadFile, request: Request, response: Response, service
     with its `.mtl` and textures; a `.ply` or an `.stl`. The answer describes it as `GET /api/scenes` does
     (`uploaded` true), under a new name that only the uploader knows; use it wherever a scene name goes."""
     settings, uploads = service.settings, service.uploads
-    if not settings.uploads:
-        raise HTTPException(403, "uploads are off on this server (RCP_UPLOADS=0)")
-    service.sweep_uploads()  # before counting
+    upload_door(service)
+    uploads.queued += 1
     try:
-        uploads.check_room(settings.upload_max_scenes, settings.upload_idle_s)
-        if uploads.queued >= MAX_QUEUED:
-            raise Full("other uploads are being read; try again in a few seconds", 5)
-        uploads.queued += 1
-        try:
-            async with uploads.reading:
-                limits = settings.upload_limits(room_bytes=settings.upload_total_bytes - uploads.weight)
-                scene, weight = await run_in_threadpool(
-                    read_scene, file.file, file.filename or "", limits, service.store.uploads_dir
-                )
-        finally:
-            uploads.queued -= 1
-        # its description is built off the event loop too: a model's cameras make it (bounded, gltf.MAX_VIEWPOINTS)
-        info = (await run_in_threadpool(scene_info, scene)).model_copy(update={"uploaded": True})
-        owner = presented(request.headers, request.query_params) if settings.token is not None else None
-        try:
-            uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes, owner)
-        except Full:
-            service.store.remove_upload(scene.name)  # its files, kept by read_scene
-            raise
-    except NoRoom as exc:  # what the file declares would not fit in the memory left: refused before it is built
-        raise HTTPException(503, str(exc), headers={"Retry-After": str(MEMORY_RETRY_S)}) from None
-    except Refused as exc:
-        raise HTTPException(422, str(exc)) from None
-    except Full as full:
-        raise HTTPException(503, str(full), headers={"Retry-After": str(full.retry_after)}) from None
+        async with uploads.reading:
+            limits = settings.upload_limits(room_bytes=settings.upload_total_bytes - uploads.weight)
+            scene, weight = await run_in_threadpool(
+                read_upload, file.file, file.filename or "", limits, service.store.uploads_dir
+            )
+    finally:
+        uploads.queued -= 1
+    # its description is built off the event loop too: a model's cameras make it (bounded, gltf.MAX_VIEWPOINTS)
+    info = (await run_in_threadpool(scene_info, scene)).model_copy(update={"uploaded": True})
+    owner = presented(request.headers, request.query_params) if settings.token is not None else None
+    try:
+        uploads.add(scene, info, weight, settings.upload_max_scenes, settings.upload_total_bytes, owner)
+    except Refusal:
+        service.store.remove_upload(scene.name)  # its files, kept by read_scene
+        raise
     response.headers["Location"] = f"/api/scenes/{scene.name}"
     return info
 
@@ -85,7 +73,7 @@ async def describe(name: NamePath, service: ServiceDep) -> protocol.SceneInfo:
     """One scene's description, the operator's or an uploaded one."""
     info = service.info(name)
     if info is None:
-        raise HTTPException(404, _unknown(name, service))
+        raise Refusal(_unknown(name, service), 404)
     return info
 
 
@@ -97,9 +85,9 @@ async def describe(name: NamePath, service: ServiceDep) -> protocol.SceneInfo:
 async def delete(name: NamePath, service: ServiceDep) -> Response:
     """Removes an uploaded scene (walk-throughs showing it keep it until they leave it)."""
     if name in service.scenes:
-        raise HTTPException(403, f"{name!r} is one of the server's own scenes; only uploaded scenes can be deleted")
+        raise Refusal(f"{name!r} is one of the server's own scenes; only uploaded scenes can be deleted", 403)
     if service.uploaded(name) is None or not service.uploads.remove(name):
-        raise HTTPException(404, _unknown(name, service))
+        raise Refusal(_unknown(name, service), 404)
     return Response(status_code=204)
 
 

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import os
 
-from fastapi import APIRouter, HTTPException, Response
+from fastapi import APIRouter, Response
 from fastapi.responses import FileResponse
 
 from ...camera.wire import spec_of
 from .. import protocol
-from ..asked import Refusal, SceneDep, VideoAskedDep, resolved
+from ..asked import SceneDep, VideoAskedDep, resolved
+from ..refusal import Refusal
 from ..state import ServiceDep
 from ..store import open_regular
-from ..videos import VideoJob, VideoRefused
-from ..workshop import Busy
+from ..videos import VideoJob
 from . import SCENE_BODY, Responses
 
 router = APIRouter(prefix="/api/videos", tags=["videos"])
@@ -29,7 +29,7 @@ def _status(job: VideoJob) -> protocol.VideoStatus:
 def _job(service, video_id: str) -> VideoJob:
     job = service.videos.get(video_id)
     if job is None:
-        raise HTTPException(404, f"no video {video_id!r}: never made, deleted, or expired")
+        raise Refusal(f"no video {video_id!r}: never made, deleted, or expired", 404)
     return job
 
 
@@ -47,10 +47,7 @@ PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 f
 async def path_cameras(body: protocol.PathRequest, scene: SceneDep) -> protocol.PathCameras:
     """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path);
     ``path`` may name one of the scene's animated cameras (``{"camera": name}``)."""
-    try:
-        path = await resolved(body.path, scene)
-    except Refusal as exc:
-        raise HTTPException(422, str(exc)) from None
+    path = await resolved(body.path, scene)  # a Refusal in one line
     step = -(-path.frame_count // PREVIEW_FRAMES)
     cameras, scene_times = path.at(path.frame_times()[::step])
     return protocol.PathCameras(
@@ -77,18 +74,7 @@ async def path_cameras(body: protocol.PathRequest, scene: SceneDep) -> protocol.
 async def create(body: protocol.VideoRequest, asked: VideoAskedDep, service: ServiceDep) -> protocol.VideoCreated:
     """Queue a video of ``path``; watch it at ``GET /api/videos/{id}``, fetch it from ``.../file``."""
     frame = asked.frame
-    try:
-        if frame.width % 2 or frame.height % 2:
-            raise ValueError(
-                f"an MP4 (H.264, yuv420p) needs an even width and height, got {frame.width}x{frame.height}"
-            )
-        job = service.videos.submit(frame.scene, asked.path, body.width, body.height, frame.params, body.temporal)
-    except VideoRefused as exc:
-        raise HTTPException(exc.status, str(exc)) from None
-    except ValueError as exc:
-        raise HTTPException(422, str(exc)) from None
-    except Busy as busy:
-        raise HTTPException(503, str(busy), headers={"Retry-After": str(busy.retry_after)}) from None
+    job = service.videos.submit(frame.scene, asked.path, body.width, body.height, frame.params, body.temporal)
     return protocol.VideoCreated(id=job.id, frames=job.frames)
 
 
@@ -103,7 +89,7 @@ async def delete(video_id: str, service: ServiceDep) -> protocol.VideoStatus:
     """Cancel a video in progress (it stops within a tile); a finished one is forgotten and its file deleted."""
     job = service.videos.delete(video_id)
     if job is None:
-        raise HTTPException(404, f"no video {video_id!r}: never made, deleted, or expired")
+        raise Refusal(f"no video {video_id!r}: never made, deleted, or expired", 404)
     return _status(job)
 
 
@@ -119,10 +105,10 @@ async def delete(video_id: str, service: ServiceDep) -> protocol.VideoStatus:
 async def file(video_id: str, service: ServiceDep) -> Response:
     job = _job(service, video_id)
     if job.state != "done":
-        raise HTTPException(409, f"video {video_id} is {job.state}, not done: {job.message or 'wait for it'}")
+        raise Refusal(f"video {video_id} is {job.state}, not done: {job.message or 'wait for it'}", 409)
     try:  # only a regular file of the data folder is served: never a link, wherever it points, nor a FIFO
         with open_regular(job.file, service.settings.video_disk_bytes) as source:
             info = os.fstat(source.fileno())
     except OSError:
-        raise HTTPException(409, f"video {video_id} is done but its file is lost; ask for it again") from None
+        raise Refusal(f"video {video_id} is done but its file is lost; ask for it again", 409) from None
     return FileResponse(job.file, media_type="video/mp4", filename=f"{job.scene_name}-{job.id}.mp4", stat_result=info)

@@ -39,5 +39,5 @@ def _refusal(ws: WebSocket, service: Service) -> tuple[int, str] | None:
     if not admits(settings, ws.headers, ws.query_params):
         return 1008, NEEDS_TOKEN
     if service.walking() >= settings.max_sessions:
-        return 1013, busy_message(settings.max_sessions)
+        return 1013, busy_message(settings.max_sessions, settings.walk_retry_s)
     return None
