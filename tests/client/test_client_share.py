@@ -22,7 +22,7 @@ from helpers.browser import (
 
 from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.picking import object_pixels
-from rcp_server.service.session import pick_mask
+from rcp_server.service.walkview import pick_mask
 
 pytestmark = needs_chromium
 

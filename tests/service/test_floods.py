@@ -10,11 +10,10 @@ import sys
 import time
 
 import pytest
+from helpers.wire import Walk
 from websockets.exceptions import ConnectionClosed
 
 from rcp_server.bench.harness import BackgroundServer
-
-from .conftest import Walk
 
 FLOODERS = 6
 MESSAGES = 2000  # of each kind, per flooding socket

@@ -7,7 +7,7 @@ from __future__ import annotations
 import asyncio
 
 import pytest
-from conftest import CAMERA, make_scene
+from helpers.scenes import CAMERA, make_scene
 
 from rcp_server.service import protocol
 from rcp_server.service.outbox import Outbox, Questions, Rate
