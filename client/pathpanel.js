@@ -343,6 +343,7 @@ export function pathPanel(root, hooks) {
     } catch (error) {
       return finish(`failed: ${error.message}`);
     }
+    if (!job) return; // ended meanwhile (a cancel's poll)
     $("progress").value = status.done_frames;
     if (progress.at(-1) !== status.done_frames) progress.push(status.done_frames);
     $("status").textContent = `${status.state} · ${status.done_frames} / ${status.frames} frames`;
@@ -359,6 +360,7 @@ export function pathPanel(root, hooks) {
   }
 
   function finish(text) {
+    if (!job) return; // a cancel's poll and the timer's can both end a job: the first ends it
     clearInterval(job.timer);
     $("cancel").hidden = true;
     $("status").textContent = text;
