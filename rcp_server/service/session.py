@@ -57,9 +57,9 @@ def painting_of(view: WalkView) -> Painting:
 class Closing(Exception):
     """The session closes the socket: ``code`` and ``reason`` (the one error line it sent before)."""
 
-    def __init__(self, code: int, reason: str):
+    def __init__(self, code: int, reason: str, answering: str | None = None):
         super().__init__(reason)
-        self.code, self.reason = code, reason
+        self.code, self.reason, self.answering = code, reason, answering  # answering: the message refused
 
 
 class Session:
@@ -96,7 +96,7 @@ class Session:
         except* Closing as closing:
             first = closing.exceptions[0]
             assert isinstance(first, Closing)
-            await self._send_now(first.code, first.reason)
+            await self._send_now(first)
         finally:
             self.close()
 
@@ -106,11 +106,12 @@ class Session:
         self.painter.leave(self)
         self.service.memory.release(self)
 
-    async def _send_now(self, code: int, reason: str) -> None:
+    async def _send_now(self, closing: Closing) -> None:
         """The one error line, then the close with its reason (a client gone meanwhile is let be)."""
         try:
-            await self._deliver({"type": "websocket.send", "text": protocol.Error(message=reason).model_dump_json()})
-            await self.ws.close(code=code, reason=reason[:120])
+            line = protocol.Error.answering(closing.answering, closing.reason)
+            await self._deliver({"type": "websocket.send", "text": line.model_dump_json()})
+            await self.ws.close(code=closing.code, reason=closing.reason[:120])
         except Exception:  # gone already: nobody is left to tell
             pass
 
@@ -167,7 +168,7 @@ class Session:
             self._show(view)
         except Refusal as refusal:
             if isinstance(msg, protocol.Hello) and self.view.scene is None and refusal.retry_after is not None:
-                raise Closing(1013, refusal.message) from None  # the page tries again after the time it states
+                raise Closing(1013, refusal.message, text) from None  # the page tries again after the time it states
             self.outbox.note(protocol.Error.answering(text, refusal.message))
         except Exception:  # a fault of ours: this message is lost, the session is not
             fault = fault_message(report_fault(f"session message {text[:200]!r}"))

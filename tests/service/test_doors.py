@@ -167,7 +167,7 @@ def test_a_walker_refused_at_hello_is_closed_at_once_with_the_reason_and_a_code_
             first.send(type="hello", scene="tiny", width=32, height=32)
             assert first.next()["type"] == "ready"
             second.send(type="hello", scene="tiny", width=32, height=32)
-            assert second.next() == {"type": "error", "message": line}
+            assert second.next() == {"type": "error", "message": line, "answers": "hello", "id": None}
             with pytest.raises(ConnectionClosed) as closed:
                 second.next()
             assert (closed.value.rcvd.code, closed.value.rcvd.reason) == (1013, line)

@@ -141,8 +141,8 @@ def test_the_outbox_keeps_the_newest_frame_and_the_notes_in_order():
             seq=0, width=1, height=1, render_ms=1.0, iteration=1, spp=1, scale=1.0, phase="walk", final=False,
             temporal=False, quality=70, paint={}, camera_id=None, time=0.0, dropped=0,
         )  # fmt: skip
-        outbox.post_frame(meta, b"old")
-        outbox.post_frame(meta, b"new")
+        outbox.post_frame(meta, [b"old"])
+        outbox.post_frame(meta, [b"new"])
         outbox.note(protocol.Error(message="two"))
         return await outbox.take()
 
