@@ -198,7 +198,7 @@ def test_bench_speed_prints_the_stage_split_and_the_ratios_to_embreex_and_to_emb
         "triangles",
         "nanoseconds a pixel an iteration",
         "cameras",
-        "ray (Embree",
+        "ray (screen cells or Embree",
         "shading",
         "carrying pixels",
         "embreex alone",
