@@ -157,7 +157,7 @@ class Settings(BaseSettings):
         2 << 30,
         ge=1,
         description="disk the videos may use together, the frames of those in progress included; a new job whose "
-        "estimate (its frames' PNGs at 3 bytes a pixel beside 0.25 bytes a pixel a frame of MP4) does not fit beside "
+        "estimate (its frames' PNGs at 2 bytes a pixel beside 0.25 bytes a pixel a frame of MP4) does not fit beside "
         "the kept videos and the jobs in progress gets 507 with the estimate and the room left; a film whose next "
         "frame would pass it stops, failed with 507 naming the setting, and keeps what it made until it expires",
     )

@@ -75,6 +75,9 @@ BYTES_PER_PIXEL = 0.25
 (0.08 at 320x180); the noisiest styles may take more, which the check while writing still catches."""
 MP4_BYTES = 64 * 1024  # the container and the encoder's headers, at most, for the estimate
 PNG_BYTES = 1024  # a kept frame's PNG headers and chunks beyond its pixels, at most
+PNG_BYTES_PER_PIXEL = 2.0
+"""A kept frame's PNG, bytes a pixel, estimated: a painting's smooth strokes deflate to about half their raw RGB;
+a noisier one may take more, which the count while writing still catches (507, the frames kept)."""
 RAY_ATTEMPTS = 8  # Ray failures a job outlives, waiting each time as Ray backs off (a quarter of an hour in all)
 
 
@@ -90,8 +93,8 @@ def job_work(width: int, height: int, params: PaintParams, temporal: int | None,
 
 def video_bytes(width: int, height: int, frames: int) -> int:
     """The bytes a video of ``frames`` frames of ``width x height`` is estimated to take on disk at its peak: its
-    frames kept as PNGs (at most their raw RGB, and a header each) beside the MP4 assembled from them."""
-    pngs = frames * (3 * width * height + PNG_BYTES)
+    frames kept as PNGs (:data:`PNG_BYTES_PER_PIXEL`, and a header each) beside the MP4 assembled from them."""
+    pngs = frames * (math.ceil(PNG_BYTES_PER_PIXEL * width * height) + PNG_BYTES)
     return MP4_BYTES + math.ceil(BYTES_PER_PIXEL * width * height * frames) + pngs
 
 

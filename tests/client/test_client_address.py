@@ -123,7 +123,7 @@ def test_a_film_cancelled_twice_is_cancelled_once(browser, live_server):  # noqa
         add.click()
         page.evaluate("rcp.walk.place({eye: [0, 1.6, 0], look_at: [3, 1.6, -3], up: [0, 1, 0], fov: 50})")
         add.click()
-        page.fill("#path li[data-index='1'] input", "30")  # a long film: it cannot end before the cancels
+        page.fill("#path li[data-index='1'] input", "10")  # a long film: it cannot end before the cancels
         page.dispatch_event("#path li[data-index='1'] input", "change")
         page.select_option("#path-size", "1920x1080")
         with page.expect_request(lambda r: r.method == "POST" and r.url.endswith("/api/videos")):
