@@ -85,10 +85,26 @@ def _add_camera_options(p: argparse.ArgumentParser) -> None:
 
 
 def _parser() -> argparse.ArgumentParser:
+    """``rcp``'s parser: the global flags and one subcommand each for render, scenes, compile, serve and bench."""
     parser = _Parser(prog="rcp", description="Recursive Camera Painting: paint 3D scenes with per-pixel cameras.")
     parser.add_argument("-q", "--quiet", action="store_true", help="no warnings or progress")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    _add_render_command(sub)
+    sub.add_parser("scenes", help="list the shipped scenes")
+    sub.add_parser(
+        "compile",
+        help="compile the kernels into numba's cache (NUMBA_CACHE_DIR) as `rcp serve` does as it starts, so that "
+        "the next start is ready at once (a container image does it when it is built)",
+    )
+    v = sub.add_parser("serve", help="serve the walk-through client, REST renders and the WebSocket")
+    v.add_argument("--host", help="address to listen on (default 127.0.0.1, or RCP_HOST)")
+    v.add_argument("--port", type=int, help="port (default 8000, or RCP_PORT)")
+    add_bench_commands(sub)
+    return parser
 
+
+def _add_render_command(sub) -> None:
+    """``rcp render``: the scene, output, size, painting and camera options, then those of a sequence."""
     r = sub.add_parser("render", help="paint a still, its iterations, or a sequence")
     r.add_argument("scene", help="a scene name (see 'rcp scenes'), a scene .toml file, or a mesh file")
     r.add_argument(
@@ -124,6 +140,11 @@ def _parser() -> argparse.ArgumentParser:
         "--alpha", action="store_true", help="a PNG with alpha 0 where the plain image sees no geometry (a still)"
     )
     r.add_argument("--bits", type=int, choices=BITS, default=8, help="bits a channel of a PNG still (default 8)")
+    _add_sequence_options(r)
+
+
+def _add_sequence_options(r: argparse.ArgumentParser) -> None:
+    """``rcp render``'s sequence options: frames, a camera path, fps, an orbit, a walk and temporal mode."""
     s = r.add_argument_group("sequences")
     s.add_argument("--frames", type=positive_int, default=1, help="number of frames")
     s.add_argument(
@@ -153,21 +174,6 @@ def _parser() -> argparse.ArgumentParser:
         metavar="K",
         help="temporal mode: after the first frame, run K iterations from the previous frame",
     )
-
-    sub.add_parser("scenes", help="list the shipped scenes")
-
-    sub.add_parser(
-        "compile",
-        help="compile the kernels into numba's cache (NUMBA_CACHE_DIR) as `rcp serve` does as it starts, so that "
-        "the next start is ready at once (a container image does it when it is built)",
-    )
-
-    v = sub.add_parser("serve", help="serve the walk-through client, REST renders and the WebSocket")
-    v.add_argument("--host", help="address to listen on (default 127.0.0.1, or RCP_HOST)")
-    v.add_argument("--port", type=int, help="port (default 8000, or RCP_PORT)")
-
-    add_bench_commands(sub)
-    return parser
 
 
 def paint_file(path: Path) -> dict:
@@ -299,34 +305,51 @@ def _render_print(args: argparse.Namespace, scene: Scene, params: PaintParams, c
 
 def _render_sequence(args: argparse.Namespace, scene, params: PaintParams, base: Camera) -> None:
     """Paint a camera path or an orbit and walk, into a video, a folder of PNGs or numbered images."""
-    from tqdm import tqdm  # type: ignore[import-untyped]
-
     if args.save_iterations is not None and args.ray is not None:
         raise UsageError("--save-iterations paints here: leave out --ray")
-    if args.path is not None:
-        if args.path.startswith(CAMERA_PREFIX):
-            distance = float(np.linalg.norm(np.subtract(base.look_at, base.eye)))
-            path = motion_path(args.path, scene.motions, args.fps, distance)
-        else:
-            path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
-        if path.track is not None and args.ray is not None:
-            raise UsageError("--ray paints one painting for a whole path: a path that keys its painting paints here")
-        fps, count = path.fps, path.frame_count
-        shots = (frame._replace(scene_time=frame.scene_time + args.time) for frame in path.frames())
-    else:
+    path, fps, count, shots = _sequence_shots(args, scene, params, base)
+    writer = _sequence_writer(args, path, base, fps, count)
+    _write_paintings(args, scene, params, shots, count, writer)
+
+
+def _sequence_shots(args: argparse.Namespace, scene, params: PaintParams, base: Camera):
+    """The sequence's camera path (None for an orbit and walk), its frames per second, its frame count and its
+    shots (:class:`PathFrame`, lazily), from ``--path`` or from ``--frames``, ``--orbit`` and ``--walk``."""
+    if args.path is None:
         fps, count = args.fps or 24.0, args.frames
         shots = (
             PathFrame(k, k / fps, camera_path(base, k / max(count - 1, 1), args.orbit, args.walk), args.time + k / fps)
             for k in range(count)
         )
-    writer: video.FrameWriter
-    if count == 1 and args.path is None:  # a still, painted on Ray
-        writer = video.ImageFrames(lambda index: args.out, args.quality)
-    elif video.is_video(args.out) or video.is_folder(args.out):
-        first = path.cameras[0] if args.path is not None else base  # a sequence keeps one projection
-        writer = video.open_writer(args.out, args.width, args.height, fps, count, first.projection, first.stereo)
+        return None, fps, count, shots
+    if args.path.startswith(CAMERA_PREFIX):
+        distance = float(np.linalg.norm(np.subtract(base.look_at, base.eye)))
+        path = motion_path(args.path, scene.motions, args.fps, distance)
     else:
-        writer = video.ImageFrames(lambda index: _frame_path(args.out, index), args.quality)
+        path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
+    if path.track is not None and args.ray is not None:
+        raise UsageError("--ray paints one painting for a whole path: a path that keys its painting paints here")
+    shots = (frame._replace(scene_time=frame.scene_time + args.time) for frame in path.frames())
+    return path, path.fps, path.frame_count, shots
+
+
+def _sequence_writer(args: argparse.Namespace, path, base: Camera, fps: float, count: int) -> video.FrameWriter:
+    """Where the sequence's frames go: one image (a still painted on Ray), a video or a folder of PNGs in the
+    first camera's projection, or numbered images beside ``--out``."""
+    if count == 1 and args.path is None:  # a still, painted on Ray
+        return video.ImageFrames(lambda index: args.out, args.quality)
+    if video.is_video(args.out) or video.is_folder(args.out):
+        first = path.cameras[0] if path is not None else base  # a sequence keeps one projection
+        return video.open_writer(args.out, args.width, args.height, fps, count, first.projection, first.stereo)
+    return video.ImageFrames(lambda index: _frame_path(args.out, index), args.quality)
+
+
+def _write_paintings(
+    args: argparse.Namespace, scene, params: PaintParams, shots, count: int, writer: video.FrameWriter
+) -> None:
+    """Paint the shots here on threads or on Ray (``--ray``) and hand each image to ``writer`` under a progress
+    bar; the writer is aborted if anything fails (or is interrupted), closed otherwise."""
+    from tqdm import tqdm  # type: ignore[import-untyped]
 
     def paint_frame(camera: Camera, scene_time: float, frame_params: PaintParams, previous: PaintState | None):
         return paint(

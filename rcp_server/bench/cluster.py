@@ -226,65 +226,10 @@ def _measure_on_ray(scene, scene_name: str, width: int, height: int, frames: int
     joined = time.perf_counter() - clock
     painter = RayPainter(address)
     try:
-        clock = time.perf_counter()
-        actors = painter.warm(scene)
-        import ray
-
-        warm = time.perf_counter() - clock
-        clock = time.perf_counter()
-        first = next(painter.images(scene, shots[:1], width, height, params))
-        first_frame = time.perf_counter() - clock
-        trips = []
-        for _ in range(50):
-            clock = time.perf_counter()
-            ray.get(actors[0].pid.remote())
-            trips.append(time.perf_counter() - clock)
-        trip = float(np.median(trips))
-        request = len(pickle.dumps((shots[1].camera, shots[1].scene_time, frame_params(params, None, 1))))
-        answer = first.nbytes
-        print(f"Ray: joined in {joined:.1f} s, {len(actors)} actors warm in {warm:.1f} s (scene put once, BVH each)")
-        total = joined + warm + first_frame
-        print(f"time to the first frame: {first_frame * 1000:.0f} ms after warm-up ({total:.1f} s from nothing)")
-        print(f"a Ray call's round trip: {trip * 1000:.2f} ms (median of 50)")
-        print(f"bytes per frame: {request:,} out (camera, time, settings), {answer:,} back (uint8 frame)")
-        rows = []
-        for name, temporal in (("per frame", None), ("temporal K=1", 1)):
-            here_s, here = _threaded(scene, shots, params, width, height, threads, temporal)
-            clock = time.perf_counter()
-            there = list(painter.images(scene, shots, width, height, params, temporal))
-            ray_s = time.perf_counter() - clock
-            same = all(np.array_equal(a, b) for a, b in zip(there, (_u8(i) for i in here), strict=True))
-            rows.append((name, here_s, ray_s, same))
-            print(
-                f"{name:>13}: threads {here_s:6.2f} s ({here_s / len(shots) * 1000:6.1f} ms/frame), "
-                f"Ray {ray_s:6.2f} s ({ray_s / len(shots) * 1000:6.1f} ms/frame), "
-                f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {same}"
-            )
-        # one large painting, as a REST render over RCP_RAY_MIN_WORK asks: a band of rows per actor
-        big, large = (2 * width, 2 * height), replace(params, spp=4)
-        clock = time.perf_counter()
-        here = _u8(paint(scene, scene.camera, *big, large, threads=threads).image)
-        here_s = time.perf_counter() - clock
-        clock = time.perf_counter()
-        there_one = painter.render(scene, scene.camera, *big, large)
-        ray_s = time.perf_counter() - clock
-        print(
-            f"one {big[0]}x{big[1]} painting at 4 spp: threads {here_s:.2f} s, "
-            f"Ray in {len(actors)} bands {ray_s:.2f} s, "
-            f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {np.array_equal(here, there_one)}"
-        )
-        # a panorama (equirect, an eye's image twice as wide as high), threads against Ray's bands
-        pano_camera, pano = scene.camera.moved(projection="equirect"), (4 * height, 2 * height)
-        clock = time.perf_counter()
-        here = _u8(paint(scene, pano_camera, *pano, params, threads=threads).image)
-        pano_here_s = time.perf_counter() - clock
-        clock = time.perf_counter()
-        there_one = painter.render(scene, pano_camera, *pano, params)
-        pano_ray_s = time.perf_counter() - clock
-        print(
-            f"one {pano[0]}x{pano[1]} panorama: threads {pano_here_s:.2f} s, Ray in {len(actors)} bands "
-            f"{pano_ray_s:.2f} s, pixel-identical: {np.array_equal(here, there_one)}"
-        )
+        actors, trip, request = _measure_start(painter, scene, shots, params, width, height, joined)
+        rows = _measure_films(painter, scene, shots, params, width, height, threads)
+        _measure_large(painter, scene, params, width, height, threads, len(actors))
+        pano, pano_ray_s = _measure_panorama(painter, scene, params, height, threads, len(actors))
         painter.crew.close()  # its actors hold every core: the walkers' figures are measured alone
         walk_figures = measure_walks(scene, address)
     finally:
@@ -305,6 +250,86 @@ def _measure_on_ray(scene, scene_name: str, width: int, height: int, frames: int
         "walks": walk_figures,
         "size": (width, height),
     }
+
+
+def _measure_start(painter, scene, shots, params, width: int, height: int, joined: float) -> tuple[list, float, int]:
+    """Warm ``painter``'s actors, time the first frame and a Ray call's round trip (median of 50), count a
+    frame's bytes each way, and print them; the actors, the round trip in seconds and a request's bytes."""
+    clock = time.perf_counter()
+    actors = painter.warm(scene)
+    import ray
+
+    warm = time.perf_counter() - clock
+    clock = time.perf_counter()
+    first = next(painter.images(scene, shots[:1], width, height, params))
+    first_frame = time.perf_counter() - clock
+    trips = []
+    for _ in range(50):
+        clock = time.perf_counter()
+        ray.get(actors[0].pid.remote())
+        trips.append(time.perf_counter() - clock)
+    trip = float(np.median(trips))
+    request = len(pickle.dumps((shots[1].camera, shots[1].scene_time, frame_params(params, None, 1))))
+    answer = first.nbytes
+    print(f"Ray: joined in {joined:.1f} s, {len(actors)} actors warm in {warm:.1f} s (scene put once, BVH each)")
+    total = joined + warm + first_frame
+    print(f"time to the first frame: {first_frame * 1000:.0f} ms after warm-up ({total:.1f} s from nothing)")
+    print(f"a Ray call's round trip: {trip * 1000:.2f} ms (median of 50)")
+    print(f"bytes per frame: {request:,} out (camera, time, settings), {answer:,} back (uint8 frame)")
+    return actors, trip, request
+
+
+def _measure_films(painter, scene, shots, params, width: int, height: int, threads: int) -> list:
+    """The film painted per frame and temporally (K=1) on the threads and on Ray, printed as measured; a row
+    (name, threads' seconds, Ray's seconds, pixel-identical) each."""
+    rows = []
+    for name, temporal in (("per frame", None), ("temporal K=1", 1)):
+        here_s, here = _threaded(scene, shots, params, width, height, threads, temporal)
+        clock = time.perf_counter()
+        there = list(painter.images(scene, shots, width, height, params, temporal))
+        ray_s = time.perf_counter() - clock
+        same = all(np.array_equal(a, b) for a, b in zip(there, (_u8(i) for i in here), strict=True))
+        rows.append((name, here_s, ray_s, same))
+        print(
+            f"{name:>13}: threads {here_s:6.2f} s ({here_s / len(shots) * 1000:6.1f} ms/frame), "
+            f"Ray {ray_s:6.2f} s ({ray_s / len(shots) * 1000:6.1f} ms/frame), "
+            f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {same}"
+        )
+    return rows
+
+
+def _measure_large(painter, scene, params, width: int, height: int, threads: int, actors: int) -> None:
+    """One painting twice the film's size at 4 spp, as a REST render over RCP_RAY_MIN_WORK asks (a band of rows
+    per actor), on the threads and on Ray; printed."""
+    big, large = (2 * width, 2 * height), replace(params, spp=4)
+    clock = time.perf_counter()
+    here = _u8(paint(scene, scene.camera, *big, large, threads=threads).image)
+    here_s = time.perf_counter() - clock
+    clock = time.perf_counter()
+    there_one = painter.render(scene, scene.camera, *big, large)
+    ray_s = time.perf_counter() - clock
+    print(
+        f"one {big[0]}x{big[1]} painting at 4 spp: threads {here_s:.2f} s, "
+        f"Ray in {actors} bands {ray_s:.2f} s, "
+        f"overhead {ray_s / here_s:4.2f}x, pixel-identical: {np.array_equal(here, there_one)}"
+    )
+
+
+def _measure_panorama(painter, scene, params, height: int, threads: int, actors: int) -> tuple[tuple[int, int], float]:
+    """A panorama (equirect, an eye's image twice as wide as high) on the threads and in Ray's bands, printed;
+    its size and Ray's seconds."""
+    pano_camera, pano = scene.camera.moved(projection="equirect"), (4 * height, 2 * height)
+    clock = time.perf_counter()
+    here = _u8(paint(scene, pano_camera, *pano, params, threads=threads).image)
+    pano_here_s = time.perf_counter() - clock
+    clock = time.perf_counter()
+    there_one = painter.render(scene, pano_camera, *pano, params)
+    pano_ray_s = time.perf_counter() - clock
+    print(
+        f"one {pano[0]}x{pano[1]} panorama: threads {pano_here_s:.2f} s, Ray in {actors} bands "
+        f"{pano_ray_s:.2f} s, pixel-identical: {np.array_equal(here, there_one)}"
+    )
+    return pano, pano_ray_s
 
 
 def _print_films_model(measured: dict, cores: int, gbps: float) -> None:

@@ -42,6 +42,8 @@ def _embree_alone(query, origins, directions, tiles, pool, passes: int) -> float
 
 
 def speed(scene_name: str, width: int, height: int, iterations: int, repeats: int, threads: int | None) -> None:
+    """Print where an iteration of the color mapping goes (per stage, nanoseconds a pixel), the screen cells'
+    paths, and what a painting costs against embreex and Embree's bare packets over the same rays."""
     scene = load_scene(scene_name)
     threads = threads or default_threads()
     # the color mapping against Embree: what tracing every ray costs beyond the tracing
@@ -53,16 +55,7 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         f"{iterations} iterations, color mapping, {threads} threads"
     )
     paint(scene, camera, width, height, params, threads=threads)  # compile kernels, build the BVH
-
-    # the rays a painted iteration casts (those after the sixth), in the same row bands as the painting
-    region = Region(width, height)
-    state = paint(scene, camera, width, height, params, threads=threads).state
-    setup = setup_tile(camera, region, params)
-    n = region.pixel_count
-    rays = Rays.allocate(n, 1)
-    assign_cameras(state, setup, params, params.focus(camera), rays)
-    origins, directions = rays.origins, rays.directions
-    bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(tile_rows(region, threads))]
+    n, origins, directions, bands = _painted_rays(scene, camera, width, height, params, threads)
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0
     if tracer is not None:
         screen.forget()  # a build of its own, timed, the kernels compiled
@@ -76,22 +69,58 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         "embreex": embreex.bare_query if embreex else None,
         "packets": (lambda o, d: tracer.bare_query(o, d, scratch[: len(o)])) if tracer else None,
     }
+    painted, stage_sums, alone = _paired_repeats(
+        scene, width, height, params, threads, repeats, queries, (origins, directions, bands)
+    )
+    print(f"rays hitting geometry: {hit_fraction:.0%}")
+    _print_stages(painted, stage_sums, n, repeats, threads)
+    if tracer is None:
+        print("Embree alone: nothing to compare with, this scene has no triangles (every ray sees the sky)")
+        return
+    _print_against_embree(painted, alone, n, iterations, repeats)
+    _own_painting(scene, width, height, replace(scene.paint, iterations=iterations), repeats, threads, alone)
+
+
+def _painted_rays(scene: Scene, camera, width: int, height: int, params: PaintParams, threads: int):
+    """The rays a painted iteration casts (those after the sixth), in the same row bands as the painting: the
+    pixel count n, origins and directions ((n, 3) each) and the bands (slices of rows)."""
+    region = Region(width, height)
+    state = paint(scene, camera, width, height, params, threads=threads).state
+    setup = setup_tile(camera, region, params)
+    n = region.pixel_count
+    rays = Rays.allocate(n, 1)
+    assign_cameras(state, setup, params, params.focus(camera), rays)
+    bands = [slice(t.y0 * width, (t.y0 + t.height) * width) for t in region.tiles(tile_rows(region, threads))]
+    return n, rays.origins, rays.directions, bands
+
+
+def _paired_repeats(
+    scene: Scene, width: int, height: int, params: PaintParams, threads: int, repeats: int, queries: dict, rays
+) -> tuple[list[float], dict[str, float], dict[str, list[float]]]:
+    """``repeats`` paintings, each followed by every Embree query alone over the same ``rays`` (origins,
+    directions, bands) under the same load: seconds per iteration of each painting, its stages' mean thread
+    seconds per iteration, and each query's seconds per pass (NaN without a query)."""
+    origins, directions, bands = rays
+    iterations = params.iterations
     painted, stage_sums = [], dict.fromkeys(STAGES, 0.0)
     alone: dict[str, list[float]] = {name: [] for name in queries}
     with ThreadPoolExecutor(threads) as pool:
         for _ in range(repeats):
             clock = time.perf_counter()
-            result = paint(scene, camera, width, height, params, threads=threads)
+            result = paint(scene, scene.camera, width, height, params, threads=threads)
             painted.append((time.perf_counter() - clock) / iterations)
             for stage in STAGES:
                 stage_sums[stage] += result.stage_seconds[stage] / iterations / repeats
             for name, query in queries.items():
                 seconds = _embree_alone(query, origins, directions, bands, pool, iterations) if query else math.nan
                 alone[name].append(seconds)
+    return painted, stage_sums, alone
 
+
+def _print_stages(painted: list[float], stage_sums: dict[str, float], n: int, repeats: int, threads: int) -> None:
+    """Print an iteration's wall time (median) and where its thread time goes, in nanoseconds a pixel."""
     per_iteration = statistics.median(painted)
     thread_total = sum(stage_sums.values())
-    print(f"rays hitting geometry: {hit_fraction:.0%}")
     print(
         f"one iteration (wall, median of {repeats}): {per_iteration * 1e3:7.2f} ms   "
         f"{n / per_iteration / 1e6:5.2f} M samples/s"
@@ -102,9 +131,11 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         print(f"  {STAGE_NAMES[stage]:34s} {stage_sums[stage] / n * 1e9:7.1f} ns  {share:6.1%}")
     frame_setup = max(per_iteration * threads - thread_total, 0.0)
     print(f"  {'tile setup, threads, joins':34s} {frame_setup / n * 1e9:7.1f} ns")
-    if tracer is None:
-        print("Embree alone: nothing to compare with, this scene has no triangles (every ray sees the sky)")
-        return
+
+
+def _print_against_embree(painted: list[float], alone: dict[str, list[float]], n: int, iterations: int, repeats: int):
+    """Print each Embree query alone and the ratios of an iteration and of a whole painting to it, each the
+    median of the repeats' pairs."""
     targets = {"embreex": "target <= 1.0x, goal 0.7x", "packets": "the limit: Embree's packets and nothing else"}
     for name, pairs in alone.items():
         embree = statistics.median(pairs)
@@ -128,7 +159,6 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
         f"a whole painting / {iterations} passes of bare packets: {statistics.median(packets):.2f}x "
         f"median of {repeats} pairs (spread {packets[0]:.2f}-{packets[-1]:.2f}; target <= 1.0x, goal 0.6x)"
     )
-    _own_painting(scene, width, height, replace(scene.paint, iterations=iterations), repeats, threads, alone)
 
 
 def _screen_paths(trace, origins: np.ndarray, directions: np.ndarray, repeats: int) -> None:

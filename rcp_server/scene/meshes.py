@@ -430,34 +430,57 @@ def _material_surface(
             uv = gltf.transformed_uv(uv, info.uv_transform)
     if image is not None and has_uv:
         texture = images.decoded(image)
-    alpha_cutoff, alpha_texture, emission, emission_texture, unlit = 0.0, None, (0.0, 0.0, 0.0), None, False
     if info is not None:
-        coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
-        if coverage < info.alpha_cutoff and info.alpha_mode != "OPAQUE":
-            return None
-        alpha_texture = images.alphas.get(id(image)) if texture is not None and info.alpha_mode != "OPAQUE" else None
-        alpha_cutoff = info.alpha_cutoff / coverage if alpha_texture is not None else 0.0
-        emission, unlit = info.emissive, info.unlit
-        emissive_image = getattr(material, "emissiveTexture", None)
-        if info.has_emissive_texture and emissive_image is not None and has_uv:
-            emission_texture = images.decoded(emissive_image)
+        material_of = _gltf_material(info, material, image, texture, images, has_uv)
     elif kind == "texture" or image is not None:  # OBJ: map_d and d
-        alpha, dissolve = _obj_alpha(material, folder, images)
-        if dissolve < 0.5:
-            return None
-        if alpha is not None and has_uv and alpha.min() < 255:
-            if texture is None:  # map_d without map_Kd: a white texture to cut out of
-                key = ("white", alpha.shape)
-                if key not in images:
-                    images[key] = np.full(alpha.shape + (3,), 255, np.uint8)
-                texture = images[key]
-            key = ("map_d", id(alpha), texture.shape[:2])
-            if key not in images:
-                images[key] = _fitted(alpha, texture.shape[:2])
-            alpha_texture, alpha_cutoff = images[key], 0.5
-    if texture is None and emission_texture is None:
+        material_of = _obj_material(material, folder, images, texture, has_uv)
+    else:
+        material_of = texture, Material((0.0, 0.0, 0.0), None, False, 0.0, None)
+    if material_of is None:
+        return None
+    texture, shading = material_of
+    if texture is None and shading.emission_texture is None:
         uv = None
-    return colors, uv, texture, Material(emission, emission_texture, unlit, alpha_cutoff, alpha_texture)
+    return colors, uv, texture, shading
+
+
+def _gltf_material(
+    info: gltf.MaterialInfo, material: Any, image: Any, texture: np.ndarray | None, images: dict, has_uv: bool
+) -> tuple[np.ndarray | None, Material] | None:
+    """A glTF material's texture and :class:`Material`: its alpha (a cutoff over the base color texture's alpha,
+    scaled by the base color's coverage), emission and unlit flag; None when its coverage is below its cutoff."""
+    alpha_texture, emission_texture = None, None
+    coverage = info.alpha if info.alpha_mode != "OPAQUE" else 1.0
+    if coverage < info.alpha_cutoff and info.alpha_mode != "OPAQUE":
+        return None
+    alpha_texture = images.alphas.get(id(image)) if texture is not None and info.alpha_mode != "OPAQUE" else None
+    alpha_cutoff = info.alpha_cutoff / coverage if alpha_texture is not None else 0.0
+    emissive_image = getattr(material, "emissiveTexture", None)
+    if info.has_emissive_texture and emissive_image is not None and has_uv:
+        emission_texture = images.decoded(emissive_image)
+    return texture, Material(info.emissive, emission_texture, info.unlit, alpha_cutoff, alpha_texture)
+
+
+def _obj_material(
+    material: Any, folder: Path | None, images: dict, texture: np.ndarray | None, has_uv: bool
+) -> tuple[np.ndarray | None, Material] | None:
+    """An OBJ material's texture and :class:`Material`: ``map_d`` cut out of the texture at 0.5 (out of a white
+    texture without ``map_Kd``); None when its ``d`` dissolves it (below 0.5)."""
+    alpha_texture, alpha_cutoff = None, 0.0
+    alpha, dissolve = _obj_alpha(material, folder, images)
+    if dissolve < 0.5:
+        return None
+    if alpha is not None and has_uv and alpha.min() < 255:
+        if texture is None:  # map_d without map_Kd: a white texture to cut out of
+            key = ("white", alpha.shape)
+            if key not in images:
+                images[key] = np.full(alpha.shape + (3,), 255, np.uint8)
+            texture = images[key]
+        key = ("map_d", id(alpha), texture.shape[:2])
+        if key not in images:
+            images[key] = _fitted(alpha, texture.shape[:2])
+        alpha_texture, alpha_cutoff = images[key], 0.5
+    return texture, Material((0.0, 0.0, 0.0), None, False, alpha_cutoff, alpha_texture)
 
 
 class _Images(dict):
