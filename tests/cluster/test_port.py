@@ -3,6 +3,7 @@ implementation are the local implementation's, pixel for pixel (the JPEG's bytes
 
 from __future__ import annotations
 
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -11,10 +12,8 @@ import pytest
 ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs it
 
 from rcp_server.cluster.admission import Target  # noqa: E402
-from rcp_server.cluster.connection import connect  # noqa: E402
-from rcp_server.cluster.painter import RayPainter  # noqa: E402
 from rcp_server.cluster.port import RayPort  # noqa: E402
-from rcp_server.cluster.walks import Walks  # noqa: E402
+from rcp_server.cluster.remote import RemoteRay, RemoteWalks  # noqa: E402
 from rcp_server.media.camerapath import parse_path  # noqa: E402
 from rcp_server.media.walkframe import WalkFrame  # noqa: E402
 from rcp_server.service.painter import LocalPainter  # noqa: E402
@@ -33,18 +32,18 @@ PATH = {
 
 @pytest.fixture(scope="module")
 def ports(busy_scene):
-    """The local port, and Ray's on a small local runtime (two CPUs), its walkers measured on ``busy_scene``."""
-    started = connect(None, num_cpus=2, object_store_memory=128 << 20)
+    """The local port, and Ray's as the server opens it: a driver in a child process with a runtime of its own
+    (two CPUs), its walkers measured on ``busy_scene``."""
     workshop = Workshop(2, 2)
-    cluster = RayPainter()
-    walks = Walks(cluster.connection, Target(20, W, H), 30)
+    cluster = RemoteRay("local", Target(20, W, H), 30)
+    cluster.start(120)
+    walks = RemoteWalks(cluster, 1, 30)
     walks.calibrate(busy_scene, PaintParams(iterations=2))
+    cluster.call("target", 1.0, W, H)  # room on Ray for a walker at a frame a second, whatever the machine's load
     local, on_ray = LocalPainter(workshop), RayPort(cluster, LocalPainter(workshop), 0, walks)
     yield local, on_ray
     on_ray.close()
     workshop.close()
-    if started and ray.is_initialized():
-        ray.shutdown()
 
 
 def test_walk_frames_through_ray_are_the_local_ones_and_keep_their_state(ports, busy_scene):
@@ -52,6 +51,10 @@ def test_walk_frames_through_ray_are_the_local_ones_and_keep_their_state(ports, 
     params = PaintParams(iterations=2, spp=2, lambda_p=6.0)
     for port in ports:
         port.admit("walker", params, busy_scene)
+    deadline = time.monotonic() + 60  # the walker's crew starts off the frames' path: painted here meanwhile
+    while on_ray.walks.frames == 0 and time.monotonic() < deadline:
+        on_ray.walk_frame("walker", WalkFrame(busy_scene, busy_scene.camera, W, H, params, 0.0, 80, 100, None))
+        time.sleep(0.2)
     cameras = [busy_scene.camera.moved(eye=(0.2 * k, 0.1, 0.05 * k)) for k in range(4)]
     painted = {id(port): [] for port in ports}
     for k, camera in enumerate(cameras):
@@ -59,7 +62,7 @@ def test_walk_frames_through_ray_are_the_local_ones_and_keep_their_state(ports, 
         frame = WalkFrame(busy_scene, camera, W, H, params, 0.1 * k, 80, k + 1, after)
         for port in ports:
             painted[id(port)].append(port.walk_frame("walker", frame))
-    frames_on_ray = on_ray.walks.frames
+    frames_on_ray = on_ray.walks.frames - 1
     for here, there in zip(painted[id(local)], painted[id(on_ray)], strict=True):
         assert (here.width, here.height, here.serial, here.continued) == (
             there.width,
