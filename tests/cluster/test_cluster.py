@@ -445,18 +445,22 @@ def test_a_registered_mapping_paints_on_ray_as_on_threads(painter, busy_scene):
         unregister_mapping("test-swirl")
 
 
-def _children(pid: int) -> list[str]:
-    """The command names of a process's children (``/proc``)."""
-    names = []
+def _descendants(pid: int) -> list[str]:
+    """The command names of a process's descendants (``/proc``): Ray's runtime runs under the server's driver."""
+    parents: dict[int, tuple[int, str]] = {}
     for stat in Path("/proc").glob("[0-9]*/stat"):
         try:
             fields = stat.read_text()
         except OSError:  # gone meanwhile
             continue
         name, rest = fields[fields.index("(") + 1 : fields.rindex(")")], fields[fields.rindex(")") + 2 :].split()
-        if int(rest[1]) == pid:
-            names.append(name)
-    return names
+        parents[int(stat.parent.name)] = (int(rest[1]), name)
+    found, frontier = [], {pid}
+    while frontier:
+        children = {child for child, (parent, _) in parents.items() if parent in frontier}
+        found += [parents[child][1] for child in children]
+        frontier = children
+    return found
 
 
 @pytest.mark.parametrize("joined", [False, True])
@@ -468,7 +472,10 @@ def test_rcp_serve_exits_0_on_sigterm_with_ray_joined_or_not(tmp_path, joined):
     settings = {"ray_address": "local", "ray_walks": "0"} if joined else {}
     with rcp_serve(tmp_path, **settings) as served:
         if joined:  # a local Ray runtime of the server's own
-            assert {"raylet", "gcs_server"} <= set(_children(served.process.pid)), _children(served.process.pid)
+            deadline = time.monotonic() + 60  # the driver starts the runtime off the serving path
+            while not {"raylet", "gcs_server"} <= set(_descendants(served.process.pid)) and time.monotonic() < deadline:
+                time.sleep(0.2)
+            assert {"raylet", "gcs_server"} <= set(_descendants(served.process.pid)), _descendants(served.process.pid)
         served.process.send_signal(signal.SIGTERM)
         assert served.process.wait(120) == 0, served.log.read_text()[-2000:]
     assert "Traceback" not in served.log.read_text()
