@@ -10,6 +10,7 @@ the planner asks for, the asker answers questions one at a time, and the sender 
 from __future__ import annotations
 
 import asyncio
+import re
 import time as _time
 from collections.abc import Callable
 from functools import partial
@@ -52,6 +53,16 @@ class Painting(NamedTuple):
 def painting_of(view: WalkView) -> Painting:
     assert view.params is not None and view.camera is not None, "after hello"
     return Painting(view.params, *view.camera.image_size(view.width, view.height))
+
+
+def close_reason(line: str, limit: int = 120) -> str:
+    """A close frame's reason, at most ``limit`` bytes (WebSocket allows 123): the line, or its start and its
+    closing "try again in N s", which the page reads its time from."""
+    if len(line.encode()) <= limit:
+        return line
+    found = re.search(r"; try again in \d+ s$", line)
+    tail = found.group(0) if found else ""
+    return line.encode()[: limit - len(tail) - 3].decode(errors="ignore") + "…" + tail
 
 
 class Closing(Exception):
@@ -111,7 +122,7 @@ class Session:
         try:
             line = protocol.Error.answering(closing.answering, closing.reason)
             await self._deliver({"type": "websocket.send", "text": line.model_dump_json()})
-            await self.ws.close(code=closing.code, reason=closing.reason[:120])
+            await self.ws.close(code=closing.code, reason=close_reason(closing.reason))
         except Exception:  # gone already: nobody is left to tell
             pass
 
