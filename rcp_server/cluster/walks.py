@@ -33,7 +33,8 @@ from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .actor import HeldScenes
 from .admission import CostMeter, Full, Target, band_rows, capacity, crew_size, crews, pick_node, share
-from .connection import ClusterError, Connection, PaintingFailed, first_line, ray_module, worker_failure
+from .calibration import calibrate
+from .connection import ClusterError, Connection, PaintingFailed, first_line
 from .inventory import Inventory
 from .pool import FIRST_FRAME_S, ActorLost, Member, Pool, kill, wait_all
 from .walkactor import Painted, joined
@@ -43,8 +44,6 @@ log = logging.getLogger("rcp")
 FRAME_LEAST_S = 2.0  # a band not back within this, or FRAME_TIMES its walker's recent frame time, is lost
 FRAME_TIMES = 8.0
 ATTEMPTS = 3  # a frame whose crew members are lost is painted again by the others this many times
-SMALL = 8  # pixels each way of the frames that measure a frame's fixed cost
-CALIBRATION_FRAMES = 3  # frames of each size measured: the cheapest counts (the others met a busy core)
 
 
 @dataclass
@@ -59,6 +58,18 @@ class Place:
     recent_s: float | None = None
     paint_s: float | None = None
     overhead_s: float | None = None
+
+    def painted(self, painted: Painted, params: PaintParams, seconds: float, cost: CostMeter) -> None:
+        """One frame painted in ``seconds``: its times folded into the walker's, its cost a ray into ``cost``."""
+        self.frames += 1
+        bands = painted.bands or ()
+        paint_s = sum(b.paint_s for b in bands) if bands else painted.paint_s
+        overhead = max(0.0, seconds - painted.paint_s)
+        self.recent_s = seconds if self.recent_s is None else 0.7 * self.recent_s + 0.3 * seconds
+        self.paint_s = paint_s if self.paint_s is None else 0.7 * self.paint_s + 0.3 * paint_s
+        self.overhead_s = overhead if self.overhead_s is None else 0.7 * self.overhead_s + 0.3 * overhead
+        rays = painted.width * painted.height * params.spp * params.iterations
+        cost.measured(painted.cpu_s / max(1, len(bands)), rays // max(1, len(bands)))
 
 
 class Walks:
@@ -158,33 +169,11 @@ class Walks:
     # ---- painting ----
 
     def calibrate(self, scene: Scene, params: PaintParams, size: tuple[int, int] | None = None) -> tuple[float, float]:
-        """Measure what a frame costs on a worker (:class:`~.admission.CostMeter`), on an actor of its own: frames
-        of ``scene`` with ``params`` at ``size`` (the target's) and at ``SMALL`` pixels (the fewest CPU seconds of
-        ``CALIBRATION_FRAMES`` each, after one that builds the scene). Returns (CPU seconds a frame, a ray)."""
+        """Measure what a frame costs on a worker (:func:`~.calibration.calibrate`) at ``size`` (the target's).
+        Returns (CPU seconds a frame, a ray)."""
         self._joined()
-        ray = ray_module()
-        held = self.scenes.hold(scene)
-        actor, warm = self.pool.started(held)
-        try:
-            ray.get(warm, timeout=FIRST_FRAME_S)
-
-            def cpu_s(width: int, height: int) -> float:
-                shot = (scene.camera, width, height, params, 0.0, 70)
-                calls = [actor.frame.remote(held, *shot, k, None) for k in range(CALIBRATION_FRAMES)]
-                return min(p.cpu_s for p in ray.get(calls, timeout=FIRST_FRAME_S))
-
-            width, height = size or (self.target.width, self.target.height)
-            small, large = cpu_s(SMALL, SMALL), cpu_s(width, height)
-        except Exception as exc:
-            raise ClusterError(f"the cost of a frame on Ray was not measured: {worker_failure(exc)}") from None
-        finally:
-            kill(actor)
-        per_pixel = params.spp * params.iterations
-        rays = width * height * per_pixel - SMALL * SMALL * per_pixel
-        ray_s = max(large - small, 0.0) / max(rays, 1)
-        self.cost.calibrated(small - SMALL * SMALL * per_pixel * ray_s, ray_s)
-        assert self.cost.frame_s is not None
-        return self.cost.frame_s, ray_s
+        width, height = size or (self.target.width, self.target.height)
+        return calibrate(self.pool, self.scenes.hold(scene), self.cost, scene.camera, params, width, height)
 
     def paint(
         self,
@@ -282,16 +271,8 @@ class Walks:
 
     def _painted(self, place: Place, painted: Painted, params: PaintParams, seconds: float) -> None:
         self.frames += 1
-        place.frames += 1
         self.worker_cpu_s += painted.cpu_s
-        bands = painted.bands or ()
-        paint_s = sum(b.paint_s for b in bands) if bands else painted.paint_s
-        overhead = max(0.0, seconds - painted.paint_s)
-        place.recent_s = seconds if place.recent_s is None else 0.7 * place.recent_s + 0.3 * seconds
-        place.paint_s = paint_s if place.paint_s is None else 0.7 * place.paint_s + 0.3 * paint_s
-        place.overhead_s = overhead if place.overhead_s is None else 0.7 * place.overhead_s + 0.3 * overhead
-        rays = painted.width * painted.height * params.spp * params.iterations
-        self.cost.measured(painted.cpu_s / max(1, len(bands)), rays // max(1, len(bands)))
+        place.painted(painted, params, seconds, self.cost)
 
     def _joined(self) -> None:
         """Ray joined (again, after it stopped): what an earlier join held is forgotten."""
