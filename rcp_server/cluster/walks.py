@@ -59,6 +59,29 @@ class Place:
     paint_s: float | None = None
     overhead_s: float | None = None
 
+    def staffed(self, wanted: list[str], threads: dict[str, int], pool: Pool, held) -> list[Member]:
+        """The crew on the ``wanted`` nodes (of those live, ``threads`` each): members elsewhere or stale leave,
+        new ones start; the warm ones paint, by node id (so a band keeps its rows frame after frame)."""
+        for node in list(self.crew):
+            if node not in wanted or node not in threads or self.crew[node].stale():
+                kill(self.crew.pop(node).actor)
+        for node in wanted:
+            if node not in self.crew and node in threads:
+                self.crew[node] = pool.start(node, threads[node], held)
+        return [self.crew[node] for node in sorted(self.crew) if self.crew[node].ready()]
+
+    def lose(self, lost: ActorLost) -> list[str]:
+        """The members ``lost`` leave the crew, stopped; the nodes they were on."""
+        nodes = [node for node, member in self.crew.items() if member.actor in lost.actors]
+        for node in nodes:
+            kill(self.crew.pop(node).actor)
+        return nodes
+
+    def stop(self) -> None:
+        """Its crew stops."""
+        for member in self.crew.values():
+            kill(member.actor)
+
     def painted(self, painted: Painted, params: PaintParams, seconds: float, cost: CostMeter) -> None:
         """One frame painted in ``seconds``: its times folded into the walker's, its cost a ray into ``cost``."""
         self.frames += 1
@@ -143,9 +166,7 @@ class Walks:
                 return
             cores = self.inventory.cores()
             held = capacity(cores, walker)
-            homes: dict[str, float] = {}
-            for place in self.places.values():
-                homes[place.home] = homes.get(place.home, 0.0) + walker
+            homes = _homes(self.places, walker)
             node = pick_node(cores, homes, walker) if len(self.places) < held else None
             if node is None:
                 raise Full(
@@ -163,8 +184,7 @@ class Walks:
         with self._lock:
             place = self.places.pop(key, None)
         if place is not None:
-            for member in place.crew.values():
-                kill(member.actor)
+            place.stop()
 
     # ---- painting ----
 
@@ -221,7 +241,9 @@ class Walks:
                     continue
                 seconds = time.perf_counter() - clock
                 painted = joined(bands, width, height, serial, seconds)
-                self._painted(place, painted, params, seconds)
+                self.frames += 1
+                self.worker_cpu_s += painted.cpu_s
+                place.painted(painted, params, seconds, self.cost)
                 self.connection.backoff.succeeded()
                 return painted
             raise ClusterError(f"a walker's Ray workers were lost {ATTEMPTS} times in a row")
@@ -239,40 +261,20 @@ class Walks:
             place = self.places.get(key)
             if place is None:
                 return []
-            order = sorted(self.places.items(), key=lambda item: item[1].order)
-            dealt = crews(list(cores), [(k, p.home) for k, p in order])
-            sharing: dict[str, int] = {}
-            for nodes in dealt.values():
-                for node in nodes:
-                    sharing[node] = sharing.get(node, 0) + 1
+            dealt, sharing = _dealt(self.places, cores)
         splits = _splits(camera, params)
         wanted = dealt.get(key, [place.home])
         count = crew_size(len(wanted), height, place.paint_s, place.overhead_s) if splits else 1
-        wanted = wanted[:count]
-        for node in list(place.crew):
-            if node not in wanted or node not in cores or place.crew[node].stale():
-                kill(place.crew.pop(node).actor)
-        for node in wanted:
-            if node not in place.crew and node in cores:
-                threads = max(1, min(self.max_threads, int(cores[node] // sharing.get(node, 1))))
-                place.crew[node] = self.pool.start(node, threads, held)
-        return [place.crew[node] for node in sorted(place.crew) if place.crew[node].ready()]
+        threads = {node: max(1, min(self.max_threads, int(cores[node] // sharing.get(node, 1)))) for node in cores}
+        return place.staffed(wanted[:count], threads, self.pool, held)
 
     def _lost(self, place: Place, lost: ActorLost) -> None:
         """Crew members lost: they leave the crew (their nodes count as gone until Ray says otherwise)."""
         log.warning("a walker's Ray worker was lost (%s): its frame is painted again by the others", lost)
-        for node, member in list(place.crew.items()):
-            if member.actor in lost.actors:
-                del place.crew[node]
-                kill(member.actor)
-                if lost.died:
-                    self.inventory.lost(node)
-                self.moved += 1
-
-    def _painted(self, place: Place, painted: Painted, params: PaintParams, seconds: float) -> None:
-        self.frames += 1
-        self.worker_cpu_s += painted.cpu_s
-        place.painted(painted, params, seconds, self.cost)
+        for node in place.lose(lost):
+            if lost.died:
+                self.inventory.lost(node)
+            self.moved += 1
 
     def _joined(self) -> None:
         """Ray joined (again, after it stopped): what an earlier join held is forgotten."""
@@ -292,8 +294,27 @@ class Walks:
         with self._lock:
             places, self.places = list(self.places.values()), {}
         for place in places:
-            for member in place.crew.values():
-                kill(member.actor)
+            place.stop()
+
+
+def _homes(places: dict[object, Place], walker: float) -> dict[str, float]:
+    """The cores the walkers take on each home node, ``walker`` each."""
+    homes: dict[str, float] = {}
+    for place in places.values():
+        homes[place.home] = homes.get(place.home, 0.0) + walker
+    return homes
+
+
+def _dealt(places: dict[object, Place], cores: dict[str, float]) -> tuple[dict[object, list[str]], dict[str, int]]:
+    """The nodes each walker is dealt (:func:`~.admission.crews`, in the order they came), and how many walkers
+    share each node."""
+    order = sorted(places.items(), key=lambda item: item[1].order)
+    dealt = crews(list(cores), [(k, p.home) for k, p in order])
+    sharing: dict[str, int] = {}
+    for nodes in dealt.values():
+        for node in nodes:
+            sharing[node] = sharing.get(node, 0) + 1
+    return dealt, sharing
 
 
 def _splits(camera: Camera, params: PaintParams) -> bool:
