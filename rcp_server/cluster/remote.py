@@ -55,10 +55,10 @@ class _Down(ClusterError):
     """The driver is not running (yet, or any more)."""
 
 
-class RemoteRay:
-    """Ray's driver in a child process, at ``address`` (as :func:`~.connection.connect`: ``local`` starts a runtime
-    of the child's own); ``target`` and ``retry_s``: the walkers' (None: no walkers on Ray). Paints films and large
-    paintings (:meth:`images`, :meth:`render`) as :class:`~.painter.RayPainter` does."""
+class DriverProcess:
+    """The life of Ray's driver in a child process, at ``address`` (as :func:`~.connection.connect`: ``local``
+    starts a runtime of the child's own): started, its answers read, started again off the frames' path after it
+    died, stopped; ``target`` and ``retry_s``: the walkers' (None: no walkers on Ray)."""
 
     def __init__(self, address: str | None, target: Target | None = None, retry_s: int = 30):
         self.address = address
@@ -79,8 +79,6 @@ class RemoteRay:
         self._starter: threading.Thread | None = None
         self._closed = False
         self.started_s: list[float] = []  # when each driver joined (monotonic)
-
-    # ---- the driver's life ----
 
     def start(self, timeout_s: float | None = None) -> None:
         """Start the driver and wait until it joined Ray (``timeout_s``, default ``JOIN_S``); a fault is a
@@ -179,7 +177,11 @@ class RemoteRay:
             wait = self.backoff.wait_s()
             raise _Down(f"{self.backoff.reason or 'Ray is not joined'} (Ray is tried again in {math.ceil(wait)} s)")
 
-    # ---- calls ----
+
+class RemoteRay(DriverProcess):
+    """Calls to Ray's driver (:class:`DriverProcess`): a scene sent once, then by its key, a call given up when no
+    longer wanted. Paints films and large paintings (:meth:`images`, :meth:`render`) as
+    :class:`~.painter.RayPainter` does."""
 
     def call(self, method: str, *args, should_stop: Callable[[], bool] | None = None, timeout_s: float | None = None):
         """``method(*args)`` in the driver (a scene travels once, then by its key); its answer, or its fault raised

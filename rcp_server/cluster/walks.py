@@ -33,7 +33,8 @@ from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .actor import HeldScenes
 from .admission import CostMeter, Full, Target, band_rows, capacity, crew_size, crews, pick_node, share
-from .connection import ClusterError, Connection, PaintingFailed, first_line, ray_module, worker_failure
+from .calibration import calibrate
+from .connection import ClusterError, Connection, PaintingFailed, first_line
 from .inventory import Inventory
 from .pool import FIRST_FRAME_S, ActorLost, Member, Pool, kill, wait_all
 from .walkactor import Painted, joined
@@ -43,8 +44,6 @@ log = logging.getLogger("rcp")
 FRAME_LEAST_S = 2.0  # a band not back within this, or FRAME_TIMES its walker's recent frame time, is lost
 FRAME_TIMES = 8.0
 ATTEMPTS = 3  # a frame whose crew members are lost is painted again by the others this many times
-SMALL = 8  # pixels each way of the frames that measure a frame's fixed cost
-CALIBRATION_FRAMES = 3  # frames of each size measured: the cheapest counts (the others met a busy core)
 
 
 @dataclass
@@ -59,6 +58,41 @@ class Place:
     recent_s: float | None = None
     paint_s: float | None = None
     overhead_s: float | None = None
+
+    def staffed(self, wanted: list[str], threads: dict[str, int], pool: Pool, held) -> list[Member]:
+        """The crew on the ``wanted`` nodes (of those live, ``threads`` each): members elsewhere or stale leave,
+        new ones start; the warm ones paint, by node id (so a band keeps its rows frame after frame)."""
+        for node in list(self.crew):
+            if node not in wanted or node not in threads or self.crew[node].stale():
+                kill(self.crew.pop(node).actor)
+        for node in wanted:
+            if node not in self.crew and node in threads:
+                self.crew[node] = pool.start(node, threads[node], held)
+        return [self.crew[node] for node in sorted(self.crew) if self.crew[node].ready()]
+
+    def lose(self, lost: ActorLost) -> list[str]:
+        """The members ``lost`` leave the crew, stopped; the nodes they were on."""
+        nodes = [node for node, member in self.crew.items() if member.actor in lost.actors]
+        for node in nodes:
+            kill(self.crew.pop(node).actor)
+        return nodes
+
+    def stop(self) -> None:
+        """Its crew stops."""
+        for member in self.crew.values():
+            kill(member.actor)
+
+    def painted(self, painted: Painted, params: PaintParams, seconds: float, cost: CostMeter) -> None:
+        """One frame painted in ``seconds``: its times folded into the walker's, its cost a ray into ``cost``."""
+        self.frames += 1
+        bands = painted.bands or ()
+        paint_s = sum(b.paint_s for b in bands) if bands else painted.paint_s
+        overhead = max(0.0, seconds - painted.paint_s)
+        self.recent_s = seconds if self.recent_s is None else 0.7 * self.recent_s + 0.3 * seconds
+        self.paint_s = paint_s if self.paint_s is None else 0.7 * self.paint_s + 0.3 * paint_s
+        self.overhead_s = overhead if self.overhead_s is None else 0.7 * self.overhead_s + 0.3 * overhead
+        rays = painted.width * painted.height * params.spp * params.iterations
+        cost.measured(painted.cpu_s / max(1, len(bands)), rays // max(1, len(bands)))
 
 
 class Walks:
@@ -132,9 +166,7 @@ class Walks:
                 return
             cores = self.inventory.cores()
             held = capacity(cores, walker)
-            homes: dict[str, float] = {}
-            for place in self.places.values():
-                homes[place.home] = homes.get(place.home, 0.0) + walker
+            homes = _homes(self.places, walker)
             node = pick_node(cores, homes, walker) if len(self.places) < held else None
             if node is None:
                 raise Full(
@@ -152,39 +184,16 @@ class Walks:
         with self._lock:
             place = self.places.pop(key, None)
         if place is not None:
-            for member in place.crew.values():
-                kill(member.actor)
+            place.stop()
 
     # ---- painting ----
 
     def calibrate(self, scene: Scene, params: PaintParams, size: tuple[int, int] | None = None) -> tuple[float, float]:
-        """Measure what a frame costs on a worker (:class:`~.admission.CostMeter`), on an actor of its own: frames
-        of ``scene`` with ``params`` at ``size`` (the target's) and at ``SMALL`` pixels (the fewest CPU seconds of
-        ``CALIBRATION_FRAMES`` each, after one that builds the scene). Returns (CPU seconds a frame, a ray)."""
+        """Measure what a frame costs on a worker (:func:`~.calibration.calibrate`) at ``size`` (the target's).
+        Returns (CPU seconds a frame, a ray)."""
         self._joined()
-        ray = ray_module()
-        held = self.scenes.hold(scene)
-        actor, warm = self.pool.started(held)
-        try:
-            ray.get(warm, timeout=FIRST_FRAME_S)
-
-            def cpu_s(width: int, height: int) -> float:
-                shot = (scene.camera, width, height, params, 0.0, 70)
-                calls = [actor.frame.remote(held, *shot, k, None) for k in range(CALIBRATION_FRAMES)]
-                return min(p.cpu_s for p in ray.get(calls, timeout=FIRST_FRAME_S))
-
-            width, height = size or (self.target.width, self.target.height)
-            small, large = cpu_s(SMALL, SMALL), cpu_s(width, height)
-        except Exception as exc:
-            raise ClusterError(f"the cost of a frame on Ray was not measured: {worker_failure(exc)}") from None
-        finally:
-            kill(actor)
-        per_pixel = params.spp * params.iterations
-        rays = width * height * per_pixel - SMALL * SMALL * per_pixel
-        ray_s = max(large - small, 0.0) / max(rays, 1)
-        self.cost.calibrated(small - SMALL * SMALL * per_pixel * ray_s, ray_s)
-        assert self.cost.frame_s is not None
-        return self.cost.frame_s, ray_s
+        width, height = size or (self.target.width, self.target.height)
+        return calibrate(self.pool, self.scenes.hold(scene), self.cost, scene.camera, params, width, height)
 
     def paint(
         self,
@@ -232,7 +241,9 @@ class Walks:
                     continue
                 seconds = time.perf_counter() - clock
                 painted = joined(bands, width, height, serial, seconds)
-                self._painted(place, painted, params, seconds)
+                self.frames += 1
+                self.worker_cpu_s += painted.cpu_s
+                place.painted(painted, params, seconds, self.cost)
                 self.connection.backoff.succeeded()
                 return painted
             raise ClusterError(f"a walker's Ray workers were lost {ATTEMPTS} times in a row")
@@ -250,48 +261,20 @@ class Walks:
             place = self.places.get(key)
             if place is None:
                 return []
-            order = sorted(self.places.items(), key=lambda item: item[1].order)
-            dealt = crews(list(cores), [(k, p.home) for k, p in order])
-            sharing: dict[str, int] = {}
-            for nodes in dealt.values():
-                for node in nodes:
-                    sharing[node] = sharing.get(node, 0) + 1
+            dealt, sharing = _dealt(self.places, cores)
         splits = _splits(camera, params)
         wanted = dealt.get(key, [place.home])
         count = crew_size(len(wanted), height, place.paint_s, place.overhead_s) if splits else 1
-        wanted = wanted[:count]
-        for node in list(place.crew):
-            if node not in wanted or node not in cores or place.crew[node].stale():
-                kill(place.crew.pop(node).actor)
-        for node in wanted:
-            if node not in place.crew and node in cores:
-                threads = max(1, min(self.max_threads, int(cores[node] // sharing.get(node, 1))))
-                place.crew[node] = self.pool.start(node, threads, held)
-        return [place.crew[node] for node in sorted(place.crew) if place.crew[node].ready()]
+        threads = {node: max(1, min(self.max_threads, int(cores[node] // sharing.get(node, 1)))) for node in cores}
+        return place.staffed(wanted[:count], threads, self.pool, held)
 
     def _lost(self, place: Place, lost: ActorLost) -> None:
         """Crew members lost: they leave the crew (their nodes count as gone until Ray says otherwise)."""
         log.warning("a walker's Ray worker was lost (%s): its frame is painted again by the others", lost)
-        for node, member in list(place.crew.items()):
-            if member.actor in lost.actors:
-                del place.crew[node]
-                kill(member.actor)
-                if lost.died:
-                    self.inventory.lost(node)
-                self.moved += 1
-
-    def _painted(self, place: Place, painted: Painted, params: PaintParams, seconds: float) -> None:
-        self.frames += 1
-        place.frames += 1
-        self.worker_cpu_s += painted.cpu_s
-        bands = painted.bands or ()
-        paint_s = sum(b.paint_s for b in bands) if bands else painted.paint_s
-        overhead = max(0.0, seconds - painted.paint_s)
-        place.recent_s = seconds if place.recent_s is None else 0.7 * place.recent_s + 0.3 * seconds
-        place.paint_s = paint_s if place.paint_s is None else 0.7 * place.paint_s + 0.3 * paint_s
-        place.overhead_s = overhead if place.overhead_s is None else 0.7 * place.overhead_s + 0.3 * overhead
-        rays = painted.width * painted.height * params.spp * params.iterations
-        self.cost.measured(painted.cpu_s / max(1, len(bands)), rays // max(1, len(bands)))
+        for node in place.lose(lost):
+            if lost.died:
+                self.inventory.lost(node)
+            self.moved += 1
 
     def _joined(self) -> None:
         """Ray joined (again, after it stopped): what an earlier join held is forgotten."""
@@ -311,8 +294,27 @@ class Walks:
         with self._lock:
             places, self.places = list(self.places.values()), {}
         for place in places:
-            for member in place.crew.values():
-                kill(member.actor)
+            place.stop()
+
+
+def _homes(places: dict[object, Place], walker: float) -> dict[str, float]:
+    """The cores the walkers take on each home node, ``walker`` each."""
+    homes: dict[str, float] = {}
+    for place in places.values():
+        homes[place.home] = homes.get(place.home, 0.0) + walker
+    return homes
+
+
+def _dealt(places: dict[object, Place], cores: dict[str, float]) -> tuple[dict[object, list[str]], dict[str, int]]:
+    """The nodes each walker is dealt (:func:`~.admission.crews`, in the order they came), and how many walkers
+    share each node."""
+    order = sorted(places.items(), key=lambda item: item[1].order)
+    dealt = crews(list(cores), [(k, p.home) for k, p in order])
+    sharing: dict[str, int] = {}
+    for nodes in dealt.values():
+        for node in nodes:
+            sharing[node] = sharing.get(node, 0) + 1
+    return dealt, sharing
 
 
 def _splits(camera: Camera, params: PaintParams) -> bool:

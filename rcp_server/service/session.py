@@ -19,7 +19,6 @@ from typing import NamedTuple
 from fastapi import WebSocket, WebSocketDisconnect
 from pydantic import ValidationError
 
-from ..media.walkframe import WalkPainted
 from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..scene.scenefile import one_line
@@ -32,7 +31,8 @@ from .outbox import Outbox, Questions, Rate
 from .planner import Planner
 from .refusal import Refusal
 from .state import Service
-from .walkview import Job, WalkView, another_picture, answer, apply, job_of
+from .walkjobs import WalkJobs
+from .walkview import Job, WalkView, another_picture, answer, apply
 
 BURST_S = 4.0  # a walk-through may send this many seconds' worth of its message rate at once
 
@@ -80,9 +80,7 @@ class Session:
         self.changed = asyncio.Event()
         settings = self.settings
         self.planner = Planner(settings.frame_ms, settings.settle_ms, settings.max_work, _time.monotonic())
-        self.kept: int | None = None  # the last frame shown, whose per-pixel data the painter keeps (temporal)
-        self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
-        self.serial = 0  # frames asked for
+        self.jobs = WalkJobs(self.planner)  # the frames asked for, and the last one shown
         self.closed = False
         self.outbox, self.questions = Outbox(), Questions()
         self.rate = Rate(settings.max_messages_per_s, BURST_S * settings.max_messages_per_s, _time.monotonic)
@@ -190,7 +188,7 @@ class Session:
         before, self.view = self.view, view
         now = _time.monotonic()
         if another_picture(before, view):
-            self.kept = None  # the recursion starts again
+            self.jobs.kept = None  # the recursion starts again
         if view.epoch != before.epoch:
             self.planner.scene_started(now)
             self.outbox.drop_frame()  # a frame of the scene being left must not follow the new `ready`
@@ -208,7 +206,7 @@ class Session:
 
     async def _paint(self) -> None:
         while True:
-            job = self._next_job()
+            job = self.jobs.next(self.view, _time.monotonic())
             if job is None:
                 self.changed.clear()
                 wait = (
@@ -234,17 +232,7 @@ class Session:
                 self.outbox.note(protocol.Error(message=message or fault_message(report_fault(where))))
                 continue
             if job.epoch == self.view.epoch:  # else painted for a scene the client has left
-                self._finished(job, painted)
-
-    def _next_job(self) -> Job | None:
-        view = self.view
-        if view.scene is None or view.camera is None:
-            return None
-        plan = self.planner.next_frame(_time.monotonic(), view.planned())
-        if plan is None:
-            return None
-        self.serial += 1
-        return job_of(view, plan, self.serial, self.kept)
+                self.outbox.post_frame(*self.jobs.finished(job, painted, self.view.width))
 
     def _stop(self, job: Job) -> Callable[[], bool]:
         """Refinements are abandoned as soon as anything changes; walk frames are short by design and always
@@ -257,18 +245,12 @@ class Session:
 
         return should_stop
 
-    def _finished(self, job: Job, frame: WalkPainted) -> None:
-        plan = job.plan
-        self.planner.frame_painted(plan, frame.seconds)
-        self.kept, self.shown_time = frame.serial, plan.time
-        self.outbox.post_frame(job.meta(frame, self.view.width), [jpeg for _, _, jpeg in frame.bands] or [frame.jpeg])
-
     async def _ask(self) -> None:
         """Answer the questions, one at a time (milliseconds of rays in a big scene: off the event loop)."""
         while True:
             question = await self.questions.next()
             try:
-                self.outbox.note(await asyncio.to_thread(answer, self.view, self.shown_time, question))
+                self.outbox.note(await asyncio.to_thread(answer, self.view, self.jobs.shown_time, question))
             except ValueError as exc:  # CameraError among them
                 self.outbox.note(protocol.Error(message=str(exc)))
             except Exception:  # a fault of ours: this question is lost, the session is not

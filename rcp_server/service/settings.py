@@ -30,11 +30,25 @@ def default_data() -> Path:
     return Path(os.environ.get("XDG_DATA_HOME") or Path.home() / ".local" / "share") / "rcp"
 
 
-class Settings(BaseSettings):
-    """Every ``RCP_`` setting, each declared once with its default, bounds and description (the reference page of
-    the documentation is generated from these declarations: ``docs/gen_reference.py``)."""
+class SettingsGroup(BaseSettings):
+    """What every group of settings shares: the ``RCP_`` prefix, and an empty value meaning the default."""
 
     model_config = SettingsConfigDict(env_prefix="RCP_", allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _empty_is_the_default(cls, value, info: ValidationInfo):
+        """An empty value (``RCP_DATA=``, often a variable of a deployment left unset) means the setting's default,
+        never the working directory (``Path("")`` is ``.``); an empty token is refused: unset, there is none."""
+        if isinstance(value, str) and not value.strip():
+            if info.field_name == "token":
+                raise ValueError("empty: leave it unset for a server without a token, or give one")
+            raise PydanticUseDefault()
+        return value
+
+
+class ServerSettings(SettingsGroup):
+    """Where the server listens and the folders it reads and writes."""
 
     host: str = Field(
         "127.0.0.1", description="the address to listen on: loopback only unless asked (the container sets 0.0.0.0)"
@@ -46,7 +60,44 @@ class Settings(BaseSettings):
         default_factory=default_data,
         description="uploads, videos and their records (store.py); a volume in the container",
     )
-    # ---- access ----
+
+    @field_validator("scenes", "client")
+    @classmethod
+    def _a_folder(cls, value: Path, info: ValidationInfo) -> Path:
+        if not value.is_dir():
+            raise ValueError("not a folder" if value.exists() else "no such folder")
+        if info.field_name == "client" and not (value / "index.html").is_file():
+            raise ValueError("no index.html in it: not the client's folder")
+        return value
+
+    @field_validator("data")
+    @classmethod
+    def _a_folder_or_none_yet(cls, value: Path) -> Path:
+        if value.exists() and not value.is_dir():  # a missing one is made at start-up (store.py)
+            raise ValueError("not a folder")
+        return value
+
+    @field_validator("host")
+    @classmethod
+    def _an_address_here(cls, value: str) -> str:
+        """A name that resolves to addresses of this machine: each one the server will listen on takes a socket
+        (port 0 here: whether the port is free is the server's to find out)."""
+        try:
+            found = socket.getaddrinfo(value, None, socket.AF_UNSPEC, socket.SOCK_STREAM, 0, socket.AI_PASSIVE)
+        except (socket.gaierror, UnicodeError) as exc:
+            raise ValueError(f"does not resolve ({getattr(exc, 'strerror', None) or exc})") from None
+        for family, kind, proto, _, address in found:
+            with socket.socket(family, kind, proto) as probe:
+                try:
+                    probe.bind((address[0], 0, *address[2:]))
+                except OSError as exc:
+                    raise ValueError(f"not an address of this machine ({exc.strerror or exc})") from None
+        return value
+
+
+class AccessSettings(SettingsGroup):
+    """Who may call: the token, the origins and the host names the server answers to."""
+
     token: SecretStr | None = Field(
         None,
         description="when set, every REST route but /api/health, the API's description and the WebSocket need it, "
@@ -61,7 +112,26 @@ class Settings(BaseSettings):
         "server bound to a loopback address answers only to loopback names (others get 403), one bound elsewhere "
         "to any (access.py)",
     )
-    # ---- capacity ----
+
+    @field_validator("cors_origins", "allowed_hosts", mode="before")
+    @classmethod
+    def _comma_separated(cls, value):
+        return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
+
+    @field_validator("token")
+    @classmethod
+    def _presentable(cls, value: SecretStr | None) -> SecretStr | None:
+        """A token a caller can send as it is: no white space at its ends (a Bearer header loses it), no control
+        characters (a header cannot carry them)."""
+        text = None if value is None else value.get_secret_value()
+        if text is not None and (text != text.strip() or any(ord(c) < 32 or ord(c) == 127 for c in text)):
+            raise ValueError("white space at an end or a control character: no caller could present it")
+        return value
+
+
+class CapacitySettings(SettingsGroup):
+    """What the server shares among its paintings: threads, turns, walk-throughs and memory."""
+
     threads: int = Field(
         default_factory=default_threads,
         ge=1,
@@ -86,7 +156,11 @@ class Settings(BaseSettings):
         "Retry-After (422 if it can never fit) (default: half the memory the machine or container has left as the "
         "server starts, at least 256 MB)",
     )
-    # ---- one request ----
+
+
+class RequestLimits(SettingsGroup):
+    """How much one request may ask for, and how long it may take."""
+
     max_pixels: int = Field(4096 * 2160, ge=1, description="width x height of one image or frame; more is a 422")
     max_work: int = Field(
         1 << 28,
@@ -111,7 +185,11 @@ class Settings(BaseSettings):
     send_timeout_s: float = Field(
         30.0, gt=0, description="a client that takes no data this long (WebSocket frames, an HTTP response) is let go"
     )
-    # ---- idle and slow connections (guard.py) ----
+
+
+class ConnectionLimits(SettingsGroup):
+    """Idle and slow connections (``guard.py``): how long, how often and how many."""
+
     header_timeout_s: float = Field(
         10.0,
         gt=0,
@@ -135,7 +213,11 @@ class Settings(BaseSettings):
         ge=1,
         description="HTTP requests in progress at once (idle connections do not count); more get 503 and Retry-After",
     )
-    # ---- videos (POST /api/videos), and Ray for them and for large REST renders ----
+
+
+class FilmSettings(SettingsGroup):
+    """Videos (POST /api/videos) and prints, and Ray for them and for large REST renders."""
+
     max_videos: int = Field(
         1, ge=1, description="video jobs painting at once (their tiles take the cores walks leave); more wait"
     )
@@ -181,7 +263,11 @@ class Settings(BaseSettings):
         "on Ray; 503 and Retry-After 30 with Ray's one-line fault when Ray fails it, and painted here while Ray backs "
         "off",
     )
-    # ---- walking ----
+
+
+class WalkSettings(SettingsGroup):
+    """Walking: the frame rate aimed for, rest, and walk-throughs on Ray."""
+
     frame_ms: float = Field(
         50.0, gt=0, description="while walking, aim for frames at least this fast (20 fps), 80% of it painting"
     )
@@ -196,7 +282,11 @@ class Settings(BaseSettings):
     walk_retry_s: int = Field(
         30, ge=1, description="a walker the server or its cluster has no room for is told to try again after this"
     )
-    # ---- uploaded scenes (POST /api/scenes) ----
+
+
+class UploadSettings(SettingsGroup):
+    """Uploaded scenes (POST /api/scenes): whether, how large, how many, how long kept."""
+
     uploads: bool = Field(True, description="0 turns uploads off (403)")
     upload_max_bytes: int = Field(
         64 << 20,
@@ -227,65 +317,6 @@ class Settings(BaseSettings):
         2 << 30, ge=64 << 20, description="the sandboxed reader of one upload: address space it may add; more is a 422"
     )
 
-    @field_validator("*", mode="before")
-    @classmethod
-    def _empty_is_the_default(cls, value, info: ValidationInfo):
-        """An empty value (``RCP_DATA=``, often a variable of a deployment left unset) means the setting's default,
-        never the working directory (``Path("")`` is ``.``); an empty token is refused: unset, there is none."""
-        if isinstance(value, str) and not value.strip():
-            if info.field_name == "token":
-                raise ValueError("empty: leave it unset for a server without a token, or give one")
-            raise PydanticUseDefault()
-        return value
-
-    @field_validator("cors_origins", "allowed_hosts", mode="before")
-    @classmethod
-    def _comma_separated(cls, value):
-        return [origin.strip() for origin in value.split(",") if origin.strip()] if isinstance(value, str) else value
-
-    @field_validator("token")
-    @classmethod
-    def _presentable(cls, value: SecretStr | None) -> SecretStr | None:
-        """A token a caller can send as it is: no white space at its ends (a Bearer header loses it), no control
-        characters (a header cannot carry them)."""
-        text = None if value is None else value.get_secret_value()
-        if text is not None and (text != text.strip() or any(ord(c) < 32 or ord(c) == 127 for c in text)):
-            raise ValueError("white space at an end or a control character: no caller could present it")
-        return value
-
-    @field_validator("scenes", "client")
-    @classmethod
-    def _a_folder(cls, value: Path, info: ValidationInfo) -> Path:
-        if not value.is_dir():
-            raise ValueError("not a folder" if value.exists() else "no such folder")
-        if info.field_name == "client" and not (value / "index.html").is_file():
-            raise ValueError("no index.html in it: not the client's folder")
-        return value
-
-    @field_validator("data")
-    @classmethod
-    def _a_folder_or_none_yet(cls, value: Path) -> Path:
-        if value.exists() and not value.is_dir():  # a missing one is made at start-up (store.py)
-            raise ValueError("not a folder")
-        return value
-
-    @field_validator("host")
-    @classmethod
-    def _an_address_here(cls, value: str) -> str:
-        """A name that resolves to addresses of this machine: each one the server will listen on takes a socket
-        (port 0 here: whether the port is free is the server's to find out)."""
-        try:
-            found = socket.getaddrinfo(value, None, socket.AF_UNSPEC, socket.SOCK_STREAM, 0, socket.AI_PASSIVE)
-        except (socket.gaierror, UnicodeError) as exc:
-            raise ValueError(f"does not resolve ({getattr(exc, 'strerror', None) or exc})") from None
-        for family, kind, proto, _, address in found:
-            with socket.socket(family, kind, proto) as probe:
-                try:
-                    probe.bind((address[0], 0, *address[2:]))
-                except OSError as exc:
-                    raise ValueError(f"not an address of this machine ({exc.strerror or exc})") from None
-        return value
-
     def upload_limits(self, room_bytes: int | None = None) -> Limits:
         """What the sandbox lets one upload take; ``room_bytes``, the memory the uploaded scenes have left."""
         return Limits(
@@ -296,6 +327,21 @@ class Settings(BaseSettings):
             seconds=self.upload_read_s,
             room_bytes=room_bytes,
         )
+
+
+class Settings(
+    UploadSettings,
+    WalkSettings,
+    FilmSettings,
+    ConnectionLimits,
+    RequestLimits,
+    CapacitySettings,
+    AccessSettings,
+    ServerSettings,
+):
+    """Every ``RCP_`` setting, each declared once with its default, bounds and description (the reference page of
+    the documentation is generated from these declarations: ``docs/gen_reference.py``), in its group; the bases
+    are listed last group first, so that the fields keep the groups' order (pydantic reads the bases in reverse)."""
 
     def painting_size(self, camera: Camera, width: int, height: int, params: PaintParams) -> tuple[int, int]:
         """The one decision of every door (REST renders, the walk's ``hello`` and every later camera, view and

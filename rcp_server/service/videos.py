@@ -213,6 +213,118 @@ def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Set
     )
 
 
+class FilmRun:
+    """Paints one job's film: its frames painted (going on after a lost worker), kept on disk as they finish with
+    their bytes counted against the videos' disk budget, then assembled into the MP4."""
+
+    def __init__(self, settings: Settings, store: Store, painter: Painter, disk_used: Callable[[], int]):
+        self.settings = settings
+        self.store = store
+        self.painter = painter  # paints the films' frames (the service closes it)
+        self.disk_used = disk_used  # the bytes every video takes, this one among them
+
+    def paint(self, job: VideoJob) -> int:
+        """Paints the frames not on disk yet and assembles the MP4; its size in bytes."""
+        real_dir(job.frames_dir)  # a link in its place is refused: nothing is written through it
+        for attempt in itertools.count(1):
+            try:
+                self._paint_frames(job)
+                break
+            except PainterFailed as exc:  # its workers were lost: the job goes on from its last frame
+                if attempt >= RAY_ATTEMPTS or exc.retry_s is None:  # the latter would fail again
+                    raise
+                wait = exc.retry_s
+                job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
+                self.store.update_video(job.id, message=job.message)
+                if job.cancelled.wait(wait):
+                    raise Abandoned from None
+                job.message = ""
+        self._assemble(job)
+        size = regular_size(job.file) or 0
+        if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
+            job.file.unlink(missing_ok=True)
+            raise OSError(
+                errno.ENOSPC, f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed"
+            )
+        return size
+
+    def _paint_frames(self, job: VideoJob) -> None:
+        """Paints the frames not on disk yet, keeping each as it finishes (and a temporal job's state)."""
+        start, previous = self._resume_point(job)
+        if start > 0:
+            log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
+        job.done_frames = start
+        job.written = folder_bytes(job.frames_dir)  # counted once here, then frame by frame
+        state_file = job.frames_dir / "state.npz"
+        for image, state in self._paintings(job, start, previous):
+            frame, kept = frame_file(job.frames_dir, job.done_frames), file_bytes(state_file)
+            write_whole(frame, partial(save_png, image))
+            if state is not None:
+                save_state(state_file, job.done_frames, state)
+            job.written += file_bytes(frame) + file_bytes(state_file) - kept
+            if self.disk_used() > self.settings.video_disk_bytes:  # this frame would pass the bound: it goes
+                job.written -= file_bytes(frame)
+                frame.unlink(missing_ok=True)
+                raise self._out_of_disk(job)
+            job.done_frames += 1
+            self.store.update_video(job.id, done_frames=job.done_frames)
+
+    def _out_of_disk(self, job: VideoJob) -> Refusal:
+        limit = self.settings.video_disk_bytes
+        return Refusal(
+            f"the videos would use more than the {limit:,} bytes of RCP_VIDEO_DISK_BYTES: stopped after "
+            f"{job.done_frames} frames, kept until the video expires or is deleted",
+            507,
+        )
+
+    def _resume_point(self, job: VideoJob) -> tuple[int, PaintState | None]:
+        """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
+        here the state it continues from. A frame written without its state is painted again."""
+        written = 0
+        while written < job.frames and regular_size(frame_file(job.frames_dir, written)) is not None:
+            written += 1
+        if not job.temporal or written == 0:
+            return written, None
+        saved = load_state(job.frames_dir / "state.npz", state_bytes(job.width, job.height))
+        if saved is not None and saved[0] in (written - 1, written - 2):
+            index, state = saved
+            if index == written - 2:  # stopped between the frame and its state: that frame is painted again
+                frame_file(job.frames_dir, written - 1).unlink(missing_ok=True)
+            return index + 1, state
+        return written, None  # no state to go on from (a painter that keeps it, as Ray's bands do): painted again
+
+    def _paintings(
+        self, job: VideoJob, start: int, previous: PaintState | None
+    ) -> Iterator[tuple[np.ndarray, PaintState | None]]:
+        """The frames from ``start`` on, each (height, width, 3) uint8, with the state a temporal job continues
+        from (None when nothing needs keeping)."""
+        if start >= job.frames:
+            return
+        scene = job.scene
+        assert scene is not None
+
+        def stop() -> bool:
+            return job.cancelled.is_set()
+
+        yield from self.painter.film(
+            scene, job.path, job.width, job.height, job.params, job.temporal, start, previous, stop
+        )
+
+    def _assemble(self, job: VideoJob) -> None:
+        """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""
+        camera = job.path.cameras[0]  # a path keeps one projection: its frames are all laid out alike
+        writer = Mp4Writer(job.file, job.width, job.height, job.path.fps, camera.projection, camera.stereo)
+        try:
+            for k in range(job.frames):
+                if job.cancelled.is_set():
+                    raise Abandoned
+                writer.write(kept_frame(job.frames_dir, k, job.width, job.height))
+            writer.close()
+        except BaseException:
+            writer.abort()
+            raise
+
+
 class Videos:
     """The video jobs of one server: submitted, run, kept for ``video_keep_s`` once finished, then dropped; all
     of it recorded in ``store`` so that a restart resumes where the last run stopped (:meth:`resume`)."""
@@ -222,6 +334,7 @@ class Videos:
         self.workshop = workshop  # whether the server is stopping
         self.store = store
         self.painter = painter  # paints the films' frames (the service closes it)
+        self.run = FilmRun(settings, store, painter, self.disk_used)
         self._jobs: dict[str, VideoJob] = {}
         self._lock = threading.Lock()
         self._closing = False  # stopping the server: jobs in progress stay recorded as they are, to resume
@@ -344,27 +457,7 @@ class Videos:
             job.state = "running"
         self.store.update_video(job.id, state="running")
         try:
-            real_dir(job.frames_dir)  # a link in its place is refused: nothing is written through it
-            for attempt in itertools.count(1):
-                try:
-                    self._paint_frames(job)
-                    break
-                except PainterFailed as exc:  # its workers were lost: the job goes on from its last frame
-                    if attempt >= RAY_ATTEMPTS or exc.retry_s is None:  # the latter would fail again
-                        raise
-                    wait = exc.retry_s
-                    job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
-                    self.store.update_video(job.id, message=job.message)
-                    if job.cancelled.wait(wait):
-                        raise Abandoned from None
-                    job.message = ""
-            self._assemble(job)
-            size = regular_size(job.file) or 0
-            if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
-                job.file.unlink(missing_ok=True)
-                raise OSError(
-                    errno.ENOSPC, f"the videos would use more than the {self.settings.video_disk_bytes:,} bytes allowed"
-                )
+            size = self.run.paint(job)
             self._finish(job, "done", f"{job.frames} frames, {size:,} bytes")
         except Exception as exc:
             if self._closing or self.workshop.stopping:  # recorded as it was: the next start goes on from here
@@ -384,82 +477,6 @@ class Videos:
                 self._finish(job, "failed", str(exc))
             else:
                 self._finish(job, "failed", fault_message(report_fault(f"video {job.id}: {exc}")))
-
-    def _paint_frames(self, job: VideoJob) -> None:
-        """Paints the frames not on disk yet, keeping each as it finishes (and a temporal job's state)."""
-        start, previous = self._resume_point(job)
-        if start > 0:
-            log.info("video %s resumes at frame %d of %d", job.id, start, job.frames)
-        job.done_frames = start
-        job.written = folder_bytes(job.frames_dir)  # counted once here, then frame by frame
-        state_file = job.frames_dir / "state.npz"
-        for image, state in self._paintings(job, start, previous):
-            frame, kept = frame_file(job.frames_dir, job.done_frames), file_bytes(state_file)
-            write_whole(frame, partial(save_png, image))
-            if state is not None:
-                save_state(state_file, job.done_frames, state)
-            job.written += file_bytes(frame) + file_bytes(state_file) - kept
-            if self.disk_used() > self.settings.video_disk_bytes:  # this frame would pass the bound: it goes
-                job.written -= file_bytes(frame)
-                frame.unlink(missing_ok=True)
-                raise self._out_of_disk(job)
-            job.done_frames += 1
-            self.store.update_video(job.id, done_frames=job.done_frames)
-
-    def _out_of_disk(self, job: VideoJob) -> Refusal:
-        limit = self.settings.video_disk_bytes
-        return Refusal(
-            f"the videos would use more than the {limit:,} bytes of RCP_VIDEO_DISK_BYTES: stopped after "
-            f"{job.done_frames} frames, kept until the video expires or is deleted",
-            507,
-        )
-
-    def _resume_point(self, job: VideoJob) -> tuple[int, PaintState | None]:
-        """The first frame still to paint (the frames before it are on disk), and for a temporal job painted
-        here the state it continues from. A frame written without its state is painted again."""
-        written = 0
-        while written < job.frames and regular_size(frame_file(job.frames_dir, written)) is not None:
-            written += 1
-        if not job.temporal or written == 0:
-            return written, None
-        saved = load_state(job.frames_dir / "state.npz", state_bytes(job.width, job.height))
-        if saved is not None and saved[0] in (written - 1, written - 2):
-            index, state = saved
-            if index == written - 2:  # stopped between the frame and its state: that frame is painted again
-                frame_file(job.frames_dir, written - 1).unlink(missing_ok=True)
-            return index + 1, state
-        return written, None  # no state to go on from (a painter that keeps it, as Ray's bands do): painted again
-
-    def _paintings(
-        self, job: VideoJob, start: int, previous: PaintState | None
-    ) -> Iterator[tuple[np.ndarray, PaintState | None]]:
-        """The frames from ``start`` on, each (height, width, 3) uint8, with the state a temporal job continues
-        from (None when nothing needs keeping)."""
-        if start >= job.frames:
-            return
-        scene = job.scene
-        assert scene is not None
-
-        def stop() -> bool:
-            return job.cancelled.is_set()
-
-        yield from self.painter.film(
-            scene, job.path, job.width, job.height, job.params, job.temporal, start, previous, stop
-        )
-
-    def _assemble(self, job: VideoJob) -> None:
-        """The MP4 of the frames on disk, in one pass of the encoder (as an uninterrupted run encodes them)."""
-        camera = job.path.cameras[0]  # a path keeps one projection: its frames are all laid out alike
-        writer = Mp4Writer(job.file, job.width, job.height, job.path.fps, camera.projection, camera.stereo)
-        try:
-            for k in range(job.frames):
-                if job.cancelled.is_set():
-                    raise Abandoned
-                writer.write(kept_frame(job.frames_dir, k, job.width, job.height))
-            writer.close()
-        except BaseException:
-            writer.abort()
-            raise
 
     def _finish(self, job: VideoJob, state: State, message: str = "", keep: bool = False) -> None:
         """``keep``: its frames stay on disk (and count) until the job expires or is deleted."""
