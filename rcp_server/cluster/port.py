@@ -109,6 +109,9 @@ class RayPort:
         except Full as full:
             raise Refusal(str(full), 503, full.retry_after) from None
 
+    def release(self, walker: object) -> None:
+        self.local.release(walker)  # a walker on Ray holds its buffers there
+
     def leave(self, walker: object) -> None:
         if self.walks is not None:
             self.walks.leave(walker)

@@ -80,6 +80,11 @@ class Painter(Protocol):
         """``walker`` has gone: what it held is given back."""
         ...
 
+    def release(self, walker: object) -> None:
+        """``walker`` takes less memory from now on (a smaller view): the buffers it no longer needs go back, its
+        kept state stays."""
+        ...
+
     def figures(self) -> dict:
         """What the painter reports in ``/api/health`` beside the workshop's figures (nothing, on threads)."""
         ...
@@ -139,9 +144,21 @@ class LocalPainter:
         with self._lock:
             held = self._walkers.pop(walker, None)
         if held is not None:
-            held[1].close()  # its buffers go once its last painting stops
-            if self.give_back is not None:
-                self.give_back.after(held[1])
+            self._drop(held[1])
+
+    def release(self, walker: object) -> None:
+        with self._lock:
+            held = self._walkers.get(walker)
+            if held is not None:
+                self._walkers[walker] = (held[0], Workspace())
+        if held is not None:
+            self._drop(held[1])
+
+    def _drop(self, workspace: Workspace) -> None:
+        """``workspace``'s buffers go once its last painting stops, and their memory back to the system."""
+        workspace.close()
+        if self.give_back is not None:
+            self.give_back.after(workspace)
 
     def figures(self) -> dict:
         return {}

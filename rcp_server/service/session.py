@@ -65,6 +65,17 @@ def close_reason(line: str, limit: int = 120) -> str:
     return line.encode()[: limit - len(tail) - 3].decode(errors="ignore") + "…" + tail
 
 
+def hold_memory(service: Service, walker: object, before: WalkView, view: WalkView) -> None:
+    """``walker``'s paintings hold their memory as ``view`` paints them (or :class:`~.memory.NoRoom`, a refusal);
+    a smaller view gives the larger buffers back."""
+    if view.params is None or (view.width, view.height, view.params) == (before.width, before.height, before.params):
+        return
+    held = service.memory.held(walker)
+    admit(service.memory, walker, painting_of(view))
+    if service.memory.held(walker) < held:
+        service.painter.release(walker)
+
+
 class Closing(Exception):
     """The session closes the socket: ``code`` and ``reason`` (the one error line it sent before)."""
 
@@ -166,12 +177,7 @@ class Session:
             view = apply(self.view, msg, self.settings, partial(find_scene, self.service))
             if isinstance(view, Refusal):
                 raise view
-            if view.params is not None and (view.width, view.height, view.params) != (
-                self.view.width,
-                self.view.height,
-                self.view.params,
-            ):
-                admit(self.service.memory, self, painting_of(view))  # its paintings' memory, or NoRoom (a Refusal)
+            hold_memory(self.service, self, self.view, view)
             if first and view.scene is not None and view.params is not None:  # its place with the painter
                 self.painter.admit(self, view.params, view.scene)  # on Ray: while the cluster has room
             self._show(view)
