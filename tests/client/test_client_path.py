@@ -136,13 +136,13 @@ def test_a_recorded_path_saved_loaded_and_rendered_at_a_chosen_size_with_a_movin
         options = page.evaluate("[...document.querySelectorAll('#path-size option')].map((o) => o.textContent)")
         assert options == ["the view's (64×48)", "640×360", "1280×720", "1920×1080"]
         page.select_option("#path-size", "640x360")
-        page.locator("#path-fps").fill("6")
+        page.locator("#path-fps").fill("24")  # frames enough that a poll sees the bar between its ends
         with page.expect_request("**/api/videos") as request:
             page.locator("#path [data-path=render]").click()
         body = request.value.post_data_json
         assert (body["width"], body["height"]) == (640, 360) and body["paint"] == {"iterations": 2}
         link = page.wait_for_selector("#path [data-path=download]:not([hidden])", timeout=120_000)
-        frames = int(recorded[-1]["t"] * 6 + 1e-9) + 1
+        frames = int(recorded[-1]["t"] * 24 + 1e-9) + 1
         progress = page.evaluate("rcp.path.progress")
         assert progress[0] == 0 and progress[-1] == frames and progress == sorted(progress)
         assert any(0 < p < frames for p in progress)  # the bar moved while the frames were painted
