@@ -6,6 +6,7 @@ import argparse
 import json
 import logging
 import math
+import os
 import signal
 import sys
 import time
@@ -397,17 +398,26 @@ def _scenes() -> None:
             print(f"{name:12s} BROKEN: {exc}")
 
 
-def _compile() -> None:
+def _settings(**given):
+    """The server's settings: the ``RCP_*`` environment, with ``given`` command-line options over it; a misspelt
+    variable or a bad value is a one-line usage error naming it."""
     from pydantic import ValidationError
 
+    from .service.settings import Settings, setting_error, unknown_variable
+
+    if unknown := unknown_variable(dict(os.environ)):
+        raise UsageError(unknown)
+    try:
+        return Settings(**given)
+    except ValidationError as exc:
+        raise UsageError(setting_error(exc, {name: f"--{name}" for name in given})) from None
+
+
+def _compile() -> None:
     from .painting import warmup
-    from .service.settings import Settings, setting_error
     from .service.state import load_scenes
 
-    try:
-        folder = Settings().scenes  # the scenes `rcp serve` serves (RCP_SCENES): each compiles what it calls
-    except ValidationError as exc:
-        raise UsageError(setting_error(exc)) from None
+    folder = _settings().scenes  # the scenes `rcp serve` serves (RCP_SCENES): each compiles what it calls
     clock = time.monotonic()
     scenes = load_scenes(folder)
     warmup.warm(scenes.values())
@@ -415,16 +425,9 @@ def _compile() -> None:
 
 
 def _serve(args: argparse.Namespace) -> None:
-    from pydantic import ValidationError
-
     from .service.server import Server
-    from .service.settings import Settings, setting_error
 
-    given = {k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None}
-    try:
-        settings = Settings(**given)
-    except ValidationError as exc:
-        raise UsageError(setting_error(exc, {name: f"--{name}" for name in given})) from None
+    settings = _settings(**{k: v for k, v in (("host", args.host), ("port", args.port)) if v is not None})
     logging.getLogger("rcp").setLevel(logging.INFO)
     for handler in logging.getLogger().handlers:
         handler.setFormatter(logging.Formatter("rcp: %(levelname)s: %(message)s"))

@@ -5,6 +5,7 @@ Every limit a caller can run into is here, with a default that keeps one 2-core 
 
 from __future__ import annotations
 
+import difflib
 import os
 import socket
 from pathlib import Path
@@ -15,6 +16,7 @@ from pydantic_core import PydanticUseDefault
 from pydantic_settings import BaseSettings, NoDecode, SettingsConfigDict
 
 from ..camera.camera import Camera
+from ..engine.kernels import embree, screencells
 from ..painting.loop import default_threads
 from ..scene.untrusted import Limits
 from ..settings.params import PaintParams
@@ -375,3 +377,24 @@ def setting_error(exc: ValidationError, flags: dict[str, str] | None = None) -> 
     message = errors[0]["msg"].removeprefix("Value error, ")
     more = f" (and {len(errors) - 1} more)" if len(errors) > 1 else ""
     return " ".join(f"{name}{shown}: {message}{more}".split())  # one line, whatever the value held
+
+
+# the RCP_ variables read below the service, by the engine and by Ray's driver process, not settings of the server
+ENGINE_VARIABLES = (screencells.VARIABLE, embree.LIBRARY_VARIABLE, "RCP_LOG_LEVEL")
+
+
+def unknown_variable(environ: dict[str, str]) -> str | None:
+    """One line naming the first ``RCP_*`` variable of ``environ`` that nothing reads, with the setting it most
+    likely meant (``RCP_MAX_PIXEL``: did you mean ``RCP_MAX_PIXELS``?), else None: a misspelt limit would otherwise
+    be ignored and its default served in silence."""
+    known = [f"RCP_{name.upper()}" for name in Settings.model_fields] + list(ENGINE_VARIABLES)
+    for name in sorted(environ):
+        if name.startswith("RCP_") and name not in known:
+            close = difflib.get_close_matches(name, known, n=1, cutoff=0.8)
+            meant = (
+                f": did you mean {close[0]}?"
+                if close
+                else " (the settings are listed in the reference of the documentation)"
+            )
+            return f"{name} is no setting of rcp{meant}"
+    return None

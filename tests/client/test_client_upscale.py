@@ -170,7 +170,7 @@ def test_a_walk_frame_drawn_sharp_is_closer_to_the_full_painting_than_bilinear_a
     assert accelerated is False  # SwiftShader: "auto" leaves the upscale to machines with a GPU
     page.evaluate(f"rcp.connection.stop(); rcp.frames.resize({CANVAS[0]}, {CANVAS[1]})")  # our frames only now
 
-    look = Path(os.environ.get("RCP_LOOK_DIR", tmp_path))
+    look = Path(os.environ.get("TEST_LOOK_DIR", tmp_path))
     probe = 0
     for name, paint in PAINTINGS:
         full = decode(render(live_server, *CANVAS, format="png", paint=paint(CANVAS[0])))

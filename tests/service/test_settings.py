@@ -18,7 +18,7 @@ from starlette.datastructures import Headers, QueryParams
 
 from rcp_server.bench.harness import PACKAGE_ROOT, free_port
 from rcp_server.service.access import admits
-from rcp_server.service.settings import Settings
+from rcp_server.service.settings import ENGINE_VARIABLES, Settings, unknown_variable
 
 READY_S = 600  # a first start compiles the kernels: minutes on a machine shared with other work
 
@@ -60,6 +60,8 @@ def bad_values(tmp_path: Path) -> list[tuple[str, str, str]]:
         ("RCP_FRAME_MS", "nan", "finite"),
         ("RCP_RENDER_TIMEOUT_S", "inf", "finite"),
         ("RCP_UPLOADS", "perhaps", "boolean"),
+        ("RCP_MAX_PIXEL", "100", "is no setting of rcp: did you mean RCP_MAX_PIXELS?"),  # misspelt: not ignored
+        ("RCP_TOKN", "sesame", "did you mean RCP_TOKEN?"),
     ]
 
 
@@ -78,6 +80,14 @@ def test_each_bad_setting_is_one_line_naming_it_and_exit_2(tmp_path, command):
         if name == "RCP_TOKEN":
             assert value.strip() == "" or value.strip() not in run.stderr  # never the token itself
     assert not (tmp_path / "xdg").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["a-file"]
+
+
+def test_every_variable_something_reads_is_known_and_no_other():
+    known = {f"RCP_{name.upper()}": "1" for name in Settings.model_fields} | dict.fromkeys(ENGINE_VARIABLES, "1")
+    assert unknown_variable(known | {"PATH": "/bin", "RCPX": "1"}) is None
+    assert unknown_variable(known | {"RCP_NOTHING_LIKE_IT": "1"}) == (
+        "RCP_NOTHING_LIKE_IT is no setting of rcp (the settings are listed in the reference of the documentation)"
+    )
 
 
 def test_a_bad_host_on_the_command_line_is_named_as_the_option(tmp_path):
