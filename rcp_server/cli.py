@@ -442,8 +442,13 @@ def _serve(args: argparse.Namespace) -> None:
             print("rcp: a token is required (RCP_TOKEN): open the client at /#token=<token>")
 
     server = Server(settings, listening, log_level="info")
-    server.open_service()  # the data folder and Ray first: either failing is one line, before the port is taken
-    server.run()
+    try:
+        sock = server.bind()
+    except OSError as exc:
+        where = f"{settings.host}:{settings.port}"
+        raise UsageError(f"{where}: {exc.strerror or exc} (--port or RCP_PORT chooses another port)") from None
+    server.open_service()  # the data folder and Ray: either failing is one line, before anyone is answered
+    server.run(sockets=[sock])
 
 
 def _stopped(signum, frame) -> None:

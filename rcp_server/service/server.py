@@ -72,6 +72,23 @@ class Server(uvicorn.Server):
         Ray that does not answer is then an error before any port is taken, and nothing reports healthy first."""
         self.app.state.service = Service.open(self.settings)
 
+    def bind(self) -> socket.socket:
+        """Take the address now, before anything starts (uvicorn's own bind comes after the app's startup and
+        fails with a log line and exit status 3): the socket to pass to ``run``. Raises OSError when the port is
+        taken or the address is not this machine's."""
+        family, kind, proto, _, address = socket.getaddrinfo(
+            self.settings.host, self.settings.port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )[0]
+        sock = socket.socket(family, kind, proto)
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as uvicorn: a restart need not wait TIME_WAIT
+        try:
+            sock.bind(address)
+        except OSError:
+            sock.close()
+            raise
+        sock.set_inheritable(True)
+        return sock
+
     async def startup(self, sockets=None) -> None:
         await super().startup(sockets)
         if self.started and self.listening is not None:  # bound and listening: a connection is answered now

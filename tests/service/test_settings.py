@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -88,6 +89,19 @@ def test_every_variable_something_reads_is_known_and_no_other():
     assert unknown_variable(known | {"RCP_NOTHING_LIKE_IT": "1"}) == (
         "RCP_NOTHING_LIKE_IT is no setting of rcp (the settings are listed in the reference of the documentation)"
     )
+
+
+def test_a_port_in_use_is_one_line_and_exit_2_before_anything_starts(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        run = rcp(tmp_path, "serve", "--port", str(port))
+    assert run.returncode == 2 and run.stderr.count("\n") == 1 and not run.stdout, run.stderr
+    assert run.stderr.startswith(f"rcp: error: 127.0.0.1:{port}: Address already in use (--port or RCP_PORT"), (
+        run.stderr
+    )
+    assert not (tmp_path / "xdg").exists()  # no data folder opened
 
 
 def test_a_bad_host_on_the_command_line_is_named_as_the_option(tmp_path):
