@@ -2,7 +2,8 @@
 (``RCP_MEMORY_BYTES``), and the memory of those that ended given back to the system.
 
 A walk-through holds its share from its ``hello`` until it closes (and again, resized, at every change of its
-size or settings); a REST render holds its own while it paints. The share is what the painting declares a
+size or settings); a REST render holds its own while it paints; a film or a print waits for its own, then holds it
+while it paints. The share is what the painting declares a
 pixel costs (``painting/workspace.py::pixel_bytes``) times its pixels (both eyes of a stereo pair): a painting
 that can never fit is refused for good, one that does not fit beside the others now is told to try again.
 
@@ -20,7 +21,7 @@ import ctypes.util
 import math
 import threading
 import weakref
-from collections.abc import Hashable, Iterator
+from collections.abc import Callable, Hashable, Iterator
 from pathlib import Path
 from typing import Protocol, TypeVar
 
@@ -102,18 +103,22 @@ class Budget:
             if nbytes <= room:
                 self._held[holder] = nbytes
                 return
-        if nbytes > self.total:
-            raise NoRoom(
-                f"{what} of {size[0]}x{size[1]} pixels needs {mb(nbytes)} of memory, more than the {mb(self.total)} "
-                f"all paintings may take (RCP_MEMORY_BYTES): {smaller(size, nbytes, self.total)}",
-                None,
-            )
+        self.check(nbytes, size, what)
         raise NoRoom(
             f"{what} of {size[0]}x{size[1]} pixels needs {mb(nbytes)} of memory; the paintings in progress leave "
             f"{mb(max(0, room))} of the {mb(self.total)} (RCP_MEMORY_BYTES): {smaller(size, nbytes, room)}, or try "
             f"again in {RETRY_AFTER_S} s",
             RETRY_AFTER_S,
         )
+
+    def check(self, nbytes: int, size: tuple[int, int], what: str) -> None:
+        """:class:`NoRoom` (422) if ``nbytes`` could never fit, whatever else ends."""
+        if nbytes > self.total:
+            raise NoRoom(
+                f"{what} of {size[0]}x{size[1]} pixels needs {mb(nbytes)} of memory, more than the {mb(self.total)} "
+                f"all paintings may take (RCP_MEMORY_BYTES): {smaller(size, nbytes, self.total)}",
+                None,
+            )
 
     def release(self, holder: Hashable) -> int:
         """Give back what ``holder`` held; the bytes it held (0: nothing)."""
@@ -129,6 +134,25 @@ class Budget:
             yield
         finally:
             self.release(holder)
+
+
+def wait_for_room(
+    budget: Budget, holder: Hashable, nbytes: int, size: tuple[int, int], what: str, cancelled: threading.Event,
+    waiting: Callable[[str], None],
+) -> bool:  # fmt: skip
+    """Hold ``nbytes`` for ``holder`` (a film or a print: a background job nobody waits on to be refused) once
+    they fit beside the other paintings, saying why it waits through ``waiting`` meanwhile: True once held, False
+    if ``cancelled`` first; :class:`NoRoom` (422) if they can never fit."""
+    while True:
+        try:
+            budget.reserve(holder, nbytes, size, what)
+            return True
+        except NoRoom as refusal:
+            if refusal.retry_after is None:
+                raise
+            waiting(refusal.message)
+            if cancelled.wait(refusal.retry_after):
+                return False
 
 
 def smaller(size: tuple[int, int], nbytes: int, room: int) -> str:

@@ -22,6 +22,7 @@ from ..media import prints
 from ..painting.loop import Abandoned
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
+from .memory import Budget, painting_bytes, wait_for_room
 from .refusal import Refusal
 from .settings import Settings
 from .store import new_video_id
@@ -70,9 +71,12 @@ class PrintJob:
 class Prints:
     """The print jobs of one server: one painted at a time, a few waiting, each kept a while once finished."""
 
-    def __init__(self, settings: Settings, workshop: Workshop, folder: Path, disk_used_by_videos=lambda: 0):
+    def __init__(
+        self, settings: Settings, workshop: Workshop, memory: Budget, folder: Path, disk_used_by_videos=lambda: 0
+    ):
         self.settings = settings
         self.workshop = workshop
+        self.memory = memory  # the paintings' memory: a print holds its largest band's while it paints
         self.folder = Path(folder)
         shutil.rmtree(self.folder, ignore_errors=True)  # prints do not outlive a restart
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -94,6 +98,8 @@ class Prints:
                 f"{width}x{height} pixels x {params.spp} spp x their iterations is {work:,} rays, more than the "
                 f"{self.settings.max_print_work:,} one print may take (RCP_MAX_PRINT_WORK)"
             )
+        band = prints.bands(width, height)[0]
+        self.memory.check(painting_bytes(params, band.width, band.height), (band.width, band.height), "a band of it")
         self.sweep()
         job_id = new_video_id()
         job = PrintJob(job_id, scene, camera, width, height, params, time_s, bits, alpha, self.folder / f"{job_id}.png")
@@ -115,6 +121,23 @@ class Prints:
         return job
 
     def _run(self, job: PrintJob) -> None:
+        band = prints.bands(job.width, job.height)[0]  # the first is the largest
+        nbytes = painting_bytes(job.params, band.width, band.height)
+        holder, size = ("print", job.id), (band.width, band.height)
+        try:
+            if not wait_for_room(self.memory, holder, nbytes, size, "a band of this print", job.cancelled,
+                                 lambda line: setattr(job, "message", line)):  # fmt: skip
+                return
+        except Refusal as refusal:  # a band that can never fit
+            self._finish(job, "failed", refusal.message)
+            return
+        job.message = ""
+        try:
+            self._paint(job)
+        finally:
+            self.memory.release(holder)
+
+    def _paint(self, job: PrintJob) -> None:
         if job.cancelled.is_set():
             return
         job.state = "running"

@@ -85,10 +85,10 @@ class Service:
             workshop = Workshop(settings.threads, settings.max_renders, settings.max_waiting)
             give_back = GiveBack()
             painter = open_painter(settings, workshop, give_back)
-            videos = Videos(settings, workshop, store, painter)
             memory = Budget(settings.memory_bytes)
+            videos = Videos(settings, workshop, store, painter, memory)
             service = cls(settings, {}, {}, workshop, videos, store, painter, memory=memory, give_back=give_back)
-            service.prints = Prints(settings, workshop, store.folder / "prints", videos.disk_used)
+            service.prints = Prints(settings, workshop, memory, store.folder / "prints", videos.disk_used)
             return service
         except BaseException:
             for opened in (painter, workshop, store):

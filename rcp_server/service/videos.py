@@ -47,6 +47,7 @@ from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .faults import fault_message, report_fault
 from .filmfiles import DamagedFrame, file_bytes, folder_bytes, frame_file, kept_frame, save_png, state_bytes
+from .memory import Budget, painting_bytes, wait_for_room
 from .painter import Painter, PainterFailed
 from .refusal import Refusal
 from .settings import Settings
@@ -175,6 +176,14 @@ def film_door(
     return width, height
 
 
+def film_bytes(width: int, height: int, path: CameraPath, params: PaintParams, temporal: int | None) -> int:
+    """The memory a film's painting holds while it paints: its most costly painting (twice where its keys
+    cross-fade), with the frame before kept when it is temporal."""
+    paintings = path.track.paintings() if path.track is not None else [params]
+    most = max(painting_bytes(p, width, height, kept=2 if temporal else 1) for p in paintings)
+    return most * (2 if path.track is not None and path.track.fades else 1)
+
+
 def job_of(record: VideoRecord, scene: Scene | None, store: Store, settings: Settings) -> VideoJob:
     """The job a stored record describes, checked as a new one is at the door (the same limits: a record is
     untrusted input); ``ValueError`` in one line for one that cannot be painted as it says."""
@@ -217,28 +226,38 @@ class FilmRun:
     """Paints one job's film: its frames painted (going on after a lost worker), kept on disk as they finish with
     their bytes counted against the videos' disk budget, then assembled into the MP4."""
 
-    def __init__(self, settings: Settings, store: Store, painter: Painter, disk_used: Callable[[], int]):
+    def __init__(
+        self, settings: Settings, store: Store, painter: Painter, memory: Budget, disk_used: Callable[[], int]
+    ):
         self.settings = settings
         self.store = store
         self.painter = painter  # paints the films' frames (the service closes it)
+        self.memory = memory  # the paintings' memory, which a film holds while it paints
         self.disk_used = disk_used  # the bytes every video takes, this one among them
 
     def paint(self, job: VideoJob) -> int:
-        """Paints the frames not on disk yet and assembles the MP4; its size in bytes."""
+        """Paints the frames not on disk yet, once its memory is held, and assembles the MP4; its size in bytes."""
         real_dir(job.frames_dir)  # a link in its place is refused: nothing is written through it
-        for attempt in itertools.count(1):
-            try:
-                self._paint_frames(job)
-                break
-            except PainterFailed as exc:  # its workers were lost: the job goes on from its last frame
-                if attempt >= RAY_ATTEMPTS or exc.retry_s is None:  # the latter would fail again
-                    raise
-                wait = exc.retry_s
-                job.message = f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s"
-                self.store.update_video(job.id, message=job.message)
-                if job.cancelled.wait(wait):
-                    raise Abandoned from None
-                job.message = ""
+        holder, pixels = ("video", job.id), (job.width, job.height)
+        nbytes = film_bytes(job.width, job.height, job.path, job.params, job.temporal)
+        if not wait_for_room(self.memory, holder, nbytes, pixels, "this video", job.cancelled, self._say(job)):
+            raise Abandoned
+        self._say(job)("")
+        try:
+            for attempt in itertools.count(1):
+                try:
+                    self._paint_frames(job)
+                    break
+                except PainterFailed as exc:  # its workers were lost: the job goes on from its last frame
+                    if attempt >= RAY_ATTEMPTS or exc.retry_s is None:  # the latter would fail again
+                        raise
+                    wait = exc.retry_s
+                    self._say(job)(f"{exc}; going on from frame {job.done_frames} in {math.ceil(wait)} s")
+                    if job.cancelled.wait(wait):
+                        raise Abandoned from None
+                    job.message = ""
+        finally:
+            self.memory.release(holder)
         self._assemble(job)
         size = regular_size(job.file) or 0
         if size + self.disk_used() > self.settings.video_disk_bytes:  # the finished videos and this one
@@ -268,6 +287,15 @@ class FilmRun:
                 raise self._out_of_disk(job)
             job.done_frames += 1
             self.store.update_video(job.id, done_frames=job.done_frames)
+
+    def _say(self, job: VideoJob) -> Callable[[str], None]:
+        """What the job's status says while it waits (for memory, for Ray), kept with its record."""
+
+        def say(message: str) -> None:
+            job.message = message
+            self.store.update_video(job.id, message=message)
+
+        return say
 
     def _out_of_disk(self, job: VideoJob) -> Refusal:
         limit = self.settings.video_disk_bytes
@@ -329,12 +357,13 @@ class Videos:
     """The video jobs of one server: submitted, run, kept for ``video_keep_s`` once finished, then dropped; all
     of it recorded in ``store`` so that a restart resumes where the last run stopped (:meth:`resume`)."""
 
-    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter: Painter):
+    def __init__(self, settings: Settings, workshop: Workshop, store: Store, painter: Painter, memory: Budget):
         self.settings = settings
         self.workshop = workshop  # whether the server is stopping
         self.store = store
         self.painter = painter  # paints the films' frames (the service closes it)
-        self.run = FilmRun(settings, store, painter, self.disk_used)
+        self.memory = memory
+        self.run = FilmRun(settings, store, painter, memory, self.disk_used)
         self._jobs: dict[str, VideoJob] = {}
         self._lock = threading.Lock()
         self._closing = False  # stopping the server: jobs in progress stay recorded as they are, to resume
@@ -376,6 +405,7 @@ class Videos:
         place in the queue taken)."""
         settings = self.settings
         width, height = film_door(settings, path.cameras[0], width, height, params, temporal, path.frame_count)
+        self.memory.check(film_bytes(width, height, path, params, temporal), (width, height), "this video")
         self.sweep()
         job_id = new_video_id()
         store = self.store

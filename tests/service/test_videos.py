@@ -20,10 +20,12 @@ from rcp_server.cluster.painter import Backoff
 from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene
-from rcp_server.service.painter import PainterFailed
+from rcp_server.service.memory import Budget
+from rcp_server.service.painter import LocalPainter, PainterFailed
+from rcp_server.service.refusal import Refusal
 from rcp_server.service.settings import Settings
 from rcp_server.service.store import Store, VideoRecord, VideoSettings
-from rcp_server.service.videos import VideoRefused, Videos, path_spec, video_bytes
+from rcp_server.service.videos import VideoRefused, Videos, film_bytes, path_spec, video_bytes
 from rcp_server.service.workshop import Workshop
 from rcp_server.settings.params import PaintParams
 from rcp_server.util import images
@@ -244,7 +246,7 @@ def test_a_job_resumed_from_the_last_run_reserves_its_estimate_at_submission(tmp
                 bytes=0,
             )
         )
-        videos = Videos(settings, workshop, store, StillPainting())
+        videos = Videos(settings, workshop, store, StillPainting(), Budget(settings.memory_bytes))
         try:
             videos.resume(lambda name: scene if name == "tiny" else None)
             assert videos.get("0123456789abcdef").state in ("queued", "running")
@@ -319,7 +321,7 @@ def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(
     workshop = Workshop(1, 1)
     painter = FlakyRay()
     with Store(tmp_path) as store:
-        videos = Videos(settings, workshop, store, painter)
+        videos = Videos(settings, workshop, store, painter, Budget(settings.memory_bytes))
         try:
             job = videos.submit(make_scene(), parse_path(PATH).resolve(CAMERA), 32, 32, PaintParams(), None)
             deadline = time.monotonic() + 30
@@ -365,3 +367,36 @@ def test_a_kept_job_keeps_its_cameras_whole():
     path = parse_path({**PATH, "keyframes": keyframes}).resolve(CAMERA)
     again = parse_path(path_spec(path)).resolve(CAMERA.moved(fov=30))
     assert again.cameras == path.cameras and again.times == path.times
+
+
+def test_a_video_waits_for_the_memory_others_hold_and_one_that_never_fits_is_refused(tmp_path):
+    """A film holds its painting's memory while it paints (memory.py): held by a walk-through, the film waits and
+    says why, then paints once it is given back; a film larger than the whole budget is refused at the door."""
+    settings = Settings(data=tmp_path, threads=1)
+    workshop = Workshop(1, 1)
+    path = parse_path(PATH).resolve(CAMERA)
+    need = film_bytes(32, 32, path, PaintParams(), None)
+    memory = Budget(need + need // 2)  # room for this film, not for it beside a walk as large
+    with Store(tmp_path) as store:
+        videos = Videos(settings, workshop, store, LocalPainter(workshop), memory)
+        try:
+            memory.reserve("a walk", need, (32, 32), "a walk-through")
+            job = videos.submit(make_scene(), path, 32, 32, PaintParams(), None)
+            deadline = time.monotonic() + 60
+            while "of memory" not in job.message:
+                assert time.monotonic() < deadline and job.state in ("queued", "running"), job.message
+                time.sleep(0.01)
+            assert job.message.startswith("this video of 32x32 pixels needs") and job.done_frames == 0
+            assert memory.held(("video", job.id)) == 0
+            memory.release("a walk")
+            while job.state not in ("done", "failed", "cancelled"):
+                assert time.monotonic() < deadline
+                time.sleep(0.01)
+            assert job.state == "done" and job.message.startswith("7 frames"), job.message
+            assert memory.used == 0  # given back
+            with pytest.raises(Refusal) as refused:
+                videos.submit(make_scene(), path, 64, 64, PaintParams(), None)  # four times the bytes
+            assert refused.value.status == 422 and "RCP_MEMORY_BYTES" in refused.value.message
+        finally:
+            videos.close()
+            workshop.close()
