@@ -153,7 +153,8 @@ class CapacitySettings(SettingsGroup):
         default_factory=default_memory_bytes,
         ge=16 << 20,
         description="the memory the paintings' per-pixel buffers may take together, by their declared bytes a pixel "
-        "(memory.py): a walk-through holds its share from its hello until it closes, a REST render while it paints; "
+        "(memory.py): a walk-through holds its share from its hello until it closes, a REST render, a film or a print "
+        "while it paints (a film or a print waits for its share); "
         "a walk that does not fit is refused in one line with the largest size that would, a render gets 503 and "
         "Retry-After (422 if it can never fit) (default: half the memory the machine or container has left as the "
         "server starts, at least 256 MB)",
