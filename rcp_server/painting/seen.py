@@ -25,7 +25,7 @@ def visible_faces(scene: Scene, time: float, camera: Camera, region: Region, out
         out.face[:] = -1
         return
     hits = Hits.misses(region.pixel_count)
-    intersect_rays(tracer.embree, rays.origins, rays.directions, setup.pixels, hits.face)
+    intersect_rays(tracer.embree, rays.origins, rays.directions, setup.pixels, hits.face, True)
     kernels.place_hits(
         origins=rays.origins, directions=rays.directions, rays=setup.pixels, triangles=geometry.triangles, hits=hits
     )

@@ -1,10 +1,11 @@
 """Compiling the kernels before anyone waits for them: the server does it in a thread while it already answers
-(``service/startup.py``), ``rcp compile`` when a container image is built.
+(``service/state.py``), ``rcp compile`` when a container image is built.
 
-numba compiles a kernel at its first call (``engine/kernels/jit.py``, ``cache=True``): about 30 s of one core
+numba compiles a kernel at its first call (``engine/kernels/jit.py``, ``cache=True``): about 25 s of one core
 for all of them on a cold cache, a second or two to load them from a warm one. Painting a tiny image of each
 scene calls every kernel a visitor's painting would, with the argument types that scene gives them (a new
-type is a new compilation).
+type is a new compilation). The server compiles the first scene's (:func:`first_frame`, about 15 s of one
+core) before it is ready, and the others' after (:func:`warm`).
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from dataclasses import replace
 
 from numba.core.registry import CPUDispatcher
 
+from ..camera.camera import Camera
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .loop import paint
@@ -46,14 +48,26 @@ def compiled(entries: Iterable[CPUDispatcher]) -> int:
     return sum(len(kernel.overloads) > 0 for kernel in entries)  # len: safe while another thread compiles
 
 
+def tiny(camera: Camera) -> tuple[int, int]:
+    """The least painting ``camera`` can take that reaches every kernel."""
+    return camera.image_size(2 * SIZE if camera.projection == "equirect" else SIZE, SIZE)
+
+
+def first_frame(scene: Scene) -> None:
+    """Paints a tiny image of ``scene`` with its own settings: after this its first walk frame compiles nothing
+    (about half of all the kernels' compile time, the half a visitor waits for)."""
+    paint(scene, scene.camera, *tiny(scene.camera), replace(scene.paint, iterations=ITERATIONS), threads=1)
+
+
 def warm(scenes: Iterable[Scene]) -> None:
     """Paints a tiny image of every scene with its own settings, and the image-space method once: after this the
-    kernels a visitor's painting calls are compiled (and in numba's cache for the next process)."""
+    kernels a visitor's painting calls are compiled (and in numba's cache for the next process). A scene whose
+    kernels are compiled already costs a few milliseconds."""
     first = True
     for scene in scenes:
-        camera = scene.camera
-        size = camera.image_size(2 * SIZE if camera.projection == "equirect" else SIZE, SIZE)  # one it can take
-        paint(scene, camera, *size, replace(scene.paint, iterations=ITERATIONS), threads=1)
+        first_frame(scene)
         if first:  # the other projections, mappings and sample counts compile nothing more (measured)
-            paint(scene, camera, *size, PaintParams(iterations=ITERATIONS, method="image"), threads=1)
+            paint(
+                scene, scene.camera, *tiny(scene.camera), PaintParams(iterations=ITERATIONS, method="image"), threads=1
+            )
             first = False

@@ -1,5 +1,6 @@
 """The first start: the server answers at once, and says how far it is while, in a thread, the scenes load and
-the kernels compile (about 30 s of one core on a cold numba cache; ``state.Service.start``).
+the first scene's kernels compile (about 15 s of one core on a cold numba cache; ``state.Service.start``: the
+other scenes' compile after it, while it serves).
 
 Until it is ready, every ``/api/`` request (``/api/health`` included) is answered by :class:`Starting`: a 503
 with ``Retry-After`` and a JSON body that says what it is doing (``status`` "starting", ``phase``, ``done`` of

@@ -6,9 +6,10 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Protocol, TypeGuard
+from typing import TYPE_CHECKING, Annotated, Protocol, TypeGuard, TypeVar
 
 from fastapi import Depends
 from starlette.applications import Starlette
@@ -34,6 +35,9 @@ if TYPE_CHECKING:  # for the annotation only: a server opens a RayPainter (and R
     from ..cluster.remote import RemoteRay, RemoteWalks
 
 log = logging.getLogger("rcp.service")
+
+FIRST_SCENE = "default"  # the scene the page opens (client/main.js): its kernels compile before the service is ready
+T = TypeVar("T")
 
 
 class Walkthrough(Protocol):
@@ -67,7 +71,9 @@ class Service:
     prints: Prints | None = None  # stills at print size, painted in the background (opened with the service)
     sessions: set[Walkthrough] = field(default_factory=set)
     uploads: Uploads = field(default_factory=Uploads)  # visitors' scenes, apart from the operator's
-    startup: Startup = field(default_factory=Startup)  # ready once the scenes are loaded and the kernels compiled
+    startup: Startup = field(
+        default_factory=Startup
+    )  # ready once the scenes are loaded, the first one's kernels compiled
     memory: Budget = field(default_factory=lambda: Budget(default_memory_bytes()))  # the paintings' (memory.py)
     give_back: GiveBack = field(default_factory=GiveBack)  # the memory of walks that closed, to the system
     closed: bool = False
@@ -98,8 +104,9 @@ class Service:
 
     def start(self) -> threading.Thread:
         """In a thread, while the server already answers (``startup.py``): load the scenes of ``settings.scenes``,
-        compile the kernels, load the stored uploads and resume the stored video jobs; then the service is
-        ready. A fault there is logged, and the service serves what did load."""
+        compile the kernels the first scene's walk needs, load the stored uploads and resume the stored video
+        jobs; then the service is ready, and the same thread compiles the other paintings' kernels. A fault
+        there is logged, and the service serves what did load."""
         thread = threading.Thread(target=self._start, name="rcp-start", daemon=True)  # a compile cannot be stopped
         thread.start()
         return thread
@@ -113,10 +120,9 @@ class Service:
             log.info("serving %d scenes: %s", len(scenes), ", ".join(scenes))
             loaded, entries = time.monotonic(), warmup.kernels()
             startup.enter("compiling kernels", lambda: (warmup.compiled(entries), len(entries)))
-            try:
-                warmup.warm(scenes.values())
-            except Exception:  # the kernels compile at the first painting instead: slower, not broken
-                log.exception("the kernels could not be compiled ahead")
+            first = scenes.get(FIRST_SCENE) or next(iter(scenes.values()), None)
+            if first is not None:
+                _compile_ahead(warmup.first_frame, first)
             compiled = time.monotonic()
             if on_ray(self.painter) and self.settings.ray_walks:
                 startup.enter("measuring a walk frame on Ray")
@@ -143,6 +149,14 @@ class Service:
             log.exception("the start did not finish: serving what it loaded")
         finally:
             startup.finish()
+        self._compile_the_rest()
+
+    def _compile_the_rest(self) -> None:
+        """After the start, while the service serves: the kernels of the other scenes and of the image-space
+        method (a painting that needs one before waits for the compiler instead)."""
+        clock = time.monotonic()
+        if not self.closed and _compile_ahead(warmup.warm, list(self.scenes.values())):
+            log.info("the other paintings' kernels compiled in %.1f s", time.monotonic() - clock)
 
     def walking(self) -> int:
         """Walk-throughs that have said hello (a WebSocket that has not holds no place)."""
@@ -294,6 +308,17 @@ def load_uploads(settings: Settings, store: Store) -> Uploads:
             "%d uploaded scenes kept from the last run, loaded in %.2f s", len(uploads.scenes), time.monotonic() - clock
         )
     return uploads
+
+
+def _compile_ahead(warm: Callable[[T], None], scenes: T) -> bool:
+    """``warm(scenes)``; False, logged, where it fails: the kernels then compile at the first painting that
+    needs them instead, slower but not broken."""
+    try:
+        warm(scenes)
+    except Exception:
+        log.exception("the kernels could not be compiled ahead")
+        return False
+    return True
 
 
 def load_scenes(folder: Path) -> dict[str, Scene]:

@@ -80,7 +80,7 @@ def _both(triangles, origins, directions):
     n = len(origins)
     every = np.arange(n)
     alone = np.full(n, -7, np.int32)
-    intersect_rays(tracer.embree, origins, directions, every, alone)
+    intersect_rays(tracer.embree, origins, directions, every, alone, True)
     found = np.full(n, -7, np.int32)
     answered = visibility.find_faces(
         screen=screen,

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .embree import intersect_rays
 from .jit import jit
 from .triangle import place_hits
@@ -94,7 +96,7 @@ def pass_masked(embree, triangles, surfaces, origins, directions, rays, hits, fl
             step = t + max(t * 1e-5, floor)
             for k in range(3):
                 starts[s, k] = origins[s, k] + step * directions[s, k]
-        intersect_rays(embree, starts, directions, listed, hits.face, False)
+        intersect_rays(embree, starts, directions, listed, hits.face, np.bool_(False))
         place_hits(origins, directions, listed, triangles, hits)
         count = masked_rays(listed, hits, surfaces, next_todo)
         todo, next_todo = next_todo, todo

@@ -227,14 +227,15 @@ def _single(embree, origins, directions, s, ints, floats, address, arguments):
 
 
 @numba.njit(nogil=True, cache=True)
-def intersect_rays(embree, origins, directions, rays, face, coherent=True):
+def intersect_rays(embree, origins, directions, rays, face, coherent):
     """Closest triangle of each listed ray, found by Embree: ``face[s]`` for every ``s`` in ``rays``.
 
     embree : :class:`Embree`;  origins, directions : (n, 3) float32, directions unit length;  rays : (m,)
     int64, the rays to trace (in screen order for coherent packets);  face : (n,) int32, written -1 for a miss.
     A ray with a non-finite component is not sent to Embree: it misses. ``coherent``: rays go in packets of
     eight consecutive entries of ``rays`` (fewer than two valid rays go alone), else one by one (scattered
-    rays: a packet whose rays part at the root costs more than its rays alone).
+    rays: a packet whose rays part at the root costs more than its rays alone). A kernel passes it as
+    ``np.bool_(...)``, not a literal: each literal value would compile a specialisation of its own.
 
     The answer of a ray does not depend on the rays beside it: where two triangles tie (a ray through their
     shared edge or corner), which one a packet reports depends on the order its traversal took, so a hit
@@ -338,14 +339,14 @@ class Tracer:
         n = len(origins)
         hits = Hits.misses(n)
         listed = np.arange(n) if rays is None else rays
-        intersect_rays(self.embree, origins, directions, listed, hits.face)
+        intersect_rays(self.embree, origins, directions, listed, hits.face, True)
         place_hits(origins=origins, directions=directions, rays=listed, triangles=self.triangles, hits=hits)
         return hits
 
     def bare_query(self, origins: np.ndarray, directions: np.ndarray, face: np.ndarray) -> None:
         """Embree's packet query of every ray into ``face`` (n,) int32 and nothing else: the limit an
         iteration of ``rcp bench speed`` is measured against."""
-        intersect_rays(self.embree, origins, directions, np.arange(len(origins)), face)
+        intersect_rays(self.embree, origins, directions, np.arange(len(origins)), face, True)
 
 
 class EmbreexScene:

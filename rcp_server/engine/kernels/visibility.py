@@ -155,7 +155,7 @@ def find_faces(screen, embree, origins, directions, rays, face, queue):
     """
     m = len(rays)
     if not screen.on:
-        intersect_rays(embree, origins, directions, rays, face, True)
+        intersect_rays(embree, origins, directions, rays, face, np.bool_(True))
         return 0
     status = queue  # the statuses first; the queue overwrites them behind the ray being read
     classify(screen, origins, directions, rays, status, face)
@@ -165,7 +165,7 @@ def find_faces(screen, embree, origins, directions, rays, face, queue):
             queue[queued] = rays[k]
             queued += 1
     if queued:
-        intersect_rays(embree, origins, directions, queue[:queued], face, True)
+        intersect_rays(embree, origins, directions, queue[:queued], face, np.bool_(True))
     return m - queued
 
 
