@@ -66,7 +66,7 @@
  * @property {number | null} [grain] - size of the surface noise's cells, in scene units
  * @property {boolean | null} [hatch] - surface noise coherent along the smudge (constant along the displacement, varying across: hatch lines)
  * @property {number | null} [seed] - seed of the jitter and the noise
- * @property {number | null} [boil] - boil: a film reseeds its jitter and noise every this many frames, a tremble (0: never)
+ * @property {number | null} [boil] - boil: a film (and a walk while it moves) reseeds its jitter and noise every this many frames, a tremble (0: never)
  * @property {number | null} [z_max] - depth recorded for a miss (default: beyond the scene)
  * @property {"raytrace" | "image" | null} [method] - raytrace (right everywhere) or image (look up the plain render: fast, needs lambda_e 0)
  * @property {"clamp" | "wrap" | "mirror" | null} [edge] - how the image method reads off screen
@@ -373,7 +373,7 @@ const PAINT_PROPERTIES = {
    }
   ],
   "default": null,
-  "description": "boil: a film reseeds its jitter and noise every this many frames, a tremble (0: never)",
+  "description": "boil: a film (and a walk while it moves) reseeds its jitter and noise every this many frames, a tremble (0: never)",
   "title": "Boil"
  },
  "edge": {

@@ -328,8 +328,6 @@ def _sequence_shots(args: argparse.Namespace, scene, params: PaintParams, base: 
         path = motion_path(args.path, scene.motions, args.fps, distance)
     else:
         path = load_path(args.path, base, args.fps).with_painting(params, scene.check_names)
-    if path.track is not None and args.ray is not None:
-        raise UsageError("--ray paints one painting for a whole path: a path that keys its painting paints here")
     shots = (frame._replace(scene_time=frame.scene_time + args.time) for frame in path.frames())
     return path, path.fps, path.frame_count, shots
 

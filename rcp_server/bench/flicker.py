@@ -5,12 +5,16 @@ frame ``t`` by the motion, and compared with it where both frames see the same t
 
     E(t, s) = sum_p M(p) |V_t(p) - V_s(w(p))|^2 / sum_p M(p),   E = the mean of E(t, s) over the film
 
-with colors in [0, 1] and the squared difference summed over R, G and B. Here the motion is exact, not an
-optical flow: every pixel's centre ray of frame ``t`` is traced into the scene, its point projected into
-frame ``s``'s camera (``camera.project``), and ``V_s`` read there bilinearly. ``M`` masks what either camera
-cannot see: a point off frame ``s``'s screen, behind its camera, or hidden there (the four pixels around it
-in frame ``s`` must see one surface, their distances spread by less than a tenth, and the point within 2% of
-those distances; or the sky, all of them). A miss (the sky, at
+with colors in [0, 1] and the squared difference summed over R, G and B. The ``E_warp`` of Lai et al. (2018,
+"Learning Blind Video Temporal Consistency") as their released script computes it (``evaluate_WarpError.py``)
+divides by the mask's entries over the three channels: the mean per channel, a third of this; the report gives
+that too.
+
+Here the motion is exact, not an optical flow: every pixel's centre ray of frame ``t`` is traced into the
+scene, its point projected into frame ``s``'s camera (``camera.project``), and ``V_s`` read there
+bilinearly. ``M`` masks what either camera cannot see: a point off frame ``s``'s screen, behind its camera, or
+hidden there (the four pixels around it in frame ``s`` must see one surface, their distances spread by less
+than a tenth, and the point within 2% of those distances; or the sky, all of them). A miss (the sky, at
 infinity) warps by its direction. Scenes are taken to stand still (the geometry of frame ``t``).
 
 A plain film (one iteration: the ray-traced image) has an error of its own: resampling edges and textures
@@ -38,6 +42,7 @@ GAPS = (1, 7)
 """Frames back that a frame is compared with: the short and the long range."""
 SAME_SURFACE = 0.02  # a point within 2% of the distances the pixels around it see is the point they see
 CONTINUOUS = 0.1  # pixels whose distances spread over less than a tenth of it see one surface, not an edge
+CHANNELS = 3  # the published E_warp (Lai et al. 2018's evaluate_WarpError.py) divides by the mask's R, G and B entries
 
 
 @dataclass(frozen=True)
@@ -173,7 +178,8 @@ def films(
 
 
 def report(results: dict[str, Flicker]) -> list[str]:
-    """The table, side by side, and the closing line of painted-to-plain ratios."""
+    """The table, side by side, the errors per channel (the published scripts' normalisation), and the closing
+    line of painted-to-plain ratios."""
     short, long = GAPS
     lines = [f"{'film':24s} {f'error t-{short}':>12s} {f'error t-{long}':>12s}   pixels compared"]
     for name, r in results.items():
@@ -181,6 +187,11 @@ def report(results: dict[str, Flicker]) -> list[str]:
             f"{name:24s} {r.error[short]:12.6f} {r.error[long]:12.6f}   "
             f"{r.compared[short]:.0%} (t-{short}), {r.compared[long]:.0%} (t-{long})"
         )
+    per_channel = [
+        f"{name} {r.error[short] / CHANNELS:.6f} (t-{short}), {r.error[long] / CHANNELS:.6f} (t-{long})"
+        for name, r in results.items()
+    ]
+    lines.append("per channel, as Lai et al. 2018's released E_warp script averages: " + "; ".join(per_channel))
     plain = results["plain"]
     ratios = [
         f"{name.removeprefix('painted, ')} {r.error[short] / plain.error[short]:.2f}x (t-{short}), "

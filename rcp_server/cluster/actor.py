@@ -2,7 +2,7 @@
 
 Workers are Ray actors that hold the scenes they paint warm: a scene's arrays are put in the object store
 once, and each actor builds its BVH itself (an Embree handle cannot travel). What a frame needs (camera,
-time, settings) is a few hundred bytes; what comes back is the frame as uint8, 3 bytes a pixel.
+time, the settings of its paintings) is a few hundred bytes; what comes back is the frame as uint8, 3 bytes a pixel.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import numpy as np
 
 from ..camera.camera import Camera, Region
 from ..painting.loop import PaintState, paint
+from ..painting.sequence import Looks, paint_looks
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from ..util import images
@@ -116,11 +117,16 @@ class Painter:
         self._scene(held)
         return True
 
-    def frame(self, held: Held, shot: tuple[Camera, float], width: int, height: int, params: PaintParams):
-        """A whole frame from ``I_0``: (height, width, 3) uint8."""
+    def frame(self, held: Held, shot: tuple[Camera, float], width: int, height: int, looks: Looks):
+        """A whole frame from ``I_0``, painted with its ``looks`` (``sequence.frame_looks``): (height, width, 3)
+        uint8."""
         camera, time = shot
-        result = paint(self._scene(held), camera, width, height, params, time=time, threads=self.threads)
-        return images.to_uint8(result.image)
+        scene = self._scene(held)
+
+        def paint_frame(camera: Camera, time: float, params: PaintParams, previous: PaintState | None):
+            return paint(scene, camera, width, height, params, time=time, threads=self.threads)
+
+        return images.to_uint8(paint_looks(paint_frame, camera, time, looks, None).image)
 
     def band(
         self,
@@ -129,27 +135,26 @@ class Painter:
         region: Region,
         index: int,
         shot: tuple[Camera, float],
-        params: PaintParams,
+        looks: Looks,
     ) -> np.ndarray:
-        """The rows of ``region`` of frame ``index``: from ``I_0`` for frame 0, else continuing from this band's
-        painting of ``job``'s frame ``index - 1`` (kept when ``job`` is given): (rows, width, 3) uint8."""
+        """The rows of ``region`` of frame ``index``, painted with its ``looks``: from ``I_0`` for frame 0, else
+        continuing from this band's painting of ``job``'s frame ``index - 1`` (kept when ``job`` is given):
+        (rows, width, 3) uint8."""
         camera, time = shot
+        scene = self._scene(held)
         previous = None
         if index > 0:
             previous = self.previous.get((job, region), {}).get(index - 1)
             if previous is None:
                 raise LostState(f"a Ray worker was lost mid-job, and with it a band's frame {index - 1}")
-        result = paint(
-            self._scene(held),
-            camera,
-            region.full_width,
-            region.full_height,
-            params,
-            time=time,
-            previous=previous,
-            region=region,
-            threads=self.threads,
-        )
+
+        def paint_band(camera: Camera, time: float, params: PaintParams, previous: PaintState | None):
+            return paint(
+                scene, camera, region.full_width, region.full_height, params, time=time, previous=previous,
+                region=region, threads=self.threads,
+            )  # fmt: skip
+
+        result = paint_looks(paint_band, camera, time, looks, previous)
         if job is not None:
             states = self.previous.setdefault((job, region), {})
             states[index] = result.state

@@ -13,6 +13,7 @@ from typing import Any
 
 from ..camera.camera import Camera, Region
 from ..painting.loop import Abandoned
+from ..painting.sequence import Looks
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .actor import Held, HeldScenes, LostState, Painter
@@ -147,10 +148,11 @@ def paint_bands(
     job: str | None,
     index: int,
     shot: tuple[Camera, float],
-    params: PaintParams,
+    looks: Looks,
 ) -> list:
-    """The refs of one frame's bands: each band paints exactly its crop of the painting."""
-    return [actor.band.remote(held, job, band, index, shot, params) for actor, band in workers]
+    """The refs of one frame's bands, painted with its ``looks`` (``sequence.frame_looks``): each band paints
+    exactly its crop of the painting."""
+    return [actor.band.remote(held, job, band, index, shot, looks) for actor, band in workers]
 
 
 def cancel(refs: list) -> None:

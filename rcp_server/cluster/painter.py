@@ -1,7 +1,8 @@
 """Painting on Ray: the same frames and paintings as the threads of one machine, pixel for pixel, on many;
 a film goes on through a lost worker, its frames painted again.
 
-What a frame needs (camera, time, settings) is a few hundred bytes; what comes back is the frame as uint8,
+What a frame needs (camera, time, the settings of its paintings: two within a cross-fade of a path that keys its
+painting, blended where they are painted) is a few hundred bytes; what comes back is the frame as uint8,
 3 bytes a pixel, through the object store, in order, with a bounded number of frames in flight.
 
 What the method allows decides how the work splits (``sequence.py`` has the per-frame/temporal rule):
@@ -20,7 +21,6 @@ asked to paint on Ray.
 
 from __future__ import annotations
 
-import itertools
 import logging
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..camera.camera import Camera
-from ..painting.sequence import Shot, frame_params
+from ..painting.sequence import Looks, Shot, frame_looks
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
 from .actor import Held, HeldScenes
@@ -62,12 +62,12 @@ REPAINTS = 8  # times one sequence replaces lost workers and repaints their fram
 
 @dataclass
 class _Frame:
-    """A frame in flight: its index in the sequence, shot and settings, and the refs of its painting (one, or a
-    band's each) with the crew member that paints it (per frame)."""
+    """A frame in flight: its index in the sequence, shot and paintings (``sequence.frame_looks``), and the refs
+    of its painting (one, or a band's each) with the crew member that paints it (per frame)."""
 
     index: int
     shot: tuple[Camera, float]
-    params: PaintParams
+    looks: Looks
     refs: list
     actor: int = -1
 
@@ -136,7 +136,7 @@ class RayPainter:
         self.connection.check()
         try:
             workers = split(self.crew.actors(), width, height, params, camera)
-            refs = paint_bands(workers, self.crew.hold(scene), None, 0, (camera, time), params)
+            refs = paint_bands(workers, self.crew.hold(scene), None, 0, (camera, time), ((params, 1.0),))
             try:
                 return np.concatenate(self.crew.get(refs, should_stop), axis=0)
             except Lost as lost:  # a painting of its own: the caller asks again, on a new crew
@@ -174,25 +174,23 @@ class RayPainter:
         actors = self.crew.actors()
         held = self.crew.hold(scene)
         job = f"job-{next(self.crew.serial)}"
-        shots = iter(shots)
-        first = next(shots, None)
-        if first is None:
+        shots = list(shots)
+        if not shots:
             return
-        shots = itertools.chain([first], shots)
-        workers = split(actors, width, height, params, first.camera) if temporal else []
+        workers = _bands(actors, width, height, shots, params) if temporal else []
         limit = IN_FLIGHT_PER_ACTOR * (1 if temporal else len(actors))
         pending: deque[_Frame] = deque()  # the frames in flight, in order
-        history: list[tuple[tuple[Camera, float], PaintParams]] = []  # temporal: what a band painted again needs
+        history: list[tuple[tuple[Camera, float], Looks]] = []  # temporal: what a band painted again needs
         repaints = 0
 
         def submit(index: int, shot: Shot) -> _Frame:
-            p = frame_params(params, temporal, index)
+            looks = frame_looks(shot, params, temporal, index)
             when = (shot.camera, shot.scene_time)
             if not temporal:
                 k = index % len(actors)
-                return _Frame(index, when, p, [actors[k].frame.remote(held, when, width, height, p)], k)
-            history.append((when, p))
-            return _Frame(index, when, p, paint_bands(workers, held, job, index, when, p))
+                return _Frame(index, when, looks, [actors[k].frame.remote(held, when, width, height, looks)], k)
+            history.append((when, looks))
+            return _Frame(index, when, looks, paint_bands(workers, held, job, index, when, looks))
 
         def take() -> np.ndarray:
             nonlocal repaints
@@ -237,7 +235,7 @@ class RayPainter:
                 replaced.add(k)
         for frame in pending:
             if frame.actor in replaced or broken(frame.refs):
-                frame.refs = [actors[frame.actor].frame.remote(held, frame.shot, width, height, frame.params)]
+                frame.refs = [actors[frame.actor].frame.remote(held, frame.shot, width, height, frame.looks)]
 
     def _repaint_bands(self, workers: list, held: Held, job: str, pending: deque[_Frame], history: list) -> None:
         """Temporal: each band that was lost (its worker gone for good, restarted without its states, or a
@@ -259,7 +257,7 @@ class RayPainter:
             for k in range(start, first):  # results not needed: they only bring the band's state up to date
                 actor.band.remote(held, job, region, k, *history[k])
             for frame in pending:
-                frame.refs[b] = actor.band.remote(held, job, region, frame.index, frame.shot, frame.params)
+                frame.refs[b] = actor.band.remote(held, job, region, frame.index, frame.shot, frame.looks)
 
     def close(self) -> None:
         """Stop the actors, and Ray itself if this painter started it."""
@@ -267,3 +265,12 @@ class RayPainter:
             return
         self.crew.close()
         self.connection.close()
+
+
+def _bands(actors: list, width: int, height: int, shots: list, params: PaintParams) -> list:
+    """Who paints which rows of a temporal film (:func:`~.crew.split`), for the whole film: whole frames on one
+    actor if any of its paintings (``params``, or a keyed path's) uses the image method, whose lookups reach the
+    whole screen."""
+    paintings = [look for k, shot in enumerate(shots) for look, _ in frame_looks(shot, params, None, k)]
+    whole = next((look for look in paintings if look.method != "raytrace"), params)
+    return split(actors, width, height, whole, shots[0].camera)

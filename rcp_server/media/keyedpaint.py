@@ -28,13 +28,12 @@ from typing import Any
 import numpy as np
 from scipy.interpolate import PchipInterpolator
 
+from ..painting.sequence import Looks
 from ..settings.params import PAINT_SETTINGS, PER, PaintParams, as_dict
 from ..settings.styles import STYLE, get_style, with_style
 
 Name = tuple[str, ...]
 """A setting's place: ``("lambda_p",)``, or ``("objects", "walls", "lambda_p")`` for a per-object one."""
-Looks = tuple[tuple[PaintParams, float], ...]
-"""A frame's painting: the paintings to blend and their weights (summing to 1); one at weight 1 but in a fade."""
 
 
 @dataclass(frozen=True)

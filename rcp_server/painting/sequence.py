@@ -22,6 +22,9 @@ from ..camera.camera import Camera
 from ..engine.paintstate import PaintState
 from ..settings.params import PaintParams
 
+Looks = tuple[tuple[PaintParams, float], ...]
+"""A frame's paintings and their weights (summing to 1): one at weight 1, or two blended within a fade."""
+
 
 class Shot(Protocol):
     """A frame to paint: what the camera sees at what scene time (``camerapath.PathFrame`` is one)."""
@@ -70,14 +73,27 @@ def paint_results(
     if temporal and first > 0 and previous is None:
         raise ValueError("a temporal sequence resumed past its first frame needs the previous frame's state")
     for index, shot in enumerate(shots, first):
-        looks = getattr(shot, "looks", ()) or ((params, 1.0),)
-        results = [
-            (paint_frame(shot.camera, shot.scene_time, frame_params(look, temporal, index), previous), weight)
-            for look, weight in looks
-        ]
-        result = results[0][0] if len(results) == 1 else Blend.of(results)
+        result = paint_looks(
+            paint_frame, shot.camera, shot.scene_time, frame_looks(shot, params, temporal, index), previous
+        )
         previous = result.state if temporal else None
         yield result
+
+
+def frame_looks(shot: Shot, params: PaintParams, temporal: int | None, index: int) -> Looks:
+    """The paintings of frame ``index`` and their weights: the shot's own ``looks`` (a path that keys its
+    painting), else ``params``; each with :func:`frame_params`' iterations and seed."""
+    looks = getattr(shot, "looks", ()) or ((params, 1.0),)
+    return tuple((frame_params(look, temporal, index), weight) for look, weight in looks)
+
+
+def paint_looks(
+    paint_frame: FramePainter, camera: Camera, scene_time: float, looks: Looks, previous: PaintState | None
+):
+    """One frame painted with each of its ``looks`` from ``previous``: the painter's result, or the :class:`Blend`
+    of two within a cross-fade. Ray's actors paint a frame (or a band of its rows) with it too."""
+    results = [(paint_frame(camera, scene_time, look, previous), weight) for look, weight in looks]
+    return results[0][0] if len(results) == 1 else Blend.of(results)
 
 
 @dataclass(frozen=True)

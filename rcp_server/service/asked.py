@@ -26,7 +26,7 @@ from ..settings.params import PaintParams
 from . import protocol
 from .refusal import Refusal
 from .settings import Settings
-from .state import Service, ServiceDep, on_ray
+from .state import Service, ServiceDep
 from .uploads import Limits, Refused, read_refusal, read_scene
 from .videos import job_work
 
@@ -131,8 +131,6 @@ def keyed(service: Service, path: CameraPath, frame: Asked, temporal: int | None
         raise Refusal(str(exc)) from None
     if path.track is None:
         return path
-    if on_ray(service.painter):
-        raise Refusal("this server paints films on Ray, one painting a film: a path that keys its painting cannot")
     paintings = path.track.paintings()
     work = max(job_work(frame.width, frame.height, p, temporal, path.frame_count) for p in paintings)
     work *= 2 if path.track.fades else 1

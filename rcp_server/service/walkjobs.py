@@ -1,4 +1,5 @@
-"""A walk's frames as jobs: the planner's next frame numbered, and what the last one shown leaves behind."""
+"""A walk's frames as jobs: the planner's next frame numbered (a walk frame also counted, as a film's frames are
+for ``boil``), and what the last one shown leaves behind."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ class WalkJobs:
         self.kept: int | None = None  # the last frame shown, whose per-pixel data the painter keeps (temporal)
         self.shown_time = 0.0  # the scene time of the last frame sent: what a pick sees
         self.serial = 0  # frames asked for
+        self.walked = 0  # walk frames asked for: what ``boil`` counts
 
     def next(self, view: WalkView, now: float) -> Job | None:
         """The frame to paint next for ``view`` at ``now`` (monotonic seconds), or None: nothing to paint."""
@@ -26,7 +28,9 @@ class WalkJobs:
         if plan is None:
             return None
         self.serial += 1
-        return job_of(view, plan, self.serial, self.kept)
+        job = job_of(view, plan, self.serial, self.kept, self.walked)
+        self.walked += plan.phase == "walk"
+        return job
 
     def finished(self, job: Job, frame: WalkPainted, width: int) -> tuple[protocol.Frame, list[bytes]]:
         """``frame`` painted for ``job`` is shown: the planner learns its time; its meta and its JPEGs to post."""

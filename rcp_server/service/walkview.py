@@ -20,6 +20,7 @@ from ..camera.camera import Camera
 from ..camera.wire import camera_of
 from ..media.walkframe import WalkFrame, WalkPainted
 from ..painting.picking import object_pixels, pick
+from ..painting.sequence import frame_params
 from ..scene.scene import Scene
 from ..scene.walking import walk
 from ..settings.params import PaintParams
@@ -159,17 +160,23 @@ class Job:
             seq=0, width=painted.width, height=painted.height, render_ms=round(painted.seconds * 1000, 2),
             iteration=plan.iteration, spp=plan.params.spp, scale=round(plan.width / canvas_width, 4),
             phase=plan.phase, final=plan.final, temporal=painted.continued, quality=self.frame.quality,
-            paint=plan.params.settings(), camera_id=self.camera_id, time=plan.time, dropped=0,
+            paint=self.frame.params.settings(), camera_id=self.camera_id, time=plan.time, dropped=0,
             projection=self.frame.camera.projection, stereo=self.frame.camera.stereo,
             bands=[(y, rows) for y, rows, _ in painted.bands] or None,
         )  # fmt: skip
 
 
-def job_of(view: WalkView, plan: Plan, serial: int, kept: int | None) -> Job:
-    """Frame ``serial`` of ``view`` as ``plan`` paints it, going on from frame ``kept`` when the plan continues."""
+def job_of(view: WalkView, plan: Plan, serial: int, kept: int | None, walked: int) -> Job:
+    """Frame ``serial`` of ``view`` as ``plan`` paints it, going on from frame ``kept`` when the plan continues.
+
+    A walk frame is frame ``walked`` of a film (the walk frames before it) for ``boil``: with ``boil = k`` its
+    noise and jitter are reseeded every ``k`` walk frames, by the films' own rule (``sequence.frame_params``). A
+    refinement is the still of its view, as a REST render and Save paint it: the painting at rest does not
+    boil."""
     assert view.scene is not None and view.camera is not None, "painted after hello"
     size = view.camera.image_size(plan.width, plan.height)
     after = kept if plan.continues else None
     quality = frame_quality(plan, view.quality)
-    frame = WalkFrame(view.scene, view.camera, *size, plan.params, plan.time, quality, serial, after)
+    params = frame_params(plan.params, None, walked) if plan.phase == "walk" else plan.params
+    frame = WalkFrame(view.scene, view.camera, *size, params, plan.time, quality, serial, after)
     return Job(plan, view.epoch, view.camera_id, frame)

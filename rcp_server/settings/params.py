@@ -80,7 +80,11 @@ class PaintParams:
     )
     seed: int = setting(0, "seed of the jitter and the noise", ge=0, le=2**31 - 1)
     boil: int = setting(
-        0, "boil: a film reseeds its jitter and noise every this many frames, a tremble (0: never)", ge=0, le=10_000
+        0,
+        "boil: a film (and a walk while it moves) reseeds its jitter and noise every this many frames, a tremble "
+        "(0: never)",
+        ge=0,
+        le=10_000,
     )
     z_max: float | None = setting(None, "depth recorded for a miss (default: beyond the scene)", gt=0, le=1e6)
     method: str = setting(

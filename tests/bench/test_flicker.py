@@ -5,6 +5,7 @@ with the painted-to-plain ratio."""
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 
 import numpy as np
@@ -66,6 +67,10 @@ def test_rcp_bench_flicker_prints_the_films_side_by_side_and_ends_with_the_ratio
     assert lines[0].startswith("rcp bench flicker: short.json on default, 9 frames of 48x27 at 8 fps")
     assert [line.split()[0] for line in lines[2:5]] == ["plain", "painted,", "painted,"]
     assert lines[-1].startswith("painted-to-plain warping error: per frame ") and "temporal 1 " in lines[-1]
+    plain = [float(v) for v in lines[2].split()[1:3]]
+    (third,) = re.findall(r": plain ([\d.]+) \(t-1\), ([\d.]+) \(t-7\);", lines[-2])
+    assert lines[-2].startswith("per channel, as Lai et al. 2018's released E_warp script averages: plain ")
+    assert [float(v) for v in third] == pytest.approx([e / 3 for e in plain], abs=1e-6)
 
 
 @pytest.mark.parametrize("boil", [0, 3])

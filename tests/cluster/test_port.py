@@ -105,3 +105,31 @@ def test_films_through_ray_are_the_local_ones_from_any_frame(ports, busy_scene, 
         for a, b in zip(here, there, strict=True):
             np.testing.assert_array_equal(a, b)
     assert not np.array_equal(films[0][0], films[0][-1])
+
+
+@pytest.mark.parametrize(
+    ("key", "temporal"),
+    [({"mapping": "normal", "lambda_p": 10.0, "seed": 3}, None), ({"method": "image", "lambda_p": 8.0}, 2)],
+)
+def test_keyed_films_through_ray_are_the_local_ones(ports, busy_scene, key, temporal):
+    """Each frame of a path that keys its painting travels with its own settings, a cross-fade's two paintings
+    blended where they are painted (per frame: on an actor; temporal: in each band, or on one actor for all of
+    a film that keys the image method anywhere)."""
+    keyed = {
+        **PATH,
+        "keyframes": [
+            {**PATH["keyframes"][0], "paint": {"lambda_p": 2.0}},
+            {**PATH["keyframes"][1], "paint": key, "fade": 0.5},
+        ],
+    }
+    params = PaintParams(iterations=2, spp=2)
+    path = parse_path(keyed).resolve(busy_scene.camera).with_painting(params, busy_scene.check_names)
+    assert [len(frame.looks) for frame in path.frames()] == [1, 1, 1, 2, 1]  # frame 3 is the fade's midpoint
+    here, there = (
+        [image for image, _ in port.film(busy_scene, path, W, H, params, temporal, 0, None, None)] for port in ports
+    )
+    assert len(here) == len(there) == 5
+    for a, b in zip(here, there, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(here[0], here[-1])
+    assert ports[1].cluster.ready()  # painted on Ray: a failure backs off, and the film would fail or paint here

@@ -184,3 +184,46 @@ def test_after_a_second_hello_every_frame_shows_the_new_scene(walk):
             walk.ws.recv(30)
     assert message["scene"]["name"] == "sky"
     assert all(meta["width"] == meta["height"] for meta, _ in walk.until_final())  # no village frame after ready
+
+
+CAMERA = {"eye": [0.8, 1.7, 38.0], "look_at": [0.0, 3.0, 0.0]}
+
+
+def _walk_frames_of_one_camera(walk, ids: range) -> list[tuple[dict, bytes]]:
+    """The walk frame of each camera message in ``ids``, all of one camera, those of the size most of them
+    have (the planner sizes walk frames to the machine's speed)."""
+    frames = []
+    for k in ids:
+        walk.send(type="camera", id=k, **CAMERA)
+        while (meta := walk.next())["type"] != "frame" or meta["camera_id"] != k or meta["phase"] != "walk":
+            if meta["type"] == "frame":
+                walk.ws.recv(30)  # a refinement, or an older camera's frame
+        frames.append((meta, walk.ws.recv(30)))
+    widths = [meta["width"] for meta, _ in frames]
+    return [(meta, jpeg) for meta, jpeg in frames if meta["width"] == max(set(widths), key=widths.count)]
+
+
+def test_boil_reseeds_walk_frames_and_leaves_the_rest_painting_be(walk, live_server):
+    """``boil = 1``: consecutive walk frames of one camera differ in their noise, each the still of its own
+    seed (the seed moved on by one a walk frame, as a film's frames are); ``boil = 0``: they are the same frame.
+    The refinement at rest is the view's still, which does not boil."""
+    walk.send(type="hello", scene="default", width=64, height=36)
+    walk.next()
+    walk.send(type="paint", noise=0.4, boil=1)
+    walk.until_final()
+    boiled = _walk_frames_of_one_camera(walk, range(6))
+    assert len(boiled) >= 3
+    seeds = [meta["paint"]["seed"] for meta, _ in boiled]
+    assert all(b > a for a, b in zip(seeds, seeds[1:], strict=False))
+    assert all(a != b for (_, a), (_, b) in zip(boiled, boiled[1:], strict=False))
+    meta, jpeg = boiled[-1]
+    body = {"scene": "default", "width": meta["width"], "height": meta["height"], "camera": CAMERA}
+    body |= {"paint": meta["paint"], "format": "jpeg", "quality": meta["quality"]}
+    assert post(live_server, body).content == jpeg
+    refined = walk.until_final()[-1][0]
+    assert refined["phase"] == "refine" and refined["paint"]["seed"] not in seeds  # the scene's seed: the still's
+    walk.send(type="paint", boil=0)
+    walk.until_final()
+    still = _walk_frames_of_one_camera(walk, range(6, 12))
+    assert len(still) >= 3 and len({jpeg for _, jpeg in still}) == 1
+    assert {meta["paint"]["seed"] for meta, _ in still} == {refined["paint"]["seed"]}
