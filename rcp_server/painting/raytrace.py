@@ -1,13 +1,12 @@
 """The traced method: every iteration casts one ray per sample from its per-pixel camera into the scene.
 
-A tile's iteration has three stages, in one compiled call (``kernels.paint_iteration``): camera assignment
+A tile's iteration has three stages, a compiled kernel each (``kernels.paint_iteration``): camera assignment
 (``assign.py``: the mapping turns ``I_{n-1}`` into displacements ``V_p, V_e``, and those into rays),
 intersection (Embree, through ``kernels/embree.py``) and shading (``kernels.shade``).
 """
 
 from __future__ import annotations
 
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from functools import partial
@@ -26,7 +25,7 @@ from .workspace import TileBuffers, Workspace
 
 class TracedTile:
     """The traced iterations of one tile, ``I_{n-1} -> I_n`` (a ``paintstate.TileIteration``): set up once
-    for the painting, each iteration one compiled call (``kernels.paint_iteration``) into one of the two
+    for the painting, each iteration one call of ``kernels.paint_iteration`` into one of the two
     states of the buffers it is lent (:meth:`bind`), in turn (the other holds ``I_{n-1}``).
 
     ``keeps_anchor``: the tile runs its iterations in several runs, each lent other buffers (the eyes of a
@@ -43,7 +42,6 @@ class TracedTile:
         self.anchor_store: np.ndarray | None = None
         self.at_eye = False  # every origin in the ray buffers already is the camera's eye
         self.source: PaintState | None = None  # what the next iteration's fields read, when not its own state
-        self.clock = np.zeros(3, np.int64)
         self.anchor: np.ndarray | None = None  # where the surface noise is read: the plain render's points
 
     def bind(self, buffers: TileBuffers) -> None:
@@ -61,8 +59,6 @@ class TracedTile:
         # with two eyes, each ray's origin is its own pixel's eye
         self.at_eye = eyes_rest and self.setup.image_plane.half_ipd == 0.0
         out = self.buffers[1] if state.color is self.buffers[0].color else self.buffers[0]
-        self.clock[:] = 0
-        clock = time.perf_counter()
         kernels.paint_iteration(
             cast=cast,
             source=kernels.channels(source),
@@ -70,9 +66,8 @@ class TracedTile:
             trace=self.frame.trace,
             shading=self.frame.shading,
             scratch=self.scratch,
-            clock=self.clock,
+            watch=watch,
         )
-        watch.share(time.perf_counter() - clock, dict(zip(("camera", "intersect", "shade"), self.clock, strict=True)))
         if state.blank and out.position is not None:
             if self.keeps_anchor or self.anchor_store is None:
                 self.anchor = out.position.copy()

@@ -24,13 +24,6 @@ class Stopwatch:
         yield
         self.seconds[name] += time.perf_counter() - clock
 
-    def share(self, seconds: float, weights: dict[str, float]) -> None:
-        """Add ``seconds`` measured around several stages at once, shared in proportion to ``weights`` (cycles
-        a compiled kernel counted per stage)."""
-        whole = float(sum(weights.values()))
-        for name, weight in weights.items():
-            self.seconds[name] += seconds * float(weight) / whole if whole else seconds / len(weights)
-
 
 def total(seconds: list[dict[str, float]]) -> dict[str, float]:
     """Stage seconds of several stopwatches (tiles, passes) summed per stage."""
