@@ -19,7 +19,7 @@ import { Overlay } from "./overlay.js";
 import { objectsPanel } from "./objects.js";
 import { paintPanel } from "./panel.js";
 import { stylesPanel } from "./styles.js";
-import { pathPanel } from "./pathpanel.js";
+import { pathPanel } from "./path/panel.js";
 import { WalkController } from "./walk.js";
 import { Uploader } from "./upload.js";
 import { View360, panoramaSize } from "./view360.js";
