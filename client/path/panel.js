@@ -24,7 +24,8 @@ import { timeline } from "./timeline.js";
 
 /**
  * The path panel in `root`. `hooks`: camera() -> the current view ({eye, look_at, up, fov}); place(camera)
- * moves the walk there; scene() -> the SceneInfo shown (or null); request() -> {paint, width, height} of a
+ * moves the walk there; keyed(table) has the walk paint the path's painting there (a paint table; null: the
+ * page's own); scene() -> the SceneInfo shown (or null); request() -> {paint, width, height} of a
  * render; viewSize(film) -> the view's painting size as that film takes it; authorization (headers);
  * notice(text, kind).
  * @param {HTMLElement} root @param {any} hooks
@@ -65,10 +66,12 @@ class PathPanel {
     });
     this.scrubber = new Scrubber({
       spec: () => this.spec(),
+      paint: () => hooks.request().paint,
       scene: hooks.scene,
       call: this.call,
       stop: () => this.player.stop(),
       place: hooks.place,
+      keyed: hooks.keyed,
       notice: hooks.notice,
     });
     this.list = keyList($("list"), {
