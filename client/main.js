@@ -19,7 +19,7 @@ import { Overlay } from "./overlay.js";
 import { objectsPanel } from "./objects.js";
 import { paintPanel } from "./panel.js";
 import { stylesPanel } from "./styles.js";
-import { pathPanel } from "./pathpanel.js";
+import { pathPanel } from "./path/panel.js";
 import { WalkController } from "./walk.js";
 import { Uploader } from "./upload.js";
 import { View360, panoramaSize } from "./view360.js";
@@ -187,6 +187,7 @@ function advance(now) {
   const dt = Math.min(0.1, Math.max(0, now - lastTick) / 1000);
   walk.step(dt);
   keepInside();
+  if (state.keyed && !walkCamera.sameCamera(currentCamera(), state.keyed.camera)) paintKeyed(null); // walked on
   lastTick = Math.max(lastTick, now);
   if (walk.walk && state.scene && connection.state === "open") {
     collider.flush(walk.walk.eye, dt);
@@ -297,6 +298,20 @@ function flushPaint() {
   }
   paintChanges = {}; // not sent while disconnected: the reconnection restores state.paint
   paintBefore = { ...state.paint };
+}
+
+/**
+ * The walk paints `table` (the camera path's painting at a scrubbed time, as the server names it: POST
+ * /api/paths) in place of the page's own settings of those names, at the view it stands at now, until it moves
+ * on; null: the page's own settings again. Sent with this frame's edits; state.paint stays the page's own.
+ * @param {Object<string, any> | null} table
+ */
+function paintKeyed(table) {
+  const names = new Set([...Object.keys(state.keyed?.paint ?? {}), ...Object.keys(table ?? {})]);
+  for (const name of names) {
+    paintChanges[name] = table && Object.hasOwn(table, name) ? table[name] : (state.paint[name] ?? null);
+  }
+  state.keyed = table ? { paint: { ...table }, camera: currentCamera() } : null;
 }
 
 function resetCamera() {
@@ -460,6 +475,7 @@ qualityControl($("walk-quality"), (quality) => {
 const path = pathPanel($("path"), {
   camera: currentCamera,
   place: (camera) => walk.place(camera),
+  keyed: paintKeyed,
   scene: () => state.scene,
   request: () => {
     const paint = MESSAGES.paint({ ...state.paint });

@@ -21,6 +21,9 @@ export function initialState(link) {
     paint: {},
     /** @type {{changes: Object<string, any>, before: Object<string, any>} | null} the last paint message sent */
     lastPaint: null,
+    /** @type {{paint: Object<string, any>, camera: any} | null} the camera path's painting the walk shows in place
+     * of the page's own settings of those names, at the view scrubbed to (path/scrub.js), until it moves on */
+    keyed: null,
     /** @type {Object<string, any>} name -> StyleInfo (GET /api/styles) */
     styles: {},
     temporal: false, // per-frame: every frame is the painting of its camera

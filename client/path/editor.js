@@ -1,3 +1,4 @@
+// @ts-check
 // The selected keyframe's values, typed: its time, eye, look-at, field of view, ease in and out, and its
 // painting (the `paint` table a path file takes, as JSON) with the seconds it fades in over.
 

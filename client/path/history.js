@@ -1,3 +1,4 @@
+// @ts-check
 // Undo and redo for the camera path: every change is taken as a whole snapshot of the keyframes (a path is
 // small: a few hundred keyframes at most), so an undo is exact whatever the change was.
 

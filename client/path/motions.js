@@ -1,3 +1,4 @@
+// @ts-check
 // A model's animated cameras (a glTF's, SceneInfo.motions) taken as the path: the server samples one at the
 // path's frame rate (POST /api/paths with {"camera": name}), and its cameras become keyframes, one a frame,
 // which the timeline, the editor and Render video then treat as any other path.

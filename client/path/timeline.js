@@ -1,3 +1,4 @@
+// @ts-check
 // The path's keyframes on a timeline: a marker a key at its time, dragged to retime it (between its
 // neighbours), clicked to select it; and a scrub bar under them whose time the walk view shows.
 

@@ -331,10 +331,24 @@ class CameraPath:
         times = self.frame_times()
         for first in range(start, stop, 1024):
             chunk = times[first : min(stop, first + 1024)]
-            for n, (t, camera, scene_time) in enumerate(zip(chunk, *self.at(chunk), strict=True)):
-                eased = float(self.timing(np.array([min(float(t), self.end)]))[0])
-                looks = self.track.at(eased) if self.track is not None else ()
+            rows = zip(chunk, *self.at(chunk), self.looks(chunk), strict=True)
+            for n, (t, camera, scene_time, looks) in enumerate(rows):
                 yield PathFrame(first + n, float(t), camera, scene_time, looks)
+
+    def looks(self, t: np.ndarray) -> list[Looks]:
+        """The painting of the frames at seconds ``t (m,)``: the keyed one (:meth:`with_painting`) at each one's
+        time as the camera's eases read it, or ``()`` each (the film's own)."""
+        if self.track is None:
+            return [()] * len(t)
+        eased = self.timing(np.minimum(np.asarray(t, dtype=np.float64), self.end))
+        return [self.track.at(float(s)) for s in eased]
+
+    def keyed_paint(self, t: np.ndarray) -> list[dict[str, Any]]:
+        """What the path keys at seconds ``t (m,)`` over the film's painting, one ``paint`` table each
+        (:meth:`.PaintTrack.table`: within a cross-fade, the painting it fades to); ``[]`` when it keys none."""
+        if self.track is None:
+            return []
+        return [self.track.table(looks) for looks in self.looks(t)]
 
     def at(self, t: np.ndarray) -> tuple[list[Camera], list[float]]:
         """Cameras and scene times at seconds ``t (m,)`` along the path (held before the first keyframe)."""

@@ -163,6 +163,13 @@ class PaintTrack:
                 return ((self.painting(t), 1.0 - w), (self.painting(t, steps_at=end), w))
         return ((self.painting(t), 1.0),)
 
+    def table(self, looks: Looks) -> dict[str, Any]:
+        """A frame's painting (:meth:`at`) as a ``paint`` table of the settings the keys set, for a painting that
+        takes one look (the walk's): within a cross-fade the look it fades to; ``objects`` and ``materials``
+        whole where a key sets one of theirs (a table replaces the earlier one)."""
+        settings = looks[-1][0].settings()
+        return {name: settings[name] for name in sorted({name[0] for name in self.tracks})}
+
     def paintings(self) -> list[PaintParams]:
         """A painting of each key's steps (each way a frame may paint, bar its decimal settings): for the limits."""
         times = sorted({float(t) for track in self.tracks.values() for t in track.times})

@@ -122,6 +122,16 @@ async def resolved(spec: PathSpec | protocol.CameraPathRef, scene: Scene) -> Cam
         raise Refusal(str(exc)) from None
 
 
+def keyed_paint(path: CameraPath, scene: Scene, overrides: dict[str, Any], times: np.ndarray) -> list[dict[str, Any]]:
+    """Blocking: what ``path`` keys at seconds ``times (m,)`` over the film's painting (the scene's with the
+    caller's ``overrides``), one ``paint`` table a time (:meth:`.CameraPath.keyed_paint`; ``[]``: it keys none),
+    or :class:`Refusal` in one line for a painting the scene cannot take."""
+    try:
+        return path.with_painting(scene.painting(overrides), scene.check_names).keyed_paint(times)
+    except ValueError as exc:  # PathError among them
+        raise Refusal(str(exc)) from None
+
+
 def keyed(service: Service, path: CameraPath, frame: Asked, temporal: int | None) -> CameraPath:
     """``path`` painting what its keyframes key over the film's painting, checked against the scene and the
     work a video may take (its most costly painting on every frame, twice where it cross-fades)."""

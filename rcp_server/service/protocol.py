@@ -162,20 +162,25 @@ class VideoStatus(BaseModel):
 
 
 class PathRequest(_Model):
-    """``POST /api/paths``: the cameras of a path's frames, for a client to play the path back as it will render."""
+    """``POST /api/paths``: the cameras of a path's frames, for a client to play the path back as it will render;
+    ``paint``: the film's painting (as a video's), which the painting the path keys goes over."""
 
     scene: SceneName
     path: PathSpec | CameraPathRef
+    paint: PaintModel = PaintModel()
 
 
 class PathCameras(BaseModel):
-    """Every ``step``-th frame of a path (at most ``PREVIEW_FRAMES`` of them): ``fps`` is theirs."""
+    """Every ``step``-th frame of a path (at most ``PREVIEW_FRAMES`` of them): ``fps`` is theirs. ``paints``: what
+    the path keys on each of them over the film's painting, as a ``paint`` table of the settings its keys set
+    (within a cross-fade, the painting it fades to); empty when it keys none."""
 
     fps: float
     step: int
     frames: int  # of the whole path
     cameras: list[CameraModel]
     scene_times: list[float]
+    paints: list[dict[str, Any]] = []
 
 
 class Viewpoint(BaseModel):

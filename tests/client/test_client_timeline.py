@@ -151,3 +151,52 @@ def test_an_uploaded_models_animated_camera_becomes_the_path(page):
     assert [k["fov"] for k in taken] == pytest.approx(fov.tolist(), abs=1e-5)  # the file holds float32 radians
     page.locator("#path [data-path=undo]").click()
     assert keys(page) == []
+
+
+def test_scrubbing_paints_the_paths_keyed_painting_at_that_time(page, tmp_path):
+    """A path that keys its painting, loaded from its file: the frame shown at a scrubbed time is painted with
+    the film's painting of that frame (a setting between two keys on its curve; within a fade, the steps of the
+    style it fades to), and once the walk moves on the page's own painting comes back."""
+    keyframes = [
+        {"t": 0, **SIDE, "paint": {"lambda_p": 2, "noise": 0}},
+        {"t": 1, **AHEAD, "paint": {"lambda_p": 20, "noise": 0.5}},
+        {"t": 2, **SIDE, "paint": {"style": "layered"}, "fade": 1},
+    ]
+    file = tmp_path / "keyed.json"
+    file.write_text(json.dumps({"fps": 24, "loop": False, "keyframes": keyframes}))
+    page.locator("#path [data-path=file]").set_input_files(str(file))
+    page.wait_for_function("rcp.path.path.keyframes.length === 3", timeout=WAIT_MS)
+    scene = load_scene("sky")
+    path = parse_path(page.evaluate("rcp.path.spec()")).resolve(scene.camera).with_painting(scene.painting({}))
+    films = {shot.index: shot for shot in path.frames()}
+    scrub = page.locator("#path [data-path=scrub]")
+    for t, frame in ((0.5, 12), (1.5, 36)):
+        scrub.fill(str(t))
+        page.wait_for_function(f"rcp.path.scrubbed?.t === {t}", timeout=WAIT_MS)
+        assert page.evaluate("rcp.path.scrubbed.frame") == frame
+        painting = films[frame].looks[-1][0]  # the film's frame: within the fade, the look it fades to
+        # the walk's frame of the scrubbed camera names the film's painting of that frame
+        page.wait_for_function(
+            "rcp.overlay.frame?.camera_id === rcp.state.cameraId && rcp.state.keyed !== null"
+            f" && Math.abs(rcp.overlay.frame.paint.lambda_p - {painting.lambda_p}) < 1e-9",
+            timeout=WAIT_MS,
+        )
+        shown = page.evaluate("rcp.overlay.frame.paint")
+        assert shown["noise"] == pytest.approx(painting.noise, abs=1e-9)
+        assert (shown["mapping"], shown["iterations"]) == (painting.mapping, painting.iterations)
+        assert page.evaluate("rcp.state.paint") == {}  # the page's own settings stay its own
+    assert 2 < films[12].looks[0][0].lambda_p < 20  # between its keys, on their curve (PCHIP: within them)
+    assert len(films[36].looks) == 2 and films[36].looks[-1][0].mapping == "normal"  # in the fade to layered
+    sent = page.evaluate("rcp.sent.filter((m) => m.type === 'paint').at(-1)")
+    assert sent["mapping"] == "normal" and sent["lambda_p"] == pytest.approx(films[36].looks[-1][0].lambda_p)
+    # the walk moves on: the page's own painting again, for every setting the path keyed
+    page.evaluate(f"rcp.walk.place({json.dumps({**AHEAD, 'fov': 55})})")
+    page.wait_for_function("rcp.state.keyed === null", timeout=WAIT_MS)
+    restored = page.evaluate("rcp.sent.filter((m) => m.type === 'paint').at(-1)")
+    assert restored["lambda_p"] is None and restored["mapping"] is None and restored["noise"] is None
+    own = scene.painting({})
+    page.wait_for_function(
+        f"rcp.overlay.frame?.camera_id === rcp.state.cameraId && rcp.overlay.frame.paint.lambda_p === {own.lambda_p}"
+        f" && rcp.overlay.frame.paint.mapping === {json.dumps(own.mapping)}",
+        timeout=WAIT_MS,
+    )

@@ -82,3 +82,39 @@ def test_keys_that_cannot_paint_or_cost_too_much_are_refused_in_one_line(server)
     assert not_a_table.status_code == 422
     where = not_a_table.json()["detail"][0]["loc"]  # the path's model may name itself among the path's kinds
     assert where[:2] == ["body", "path"] and where[-3:] == ["keyframes", 1, "paint"]
+
+
+def test_a_paths_preview_names_the_painting_it_keys_on_each_frame(server, scenes):
+    """``POST /api/paths`` answers what the path keys on each frame over the film's painting: that table, given
+    over the film's painting (as the page sends it to its walk), is exactly the painting the film paints that
+    frame with (within a cross-fade, the one it fades to)."""
+    film = {"noise": 0.125, "lambda_e": 0.01}
+    answer = server.post("/api/paths", json={"scene": "tiny", "path": KEYED, "paint": film})
+    assert answer.status_code == 200, answer.text
+    paints = answer.json()["paints"]
+    scene = load_scene("tiny", scenes)
+    base = scene.painting(film)
+    path = parse_path(KEYED).resolve(scene.camera).with_painting(base, scene.check_names)
+    shots = list(path.frames())
+    assert len(paints) == len(shots) == 3
+    for table, shot in zip(paints, shots, strict=True):
+        assert scene.painting({**film, **table}) == shot.looks[-1][0]
+        assert "noise" not in table or table["noise"] == shot.looks[-1][0].noise  # the film's own where not keyed
+    # the fade's middle: the steps of the style it fades to, the decimal settings on their curves
+    assert (paints[1]["mapping"], paints[1]["iterations"]) == ("normal", 16) and 0 < paints[1]["lambda_p"] < 30
+    assert paints[0]["lambda_p"] == 0 and paints[0]["mapping"] == "color"
+    # two keys of one setting: its curve between them (PCHIP through two points: the straight line)
+    ramp = {"fps": 4, "keyframes": [{**k, "paint": {"lambda_p": 4 + 16 * k["t"]}} for k in KEYED["keyframes"]]}
+    answer = server.post("/api/paths", json={"scene": "tiny", "path": ramp, "paint": film}).json()
+    assert [p["lambda_p"] for p in answer["paints"]] == pytest.approx([4, 8, 12, 16, 20])
+    assert {name for p in answer["paints"] for name in p} == {"lambda_p"}
+    # a path that keys nothing names nothing; a film's painting the scene cannot take is refused in one line
+    plain = {
+        **KEYED,
+        "keyframes": [{k: v for k, v in key.items() if k not in ("paint", "fade")} for key in KEYED["keyframes"]],
+    }
+    assert server.post("/api/paths", json={"scene": "tiny", "path": plain}).json()["paints"] == []
+    refused = server.post(
+        "/api/paths", json={"scene": "tiny", "path": KEYED, "paint": {"objects": {"ghost": {"lambda_p": 1}}}}
+    )
+    assert refused.status_code == 422 and "ghost" in refused.json()["detail"] and "\n" not in refused.json()["detail"]

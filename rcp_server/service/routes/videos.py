@@ -6,10 +6,11 @@ import os
 
 from fastapi import APIRouter, Response
 from fastapi.responses import FileResponse
+from starlette.concurrency import run_in_threadpool
 
 from ...camera.wire import spec_of
 from .. import protocol
-from ..asked import SceneDep, VideoAskedDep, resolved
+from ..asked import SceneDep, VideoAskedDep, keyed_paint, resolved
 from ..refusal import Refusal
 from ..state import ServiceDep
 from ..store import open_regular
@@ -45,17 +46,21 @@ PREVIEW_FRAMES = 3600  # cameras one path preview answers with (a minute at 60 f
     },
 )
 async def path_cameras(body: protocol.PathRequest, scene: SceneDep) -> protocol.PathCameras:
-    """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path);
-    ``path`` may name one of the scene's animated cameras (``{"camera": name}``)."""
+    """The cameras of a path's frames, as a video of it paints them (every ``step``-th frame of a long path),
+    and the painting it keys on each over ``paint``; ``path`` may name one of the scene's animated cameras
+    (``{"camera": name}``)."""
     path = await resolved(body.path, scene)  # a Refusal in one line
     step = -(-path.frame_count // PREVIEW_FRAMES)
-    cameras, scene_times = path.at(path.frame_times()[::step])
+    times = path.frame_times()[::step]
+    cameras, scene_times = path.at(times)
+    paints = await run_in_threadpool(keyed_paint, path, scene, body.paint.given(), times)
     return protocol.PathCameras(
         fps=path.fps / step,
         step=step,
         frames=path.frame_count,
         cameras=[spec_of(c) for c in cameras],
         scene_times=scene_times,
+        paints=paints,
     )
 
 
