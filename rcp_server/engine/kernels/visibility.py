@@ -143,20 +143,29 @@ def classify(screen, origins, directions, rays, status, face):
             status[k] = EDGE_OR_TIE
 
 
-@jit
-def find_faces(screen, embree, origins, directions, rays, face, queue):
+def find_faces(screen, embree, origins, directions, rays, face, queue) -> int:
     """The closest triangle of each listed ray into ``face``, as ``embree.intersect_rays`` finds it (the same
     face, bit for bit): from the screen cells where they prove the answer, else from Embree. Returns how
-    many rays the cells answered.
+    many rays the cells answered. Called from Python: with the cells off, nothing of theirs compiles.
 
     screen : bundles.Screen (``on`` False: every ray goes to Embree);  embree : embree.Embree
     origins, directions : (n, 3) float32;  rays : (m,) int64 in screen order;  face : (n,) int32 out
     queue : (m,) int64 scratch: the rays that go to Embree
     """
-    m = len(rays)
     if not screen.on:
-        intersect_rays(embree, origins, directions, rays, face, np.bool_(True))
+        intersect_rays(embree, origins, directions, rays, face, True)
         return 0
+    queued = answer_listed(screen, origins, directions, rays, face, queue)
+    if queued:
+        intersect_rays(embree, origins, directions, queue[:queued], face, True)
+    return len(rays) - queued
+
+
+@jit
+def answer_listed(screen, origins, directions, rays, face, queue):
+    """``face`` of the listed rays the cells answer; the others into ``queue``, in order. Returns how many
+    were queued (arguments as :func:`find_faces`')."""
+    m = len(rays)
     status = queue  # the statuses first; the queue overwrites them behind the ray being read
     classify(screen, origins, directions, rays, status, face)
     queued = 0
@@ -164,9 +173,7 @@ def find_faces(screen, embree, origins, directions, rays, face, queue):
         if status[k] != ANSWERED:
             queue[queued] = rays[k]
             queued += 1
-    if queued:
-        intersect_rays(embree, origins, directions, queue[:queued], face, np.bool_(True))
-    return m - queued
+    return queued
 
 
 @jit
