@@ -1,3 +1,4 @@
+// @ts-check
 // A frame painted in bands on several machines arrives as its `frame` message (with `bands`: each band's
 // [first row, rows], top to bottom) and one JPEG per band, forwarded by the server as the workers encoded them.
 // The bands are gathered here, each drawn in place at its rows, and the frame is shown once all are in.

@@ -2,6 +2,7 @@
 // The selected keyframe's values, typed: its time, eye, look-at, field of view, ease in and out, and its
 // painting (the `paint` table a path file takes, as JSON) with the seconds it fades in over.
 
+/** @type {Array<[string, string, number]>} the key's fields: name, label, how many numbers */
 const FIELDS = [
   ["t", "time (s)", 1],
   ["eye", "eye", 3],
@@ -34,7 +35,7 @@ export function keyEditor(root, hooks) {
       const values = count === 1 ? [value] : value;
       values.forEach((v, k) => {
         const input = document.createElement("input");
-        Object.assign(input, { type: "number", step: "any", value: v ?? "" });
+        Object.assign(input, { type: "number", step: "any", value: String(v ?? "") });
         input.className = "num";
         input.dataset.field = count === 1 ? name : `${name}.${k}`;
         input.addEventListener("change", () => typed(name, count, row));

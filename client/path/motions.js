@@ -29,8 +29,8 @@ export function motionChooser(root, hooks) {
     if (names.includes(chosen)) select.value = chosen;
   }
 
-  take.addEventListener("click", async (event) => {
-    event.target.blur();
+  take.addEventListener("click", async () => {
+    take.blur();
     const scene = hooks.scene();
     if (!scene || !select.value) return;
     try {

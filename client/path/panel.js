@@ -108,10 +108,10 @@ class PathPanel {
     });
     const undoing = document.createElement("div");
     undoing.className = "buttons";
-    for (const [name, text, act] of [
+    for (const [name, text, act] of /** @type {Array<[string, string, () => void]>} */ ([
       ["undo", "Undo", () => keys.history.undo()],
       ["redo", "Redo", () => keys.history.redo()],
-    ]) {
+    ])) {
       const b = button(text, `${text} the last change of the path`, act);
       b.dataset.path = name;
       undoing.append(b);

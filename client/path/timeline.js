@@ -42,7 +42,7 @@ export function timeline(root, hooks) {
       });
       track.append(marker);
     });
-    scrub.max = end();
+    scrub.max = String(end());
   }
 
   track.addEventListener("pointermove", (event) => {

@@ -11,19 +11,13 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import subprocess
-import tempfile
-from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers.browser import client_360, data_url_image, needs_chromium
+from helpers.npm import npm_package
 
 IWER_VERSION = "2.5.0"
-CACHE = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "rcp-tests" / f"iwer-{IWER_VERSION}"
-BUNDLE = Path("node_modules/iwer/build/iwer.min.js")  # the UMD build: defines window.IWER
 HEADSET = """
 window.xrDevice = new IWER.XRDevice(IWER.metaQuest3);
 xrDevice.installRuntime({ forceInstall: true }); // over Chromium's own navigator.xr, which has no headset
@@ -47,19 +41,8 @@ pytestmark = needs_chromium
 
 @pytest.fixture(scope="session")
 def iwer() -> str:
-    """The source of ``iwer``'s browser bundle, installed with npm into :data:`CACHE` the first time."""
-    if not (CACHE / BUNDLE).is_file():
-        npm = shutil.which("npm")
-        assert npm, "the VR test needs npm to install iwer (apt-get install npm, or Node.js with npm)"
-        CACHE.parent.mkdir(parents=True, exist_ok=True)
-        staging = Path(tempfile.mkdtemp(prefix="iwer-", dir=CACHE.parent))  # a worker's own: xdist runs two
-        command = [npm, "install", "--prefix", str(staging), "--no-audit", "--no-fund", "--ignore-scripts"]
-        subprocess.run([*command, f"iwer@{IWER_VERSION}"], check=True, capture_output=True, timeout=600)
-        try:
-            staging.rename(CACHE)
-        except OSError:  # another worker got there first: its copy is the same
-            shutil.rmtree(staging, ignore_errors=True)
-    return (CACHE / BUNDLE).read_text()
+    """The source of ``iwer``'s browser bundle (its UMD build: defines window.IWER)."""
+    return (npm_package("iwer", IWER_VERSION) / "iwer" / "build" / "iwer.min.js").read_text()
 
 
 def shot(page) -> np.ndarray:
