@@ -118,6 +118,15 @@ class Host:
     def figures(self, stop) -> dict:
         return {} if self.walks is None else self.walks.figures()
 
+    def groups(self, stop) -> dict:
+        """Ray's placement groups, from its own table: id -> state, strategy and the node of each bundle."""
+        from ray.util import placement_group_table
+
+        return {
+            gid: {"state": g["state"], "strategy": g["strategy"], "nodes": list(g["bundles_to_node_id"].values())}
+            for gid, g in placement_group_table().items()
+        }
+
     def cost(self, stop):
         return None if self.walks is None else (self.walks.cost.frame_s, self.walks.cost.ray_s)
 

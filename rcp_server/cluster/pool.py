@@ -11,6 +11,7 @@ from typing import Any
 from ..painting.loop import Abandoned
 from .actor import Held
 from .connection import ClusterError, PaintingFailed, first_line, ray_module, worker_failure
+from .spread import BUNDLE_MEMORY, Seat
 from .walkactor import WalkPainter
 
 POLL_S = 0.05  # how often a wait for a frame checks whether it is still wanted
@@ -35,6 +36,7 @@ class Member:
     warm: Any
     threads: int
     started: float
+    group: str = ""  # the placement group it lives in (its walker's: :mod:`.spread`), none when placed by affinity
 
     def ready(self) -> bool:
         """Whether its start finished (well or not: a failed one shows at its first frame)."""
@@ -54,14 +56,19 @@ class Pool:
     def joined(self) -> None:
         self._remote = ray_module().remote(num_cpus=0, max_restarts=0)(WalkPainter)
 
-    def start(self, node: str, threads: int, held: Held) -> Member:
-        """A walk actor on ``node``, building ``held``'s scene at once."""
-        from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
+    def start(self, node: str, threads: int, held: Held, seat: Seat | None = None) -> Member:
+        """A walk actor on ``node``, building ``held``'s scene at once: in its bundle ``seat`` of the walker's
+        placement group (on ``node``), else held to ``node`` by affinity."""
+        if seat is not None:
+            options: dict[str, Any] = {"scheduling_strategy": seat.strategy(), "memory": BUNDLE_MEMORY}
+        else:
+            from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
-        # hard: a crew's bands are on distinct nodes or nowhere (an actor whose node went fails, and leaves the crew)
-        strategy = NodeAffinitySchedulingStrategy(node, soft=False)
-        actor = self._remote.options(scheduling_strategy=strategy).remote(threads)
-        return Member(node, actor, actor.warm.remote(held), threads, time.monotonic())
+            # hard: a crew's bands are on distinct nodes or nowhere (an actor whose node went fails, and leaves it)
+            options = {"scheduling_strategy": NodeAffinitySchedulingStrategy(node, soft=False)}
+        actor = self._remote.options(**options).remote(threads)
+        group = seat.group_id if seat is not None else ""
+        return Member(node, actor, actor.warm.remote(held), threads, time.monotonic(), group)
 
     def started(self, held: Held) -> Any:
         """An actor anywhere, and the ref of its start: whether Ray answers at all."""

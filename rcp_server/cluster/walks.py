@@ -37,6 +37,7 @@ from .calibration import calibrate
 from .connection import ClusterError, Connection, PaintingFailed, first_line
 from .inventory import Inventory
 from .pool import FIRST_FRAME_S, ActorLost, Member, Pool, kill, wait_all
+from .spread import Spread
 from .walkactor import Painted, joined
 
 log = logging.getLogger("rcp")
@@ -54,33 +55,68 @@ class Place:
     home: str
     order: int
     crew: dict[str, Member] = field(default_factory=dict)
+    moving: dict[str, Member] = field(default_factory=dict)  # node -> a member warming in a new group, to take over
+    spread: Spread = field(default_factory=Spread)
     frames: int = 0
     recent_s: float | None = None
     paint_s: float | None = None
     overhead_s: float | None = None
 
     def staffed(self, wanted: list[str], threads: dict[str, int], pool: Pool, held) -> list[Member]:
-        """The crew on the ``wanted`` nodes (of those live, ``threads`` each): members elsewhere or stale leave,
-        new ones start; the warm ones paint, by node id (so a band keeps its rows frame after frame)."""
-        for node in list(self.crew):
-            if node not in wanted or node not in threads or self.crew[node].stale():
-                kill(self.crew.pop(node).actor)
-        for node in wanted:
-            if node not in self.crew and node in threads:
-                self.crew[node] = pool.start(node, threads[node], held)
+        """The crew on the ``wanted`` nodes (of those live, ``threads`` each), in the bundles of the walker's
+        placement group over them (:mod:`.spread`, built off this path): members elsewhere or stale leave, new ones
+        start once the group holds their node, and a member of an older group moves into the new one (it paints
+        until its successor is warm); the warm ones paint, by node id (so a band keeps its rows frame after frame)."""
+        live = [node for node in wanted if node in threads]
+        self.spread.want(live)
+        for crew in (self.crew, self.moving):
+            for node in list(crew):
+                if node not in live or crew[node].stale():
+                    kill(crew.pop(node).actor)
+        for node in live:
+            self._seat(node, threads[node], pool, held)
+        for node in [node for node, member in self.moving.items() if member.ready()]:
+            old, self.crew[node] = self.crew.get(node), self.moving.pop(node)
+            if old is not None:
+                kill(old.actor)
+        self.spread.release({m.group for m in [*self.crew.values(), *self.moving.values()]})
         return [self.crew[node] for node in sorted(self.crew) if self.crew[node].ready()]
+
+    def _seat(self, node: str, threads: int, pool: Pool, held) -> None:
+        """A member on ``node`` in its bundle of the ready group (by affinity when Ray has no such groups)."""
+        member = self.crew.get(node)
+        if self.spread.off:
+            if member is None:
+                self.crew[node] = pool.start(node, threads, held)
+            return
+        seat = self.spread.seat(node)
+        if seat is None or (member is not None and member.group == seat.group_id) or node in self.moving:
+            return  # no group holds the node yet (the members there paint meanwhile), or it is seated already
+        if member is None:
+            self.crew[node] = pool.start(node, threads, held, seat)
+        else:
+            self.moving[node] = pool.start(node, threads, held, seat)
 
     def lose(self, lost: ActorLost) -> list[str]:
         """The members ``lost`` leave the crew, stopped; the nodes they were on."""
         nodes = [node for node, member in self.crew.items() if member.actor in lost.actors]
         for node in nodes:
             kill(self.crew.pop(node).actor)
+            if node in self.moving:
+                kill(self.moving.pop(node).actor)
         return nodes
 
     def stop(self) -> None:
-        """Its crew stops."""
-        for member in self.crew.values():
+        """Its crew stops, and its placement groups are removed."""
+        for member in [*self.crew.values(), *self.moving.values()]:
             kill(member.actor)
+        self.spread.close()
+
+    def forget(self) -> None:
+        """Ray was joined again: its actors and groups went with the runtime before."""
+        self.crew.clear()
+        self.moving.clear()
+        self.spread = Spread()
 
     def painted(self, painted: Painted, params: PaintParams, seconds: float, cost: CostMeter) -> None:
         """One frame painted in ``seconds``: its times folded into the walker's, its cost a ray into ``cost``."""
@@ -285,7 +321,7 @@ class Walks:
                 self.scenes.clear()
                 self.inventory.forget()
                 for place in self.places.values():
-                    place.crew.clear()
+                    place.forget()
                 self.pool.joined()
 
     def close(self) -> None:

@@ -98,6 +98,11 @@ def on_ray(walks: RemoteWalks, scene: Scene, k: int, params: PaintParams, after:
         time.sleep(0.1)
 
 
+def live_groups(walks: RemoteWalks) -> dict:
+    """Ray's placement groups not removed, from its own table (asked through the driver)."""
+    return {gid: g for gid, g in walks.ray.call("groups", timeout_s=10.0).items() if g["state"] != "REMOVED"}
+
+
 def camera(scene: Scene, k: int):
     return scene.camera.moved(eye=(0.3 * k, 0.2, 0.1 * k))
 
@@ -112,6 +117,8 @@ def test_a_walkers_frame_is_painted_in_bands_on_distinct_nodes_pixel_for_pixel_t
     walks.admit("w", first, busy_scene)
     painted = on_ray(walks, busy_scene, 0, first, None)
     assert len({band.node for band in painted.bands}) == NODES  # one band a node
+    (group,) = live_groups(walks).values()  # through the walker's placement group: a bundle on each band's node
+    assert group["strategy"] == "STRICT_SPREAD" and sorted(group["nodes"]) == sorted(b.node for b in painted.bands)
     assert [(b.y, b.rows) for b in painted.bands] == [(0, 32), (32, 32), (64, 32)]
     for band in painted.bands:  # each band encoded on its worker, small enough for Ray's reply
         assert band.jpeg[:2] == b"\xff\xd8" and len(band.jpeg) < 100 << 10
@@ -158,6 +165,27 @@ def test_a_node_removed_mid_walk_shrinks_the_crew_and_the_frames_go_on(walks, no
     print(f"the walk paused at most {pauses.max():.2f} s", [(round(t - removed[0], 2), n) for t, n in frames])
     assert pauses.max() < 5.0  # a short pause, then frames again
     assert [n for _, n in frames[-5:]] == [NODES - 1] * 5  # the crew shrank to the nodes left
+    # meanwhile the walker's group is rebuilt for the nodes left, its members move into it, the old one goes
+    deadline, k = time.monotonic() + 90, 200
+    while True:
+        painted = on_ray(walks, busy_scene, k, params, None, bands=NODES - 1)
+        groups = list(live_groups(walks).values())
+        if len(groups) == 1 and sorted(groups[0]["nodes"]) == sorted(b.node for b in painted.bands):
+            break
+        assert time.monotonic() < deadline, groups
+        k += 1
+    assert gone.node_id not in groups[0]["nodes"]
+
+
+def test_a_walker_that_leaves_removes_its_placement_group(walks, busy_scene):
+    params = PaintParams(iterations=2)
+    walks.admit("w", params, busy_scene)
+    assert live_groups(walks)
+    walks.leave("w")
+    deadline = time.monotonic() + 10
+    while live_groups(walks):
+        assert time.monotonic() < deadline, live_groups(walks)
+        time.sleep(0.1)
 
 
 def test_the_whole_cluster_stopped_paints_here_and_returns_to_ray_once_it_is_back(walks, nodes, busy_scene):
