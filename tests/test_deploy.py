@@ -4,6 +4,7 @@ the probe and port are the server's, and the image gets Ray through its build ar
 
 from __future__ import annotations
 
+import inspect
 import re
 import tomllib
 from pathlib import Path
@@ -133,3 +134,23 @@ def test_the_workers_scale_with_the_admitted_walkers(documents):
     settings = Settings(**env)
     assert settings.ray_walks and (settings.walk_width, settings.walk_height) == (640, 360)
     assert settings.max_sessions >= 64
+
+
+def test_a_walkers_crew_is_placed_by_a_spreading_placement_group_the_workers_hold(documents):
+    """The manifest says how crews are placed, as rcp_server/cluster/spread.py places them; each worker pod's memory
+    holds a bundle for every walker its two cores take part in, and the manifest's Ray holds bundles to nodes."""
+    from rcp_server.cluster import spread
+
+    text = " ".join(MANIFEST.read_text().replace("#", " ").split())  # the comments as one text
+    assert "placement group" in text and "STRICT_SPREAD" in text and spread.NODE_LABEL in text
+    assert f"{spread.BUNDLE_MEMORY >> 20} MiB" in text
+    (painters,) = cluster(documents)["spec"]["workerGroupSpecs"]
+    (worker,) = painters["template"]["spec"]["containers"]
+    memory = int(worker["resources"]["requests"]["memory"].removesuffix("Gi")) << 30
+    assert memory >= 16 * spread.BUNDLE_MEMORY
+    ray = pytest.importorskip("ray")
+    from ray.util import placement_group
+
+    assert "bundle_label_selector" in inspect.signature(placement_group).parameters
+    installed = tuple(int(n) for n in ray.__version__.split(".")[:2])
+    assert tuple(int(n) for n in cluster(documents)["spec"]["rayVersion"].split(".")[:2]) >= installed
