@@ -38,9 +38,14 @@ class Member:
     started: float
     group: str = ""  # the placement group it lives in (its walker's: :mod:`.spread`), none when placed by affinity
 
+    warmed: bool = False
+
     def ready(self) -> bool:
-        """Whether its start finished (well or not: a failed one shows at its first frame)."""
-        return bool(ray_module().wait([self.warm], timeout=0)[0])
+        """Whether its start finished (well or not: a failed one shows at its first frame); once it has, Ray is not
+        asked again (a call into Ray's core worker a member a frame)."""
+        if not self.warmed:
+            self.warmed = bool(ray_module().wait([self.warm], timeout=0)[0])
+        return self.warmed
 
     def stale(self) -> bool:
         """Whether it is still starting after ``FIRST_FRAME_S`` (its node gone, or never placed)."""
@@ -85,11 +90,11 @@ def wait_all(
     clock = time.monotonic()
     while True:
         ready, waiting = ray.wait(refs, num_returns=len(refs), timeout=POLL_S)
+        if not waiting:
+            break
         lost = [actor for ref, actor in zip(refs, actors, strict=True) if ref in ready and _lost(ref)]
         if lost:
             raise ActorLost("a walker's Ray worker died", lost)
-        if not waiting:
-            break
         if should_stop is not None and should_stop():
             raise Abandoned
         if time.monotonic() - clock > limit_s:
@@ -98,7 +103,10 @@ def wait_all(
         if gone():
             raise ClusterError("Ray stopped mid-walk")
     try:
-        return ray.get(refs)
+        return ray.get(refs)  # all in: one get (a worker that died shows here, and is told apart below)
+    except (ray.exceptions.RayActorError, ray.exceptions.ObjectLostError):
+        lost = [actor for ref, actor in zip(refs, actors, strict=True) if _lost(ref)]
+        raise ActorLost("a walker's Ray worker died", lost) from None
     except ray.exceptions.RayTaskError as exc:
         raise PaintingFailed(f"a walk frame failed on Ray: {worker_failure(exc)}") from None
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Any
 
 from .connection import first_line, ray_module
@@ -27,6 +28,9 @@ log = logging.getLogger("rcp")
 
 BUNDLE_MEMORY = 64 << 20  # bytes a band actor's bundle reserves: a walk actor's scene and band state, small scenes
 READY_S = 30.0  # a group not placed within this is removed, and built again at the next frame
+SETTLE_S = 3.0  # members move into a new group this long after it was placed, one at a time: a node just lost
+# leaves the crew's CPUs busy (the frame painted again, Ray's own recovery), and a successor warming beside a band
+# actor slows its band
 NODE_LABEL = "ray.io/node-id"  # the label Ray gives every node: its id
 
 
@@ -60,6 +64,7 @@ class Spread:
         self._groups: dict[str, Any] = {}  # every group made and not removed, by id
         self._building: set[str] = set()  # groups still waiting to be placed (they remove themselves if stale)
         self.built = 0  # groups placed so far
+        self.placed_at = 0.0  # when the ready group was placed (monotonic)
         self.off = False
         self.closed = False
 
@@ -80,10 +85,9 @@ class Spread:
             index = self.nodes.get(node)
             return None if index is None else Seat(self.group, index)
 
-    def current(self) -> str | None:
-        """The ready group's id."""
-        with self._lock:
-            return None if self.group is None else self.group.id.hex()
+    def settled(self) -> bool:
+        """Whether members of older groups may move into the ready one now (``SETTLE_S`` after it was placed)."""
+        return time.monotonic() - self.placed_at > SETTLE_S
 
     def release(self, living: set[str]) -> None:
         """Remove (on a thread) the groups, other than the ready one, that no member lives in (``living``: ids)."""
@@ -125,7 +129,7 @@ class Spread:
             self._building.discard(gid)
             fresh = placed and not self.closed and self._wanted == nodes
             if fresh:
-                self.group, self.built = group, self.built + 1
+                self.group, self.built, self.placed_at = group, self.built + 1, time.monotonic()
                 self.nodes = {node: int(index) for index, node in table["bundles_to_node_id"].items()}
             else:
                 self._groups.pop(gid, None)

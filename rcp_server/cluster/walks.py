@@ -38,7 +38,7 @@ from .connection import ClusterError, Connection, PaintingFailed, first_line
 from .inventory import Inventory
 from .pool import FIRST_FRAME_S, ActorLost, Member, Pool, kill, wait_all
 from .spread import Spread
-from .walkactor import Painted, joined
+from .walkactor import Painted, joined, pack
 
 log = logging.getLogger("rcp")
 
@@ -94,7 +94,7 @@ class Place:
             return  # no group holds the node yet (the members there paint meanwhile), or it is seated already
         if member is None:
             self.crew[node] = pool.start(node, threads, held, seat)
-        else:
+        elif not self.moving and self.spread.settled():  # one at a time, once the crew has settled
             self.moving[node] = pool.start(node, threads, held, seat)
 
     def lose(self, lost: ActorLost) -> list[str]:
@@ -262,10 +262,9 @@ class Walks:
                     raise NoRoom("the walker's crew is starting")
                 regions = _bands(width, height, len(members), camera, params)
                 clock = time.perf_counter()
-                refs = [
-                    m.actor.band.remote(held, camera, r, params, scene_time, quality, serial, after, keep_pixels)
-                    for m, r in zip(members, regions, strict=False)
-                ]
+                frame = (params, scene_time, quality, serial, after, keep_pixels)
+                seated = zip(members, regions, strict=False)  # one region when the frame does not split
+                refs = [m.actor.packed.remote(held, pack(camera, r, *frame)) for m, r in seated]
                 limit = FIRST_FRAME_S if place.recent_s is None else max(FRAME_LEAST_S, FRAME_TIMES * place.recent_s)
                 try:
                     bands = wait_all(refs, [m.actor for m in members], limit, should_stop, self.connection.gone)
