@@ -135,14 +135,15 @@ def bench_crew(nodes: int, scene_name: str, width: int, height: int, seconds: fl
         walks = RemoteWalks(driver, 1, 30)
         walks.calibrate(scene, params)
         walks.admit("crew", params, scene)
-        times: list[tuple[float, float, int]] = []  # (round trip, slowest band's painting, bands)
+        times: list[tuple[float, float, int, float]] = []  # (round trip, slowest band's painting, bands, free)
         deadline, end, k = time.monotonic() + 120, None, 0
         while end is None or time.monotonic() < end:
             k += 1
             camera = scene.camera.moved(eye=tuple(np.asarray(scene.camera.eye) + (0.01 * k, 0.0, 0.0)))
             try:
-                clock = time.perf_counter()
+                clock, sent = time.perf_counter(), time.time()
                 painted = walks.paint("crew", scene, camera, width, height, params, 0.0, 80, k, None)
+                back = time.time()
             except NoRoom:  # the crew is starting
                 if time.monotonic() > deadline:
                     raise
@@ -152,7 +153,7 @@ def bench_crew(nodes: int, scene_name: str, width: int, height: int, seconds: fl
             if end is None and (bands == nodes or time.monotonic() > deadline):
                 end = time.monotonic() + seconds
             elif end is not None:
-                times.append((time.perf_counter() - clock, painted.paint_s, bands))
+                times.append((time.perf_counter() - clock, painted.paint_s, bands, _free(painted.bands, sent, back)))
     finally:
         driver.close()
         cluster.shutdown()
@@ -162,12 +163,30 @@ def bench_crew(nodes: int, scene_name: str, width: int, height: int, seconds: fl
         clock = time.perf_counter()
         images.encode(paint(scene, scene.camera, width, height, params, threads=nodes).image, "JPEG", 80)
         here.append(time.perf_counter() - clock)
-    trips = np.array([t for t, _, _ in times])
-    overhead = np.array([t - p for t, p, _ in times])
+    trips = np.array([t for t, _, _, _ in times])
+    overhead = np.array([t - p for t, p, _, _ in times])
+    free = np.median([f for _, _, _, f in times]) * 1e3
     print(f"one walker of {scene_name!r} at {width}x{height}, {params.iterations} iterations, {seconds:g} s each")
-    print(f"{'where':>28} {'fps':>6} {'p95 ms':>7} {'overhead ms':>12}")
+    print(f"{'where':>28} {'fps':>6} {'p95 ms':>7} {'overhead ms':>12} {'of it Ray':>10}")
     crew = f"a crew on {nodes} nodes ({times[-1][2] if times else 0} bands)"
     p95, median = np.percentile(trips, 95) * 1e3, np.median(overhead) * 1e3
-    print(f"{crew:>28} {len(trips) / seconds:6.1f} {p95:7.1f} {median:12.1f}")
+    print(f"{crew:>28} {len(trips) / seconds:6.1f} {p95:7.1f} {median:12.1f} {free:10.1f}")
     threads = f"{nodes} threads here"
-    print(f"{threads:>28} {len(here) / seconds:6.1f} {np.percentile(here, 95) * 1e3:7.1f} {'':>12}")
+    print(f"{threads:>28} {len(here) / seconds:6.1f} {np.percentile(here, 95) * 1e3:7.1f} {'':>12} {'':>10}")
+    print(
+        "overhead: the round trip beyond the slowest band's painting (medians); of it Ray: the first band's way out "
+        "and the last band's way back, and the bands' time on their workers beyond painting (not the time a band "
+        f"waits for a core: here {nodes} nodes share this machine's {os.cpu_count()} cores)"
+    )
+
+
+def _free(bands, sent: float, back: float) -> float:
+    """A frame's round trip beyond painting, without a band's wait for a core of this machine: from the call to
+    the first band's start, from the last band's end to the answer, and each band's longest time on its worker
+    beyond its painting (the workers' clocks are this machine's)."""
+    if not bands:
+        return 0.0
+    first = min(band.span[0] for band in bands)
+    last = max(band.span[1] for band in bands)
+    beyond = max(band.span[1] - band.span[0] - band.paint_s for band in bands)
+    return (first - sent) + (back - last) + beyond

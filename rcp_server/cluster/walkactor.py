@@ -32,7 +32,9 @@ WALK_SCENES = 2  # scenes a walk actor keeps built: the one shown and the one ju
 @dataclass(frozen=True)
 class Band:
     """One band of a walk frame, painted and encoded by one worker: rows ``[y, y + rows)`` of the painting as a JPEG
-    of its own (the server forwards it as it is), and what the worker spent on it."""
+    of its own (the server forwards it as it is), and what the worker spent on it; ``span``: when the worker began
+    and ended it (its wall clock, ``time.time()``: on one machine, the bench tells Ray's round trip apart from a band
+    waiting for a core)."""
 
     y: int
     rows: int
@@ -42,6 +44,7 @@ class Band:
     cpu_s: float
     pixels: np.ndarray | None = None
     node: str = ""  # the Ray node that painted it
+    span: tuple[float, float] = (0.0, 0.0)
 
 
 @dataclass(frozen=True)
@@ -125,6 +128,7 @@ class WalkPainter:
         """Rows ``region`` of frame ``serial`` (the painting's size: ``region.full_width x full_height``, both
         eyes): painted from this band's state of frame ``after`` when this actor keeps it (temporal), else from
         ``I_0``; encoded as JPEG at ``quality``."""
+        began = time.time()
         wall, cpu = time.perf_counter(), time.process_time()
         width, height = region.full_width, region.full_height
         whole = region == Region(width, height)
@@ -158,6 +162,7 @@ class WalkPainter:
             time.process_time() - cpu,
             pixels if keep_pixels else None,
             self.node,
+            (began, time.time()),
         )
 
     def packed(self, held: Held, frame: bytes) -> Band:
