@@ -37,6 +37,7 @@ class Member:
     threads: int
     started: float
     group: str = ""  # the placement group it lives in (its walker's: :mod:`.spread`), none when placed by affinity
+    scene: str = ""  # the key of the last scene it was sent (it keeps that one built)
 
     warmed: bool = False
 
@@ -73,7 +74,7 @@ class Pool:
             options = {"scheduling_strategy": NodeAffinitySchedulingStrategy(node, soft=False)}
         actor = self._remote.options(**options).remote(threads)
         group = seat.group_id if seat is not None else ""
-        return Member(node, actor, actor.warm.remote(held), threads, time.monotonic(), group)
+        return Member(node, actor, actor.warm.remote(held), threads, time.monotonic(), group, held.key)
 
     def started(self, held: Held) -> Any:
         """An actor anywhere, and the ref of its start: whether Ray answers at all."""

@@ -165,10 +165,14 @@ class WalkPainter:
             (began, time.time()),
         )
 
-    def packed(self, held: Held, frame: bytes) -> Band:
-        """:meth:`band`, its arguments but the scene pickled together by the caller (:func:`pack`): one argument
-        costs Ray less to send than eight (the scene travels apart, so that Ray counts its reference)."""
-        return self.band(held, *pickle.loads(frame))
+    def packed(self, frame: bytes, held: Held | None = None) -> Band:
+        """:meth:`band`, its arguments pickled together by the caller (:func:`pack`, the scene by its key): one
+        argument costs Ray less to send than nine. ``held``: the scene itself (Ray counts its reference), sent only
+        when this actor's last scene was another one (it keeps its last scenes built)."""
+        key, *args = pickle.loads(frame)
+        if held is None and key not in self.scenes.built:
+            raise LookupError(f"the walk actor does not hold scene {key}")
+        return self.band(held or Held(key, []), *args)
 
     def frame(
         self,
@@ -192,6 +196,7 @@ class WalkPainter:
 
 
 def pack(
+    key: str,
     camera: Camera,
     region: Region,
     params: PaintParams,
@@ -201,7 +206,7 @@ def pack(
     after: int | None,
     keep_pixels: bool,
 ) -> bytes:
-    """:meth:`WalkPainter.band`'s arguments after the scene, as :meth:`WalkPainter.packed` takes them."""
+    """:meth:`WalkPainter.band`'s arguments, the scene by its ``key``, as :meth:`WalkPainter.packed` takes them."""
     from ray import cloudpickle  # a registered mapping travels by value, as Ray would send it
 
-    return cloudpickle.dumps((camera, region, params, scene_time, quality, serial, after, keep_pixels))
+    return cloudpickle.dumps((key, camera, region, params, scene_time, quality, serial, after, keep_pixels))

@@ -264,7 +264,7 @@ class Walks:
                 clock = time.perf_counter()
                 frame = (params, scene_time, quality, serial, after, keep_pixels)
                 seated = zip(members, regions, strict=False)  # one region when the frame does not split
-                refs = [m.actor.packed.remote(held, pack(camera, r, *frame)) for m, r in seated]
+                refs = [_band(m, held, pack(held.key, camera, r, *frame)) for m, r in seated]
                 limit = FIRST_FRAME_S if place.recent_s is None else max(FRAME_LEAST_S, FRAME_TIMES * place.recent_s)
                 try:
                     bands = wait_all(refs, [m.actor for m in members], limit, should_stop, self.connection.gone)
@@ -330,6 +330,14 @@ class Walks:
             places, self.places = list(self.places.values()), {}
         for place in places:
             place.stop()
+
+
+def _band(member: Member, held, frame: bytes):
+    """The ref of a band call: the scene goes along only when the member's last scene was another."""
+    if member.scene == held.key:
+        return member.actor.packed.remote(frame)
+    member.scene = held.key
+    return member.actor.packed.remote(frame, held)
 
 
 def _homes(places: dict[object, Place], walker: float) -> dict[str, float]:
