@@ -103,6 +103,19 @@ def live_groups(walks: RemoteWalks) -> dict:
     return {gid: g for gid, g in walks.ray.call("groups", timeout_s=10.0).items() if g["state"] != "REMOVED"}
 
 
+def settled(walks: RemoteWalks, scene: Scene, params: PaintParams, bands: int) -> dict:
+    """The walker's one placement group, once its ``bands`` members all live in it (frames painted meanwhile: a crew
+    moves into a new group between frames)."""
+    deadline, k = time.monotonic() + 90, 1000
+    while True:
+        painted = on_ray(walks, scene, k, params, None, bands=bands)
+        groups = list(live_groups(walks).values())
+        if len(groups) == 1 and sorted(groups[0]["nodes"]) == sorted(b.node for b in painted.bands):
+            return groups[0]
+        assert time.monotonic() < deadline, groups
+        k += 1
+
+
 def camera(scene: Scene, k: int):
     return scene.camera.moved(eye=(0.3 * k, 0.2, 0.1 * k))
 
@@ -115,10 +128,12 @@ def test_a_walkers_frame_is_painted_in_bands_on_distinct_nodes_pixel_for_pixel_t
     first = PaintParams(iterations=4, spp=4, lambda_p=6.0, lambda_e=0.05)
     step = replace(first, iterations=3)
     walks.admit("w", first, busy_scene)
+    group = settled(walks, busy_scene, first, NODES)  # through the walker's placement group: a bundle a band's node
+    assert group["strategy"] == "STRICT_SPREAD" and len(set(group["nodes"])) == NODES
     painted = on_ray(walks, busy_scene, 0, first, None)
     assert len({band.node for band in painted.bands}) == NODES  # one band a node
-    (group,) = live_groups(walks).values()  # through the walker's placement group: a bundle on each band's node
-    assert group["strategy"] == "STRICT_SPREAD" and sorted(group["nodes"]) == sorted(b.node for b in painted.bands)
+    assert sorted(group["nodes"]) == sorted(b.node for b in painted.bands)
+    assert list(live_groups(walks).values()) == [group]
     assert [(b.y, b.rows) for b in painted.bands] == [(0, 32), (32, 32), (64, 32)]
     for band in painted.bands:  # each band encoded on its worker, small enough for Ray's reply
         assert band.jpeg[:2] == b"\xff\xd8" and len(band.jpeg) < 100 << 10
@@ -132,6 +147,17 @@ def test_a_walkers_frame_is_painted_in_bands_on_distinct_nodes_pixel_for_pixel_t
         assert painted.continued
         np.testing.assert_array_equal(painted.pixels, images.to_uint8(expected.image))
         state = expected.state
+
+
+def test_a_walker_that_changes_scene_and_back_is_painted_as_the_threads_paint_each(walks, busy_scene, gradient_scene):
+    """A band call sends the scene only when the member's last scene was another: the new scene, then the old
+    one again (which the worker still holds built), each painted as the threads paint it."""
+    params = PaintParams(iterations=2, spp=1, lambda_p=4.0)
+    walks.admit("w", params, busy_scene)
+    for k, scene in enumerate((gradient_scene, busy_scene, busy_scene), start=3):
+        painted = on_ray(walks, scene, k, params, None)
+        expected = paint(scene, camera(scene, k), W, H, params, time=0.1 * k, threads=2)
+        np.testing.assert_array_equal(painted.pixels, images.to_uint8(expected.image))
 
 
 def test_a_node_removed_mid_walk_shrinks_the_crew_and_the_frames_go_on(walks, nodes, busy_scene):
@@ -168,15 +194,8 @@ def test_a_node_removed_mid_walk_shrinks_the_crew_and_the_frames_go_on(walks, no
     assert pauses.max() < 5.0  # a short pause, then frames again
     assert [n for _, n in frames[-5:]] == [NODES - 1] * 5  # the crew shrank to the nodes left
     # meanwhile the walker's group is rebuilt for the nodes left, its members move into it, the old one goes
-    deadline, k = time.monotonic() + 90, 200
-    while True:
-        painted = on_ray(walks, busy_scene, k, params, None, bands=NODES - 1)
-        groups = list(live_groups(walks).values())
-        if len(groups) == 1 and sorted(groups[0]["nodes"]) == sorted(b.node for b in painted.bands):
-            break
-        assert time.monotonic() < deadline, groups
-        k += 1
-    assert gone.node_id not in groups[0]["nodes"]
+    group = settled(walks, busy_scene, params, NODES - 1)
+    assert gone.node_id not in group["nodes"]
 
 
 def test_a_walker_that_leaves_removes_its_placement_group(walks, busy_scene):
