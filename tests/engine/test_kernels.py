@@ -688,22 +688,3 @@ def test_cast_rays_leaves_origins_alone_when_told_they_already_hold_the_eye():
     assert np.all(origins == 7.0)  # untouched
     kernels.cast_rays(**args, write_origins=True)
     np.testing.assert_array_equal(origins, np.broadcast_to(np.float32(camera.eye), origins.shape))
-
-
-def test_shading_reads_the_same_values_the_arrays_and_the_decoding_table_hold():
-    """What shading reads in place of the 8-bit texels and the per-face arrays holds their values exactly, so the
-    picture is the one they gave: linear texels are the decoding of every 8-bit value, bit for bit; a face's
-    record holds its corner colors, texture coordinates and normals, its texture and material."""
-    inputs = _shade_inputs(3)
-    every_value = np.arange(256, dtype=np.uint8).repeat(3).reshape(-1, 3)
-    np.testing.assert_array_equal(linear_texels(every_value), ref_srgb_decode(every_value))
-    assert linear_texels(every_value) is linear_texels(every_value)  # decoded once per store
-    names = ("colors", "uv", "normals", "texture_id", "face_material")
-    records = face_records(*(inputs[name] for name in names))
-    assert records.dtype == np.float32 and records.ctypes.data % 64 == 0
-    count = len(inputs["colors"])
-    np.testing.assert_array_equal(records[:, :9], inputs["colors"].reshape(count, 9))
-    np.testing.assert_array_equal(records[:, 9:15], inputs["uv"].reshape(count, 6))
-    np.testing.assert_array_equal(records[:, 15:24], inputs["normals"].reshape(count, 9))
-    np.testing.assert_array_equal(records[:, 24], inputs["texture_id"])
-    np.testing.assert_array_equal(records[:, 25], inputs["face_material"])
