@@ -46,8 +46,7 @@ painting.paint(scene, scene.camera, width, height, scene.paint, threads=threads)
 declared = pixel_bytes(scene.paint, outlines=bool((geometry.material_outline > 0).any()))
 first_frame_s = time.perf_counter() - start
 painted = status()
-textured = geometry.texture_id.max(initial=-1) >= 0  # else only the stand-in
-textures = geometry.texels.nbytes + geometry.linear_texels.nbytes if textured else 0  # 8-bit, and as shading reads them
+textures = geometry.texels.nbytes if geometry.texture_id.max(initial=-1) >= 0 else 0  # not the stand-in
 print(json.dumps(dict(base=base["VmRSS"], loaded=loaded["VmRSS"] - base["VmRSS"],
     peak=painted["VmHWM"] - base["VmRSS"] if resettable else None, triangles=geometry.face_count,
     textures=textures, loaded_s=loaded_s, first_frame_s=first_frame_s, declared=declared)))

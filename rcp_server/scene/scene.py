@@ -10,14 +10,12 @@ import math
 import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from functools import cached_property
 from typing import Any
 
 import numpy as np
 
 from ..camera.camera import Camera
 from ..engine.kernels.embree import Tracer
-from ..engine.kernels.shade import face_records, linear_texels
 from ..settings.params import PaintParams
 from ..settings.styles import with_style
 from .meshes import PLAIN, Material, Part, corner_normals, rgb8
@@ -124,16 +122,6 @@ class Geometry:
     @property
     def face_count(self) -> int:
         return len(self.triangles)
-
-    @cached_property
-    def linear_texels(self) -> np.ndarray:
-        """The texels in linear light, (T, 3) float64, as shading filters them (``shade.linear_texels``)."""
-        return linear_texels(self.texels)
-
-    @cached_property
-    def face_records(self) -> np.ndarray:
-        """What shading reads of each face, one record a face, (F, shade.RECORD) float32 (``shade.face_records``)."""
-        return face_records(self.colors, self.uv, self.normals, self.texture_id, self.face_material)
 
     @property
     def masked(self) -> bool:

@@ -168,8 +168,7 @@ def title_of(filename: str) -> str:
 
 
 def weight_of(scene: Scene) -> int:
-    """Bytes an uploaded scene holds: its parts, its traced geometry with what shading derives from it (the
-    texels in linear light, the faces' records) and (roughly) Embree's tree over it;
+    """Bytes an uploaded scene holds: its parts, its traced geometry and (roughly) Embree's tree over it;
     an array that views another (a part's texture in the scene's one texture store) counts once, as that one."""
     geometry, _ = scene.geometry(0.0)
     arrays: dict[int, np.ndarray] = {}
@@ -180,7 +179,7 @@ def weight_of(scene: Scene) -> int:
                 a = a.base
             arrays[id(a)] = a
 
-    for a in (*vars(geometry).values(), geometry.linear_texels, geometry.face_records):  # what shading reads
+    for a in vars(geometry).values():
         count(a)
     for obj in scene.objects:
         for part in [obj.part, *(p for _, p in obj.instances)]:

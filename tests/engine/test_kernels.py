@@ -12,7 +12,6 @@ import pytest
 from rcp_server.camera.camera import Camera, Region, pixel_frames, sample_targets
 from rcp_server.engine import kernels
 from rcp_server.engine.kernels.embree import Hits
-from rcp_server.engine.kernels.shade import face_records, linear_texels
 from rcp_server.engine.paintstate import CHANNELS, channel_shape
 from rcp_server.painting.assign import displacements, setup_tile
 from rcp_server.painting.loop import PaintState
@@ -468,8 +467,6 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
     colors = rng.uniform(-0.1, 1.4, (n_faces, 3, 3)).astype(np.float32)  # clamping is exercised
     uv = rng.uniform(-1.5, 2.5, (n_faces, 3, 2)).astype(np.float32)  # tiling in both directions
     texture_id = np.array([-1, 0, 1, 0, -1, 1, 0, -1, 1], np.int32)
-    # materials: 0 plain, 1 glowing (a color), 2 glowing through texture 1, 3 unlit
-    face_material = np.array([0, 1, 2, 3, 0, 3, 2, 1, 0], np.int32)
     tex_a = rng.integers(0, 256, (3, 5, 3)).astype(np.uint8)  # h x w, 8-bit RGB
     tex_b = rng.integers(0, 256, (4, 2, 3)).astype(np.uint8)
     texels = np.concatenate([tex_a.reshape(-1, 3), tex_b.reshape(-1, 3)])
@@ -513,7 +510,8 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
         texture_height=texture_height,
         alpha_texels=np.zeros(1, np.uint8),
         texture_alpha_offset=np.full(2, -1, np.int64),
-        face_material=face_material,
+        # materials: 0 plain, 1 glowing (a color), 2 glowing through texture 1, 3 unlit
+        face_material=np.array([0, 1, 2, 3, 0, 3, 2, 1, 0], np.int32),
         material_emission=np.array([[0, 0, 0], [0.2, 0.1, 0.05], [0.5, 0.9, 0.3], [0, 0, 0]], np.float32),
         material_emission_texture=np.array([-1, -1, 1, -1], np.int32),
         material_unlit=np.array([False, False, False, True]),
@@ -532,19 +530,6 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
     )
 
 
-def _surfaces(inputs):
-    """The inputs' Surfaces bundle, with what the kernels read in place of the 8-bit texels and the per-face
-    arrays derived from them as a scene's geometry derives it (linear texels, packed face records)."""
-    derived = dict(
-        inputs,
-        linear_texels=linear_texels(inputs["texels"]),
-        face_records=face_records(
-            inputs["colors"], inputs["uv"], inputs["normals"], inputs["texture_id"], inputs["face_material"]
-        ),
-    )
-    return kernels.Surfaces(**{name: derived[name] for name in kernels.Surfaces._fields})
-
-
 def _run_shade(inputs, need=CHANNELS[1:]):
     """Every channel, those not in ``need`` left at -9."""
     n_pix = len(inputs["face"]) // inputs["spp"]
@@ -555,7 +540,7 @@ def _run_shade(inputs, need=CHANNELS[1:]):
         hits=Hits(inputs["face"], inputs["t"], inputs["b1"], inputs["b2"]),
         spp=inputs["spp"],
         pixels=np.arange(n_pix),
-        surfaces=_surfaces(inputs),
+        surfaces=kernels.Surfaces(**{name: inputs[name] for name in kernels.Surfaces._fields}),
         environment=inputs["environment"],
         light_dir=inputs["light_dir"],
         ambient=inputs["ambient"],
@@ -573,7 +558,7 @@ def _run_shade(inputs, need=CHANNELS[1:]):
         hits=Hits(inputs["face"], inputs["t"], inputs["b1"], inputs["b2"]),
         spp=inputs["spp"],
         pixels=np.arange(n_pix),
-        surfaces=_surfaces(inputs),
+        surfaces=kernels.Surfaces(**{name: inputs[name] for name in kernels.Surfaces._fields}),
         out=kernels.Channels(*out),
         need=kernels.records(need),
     )

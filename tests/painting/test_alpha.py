@@ -7,7 +7,6 @@ import numpy as np
 from rcp_server.engine import kernels
 from rcp_server.engine.kernels.alpha import masked_rays
 from rcp_server.engine.kernels.embree import Hits
-from rcp_server.engine.kernels.shade import RECORD
 
 
 def ref_masked(rays, face, b1, b2, uv, texture_id, alphas, offsets, widths, heights, face_material, cutoff):
@@ -54,8 +53,7 @@ def test_masked_rays_matches_its_numpy_reference():
         material_emission=np.zeros((3, 3), np.float32),
         material_emission_texture=np.full(3, -1, np.int32),
         material_unlit=np.zeros(3, bool),
-        linear_texels=np.zeros((1, 3)),
-        face_records=np.zeros((faces, RECORD), np.float32),
+        texels=np.zeros((1, 3), np.uint8),
         texture_offset=np.zeros(3, np.int64),
         triangles=np.zeros((faces, 3, 3), np.float32),
         face_object=np.zeros(faces, np.int32),

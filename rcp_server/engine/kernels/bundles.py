@@ -102,8 +102,7 @@ class Surfaces(NamedTuple):
     colors: np.ndarray  # (F, 3, 3) float32 albedo per corner
     uv: np.ndarray  # (F, 3, 2) float32
     texture_id: np.ndarray  # (F,) int32, -1 none
-    face_records: np.ndarray  # (F, shade.RECORD) float32 what shading reads of a face, packed (``shade.face_records``)
-    linear_texels: np.ndarray  # (T, 3) float64 RGB in linear light, every texture packed (``shade.linear_texels``)
+    texels: np.ndarray  # (T, 3) uint8 RGB display colors, every texture packed
     texture_offset: np.ndarray  # (K,) int64 first texel of each texture
     texture_width: np.ndarray  # (K,) int64
     texture_height: np.ndarray  # (K,) int64

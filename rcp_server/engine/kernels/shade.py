@@ -6,8 +6,6 @@
 from __future__ import annotations
 
 import math
-import threading
-import weakref
 
 import numba
 import numpy as np
@@ -99,9 +97,8 @@ def _encode(linear):
 @numba.njit(inline="always")
 def texel_color(texels, offset, width, height, u, v):
     """A texture's display color at (u, v) (both wrap), an (r, g, b) tuple in [0, 1]: bilinear between its
-    four nearest texels, filtered in linear light (a blend of display values darkens an edge between light
-    and dark texels) and encoded back. texels : (T, 3) float64 linear RGB (:func:`linear_texels`: each the
-    table's value of its 8-bit texel, so that no fetch looks the curve up), every texture packed."""
+    four nearest 8-bit texels, filtered in linear light (a blend of display values darkens an edge
+    between light and dark texels) and encoded back. texels : (T, 3) uint8 RGB, every texture packed."""
     x = u * width - 0.5
     y = (1.0 - v) * height - 0.5
     fx0 = math.floor(x)
@@ -118,53 +115,25 @@ def texel_color(texels, offset, width, height, u, v):
     w01 = fx * (1.0 - fy)
     w10 = (1.0 - fx) * fy
     w11 = fx * fy
-    out_r = w00 * texels[a + c0, 0] + w01 * texels[a + c1, 0] + w10 * texels[b + c0, 0] + w11 * texels[b + c1, 0]
-    out_g = w00 * texels[a + c0, 1] + w01 * texels[a + c1, 1] + w10 * texels[b + c0, 1] + w11 * texels[b + c1, 1]
-    out_b = w00 * texels[a + c0, 2] + w01 * texels[a + c1, 2] + w10 * texels[b + c0, 2] + w11 * texels[b + c1, 2]
+    out_r = (
+        w00 * _DECODE[texels[a + c0, 0]]
+        + w01 * _DECODE[texels[a + c1, 0]]
+        + w10 * _DECODE[texels[b + c0, 0]]
+        + w11 * _DECODE[texels[b + c1, 0]]
+    )
+    out_g = (
+        w00 * _DECODE[texels[a + c0, 1]]
+        + w01 * _DECODE[texels[a + c1, 1]]
+        + w10 * _DECODE[texels[b + c0, 1]]
+        + w11 * _DECODE[texels[b + c1, 1]]
+    )
+    out_b = (
+        w00 * _DECODE[texels[a + c0, 2]]
+        + w01 * _DECODE[texels[a + c1, 2]]
+        + w10 * _DECODE[texels[b + c0, 2]]
+        + w11 * _DECODE[texels[b + c1, 2]]
+    )
     return _encode(out_r), _encode(out_g), _encode(out_b)
-
-
-_LINEAR: dict[int, tuple[weakref.ref, np.ndarray]] = {}
-_LINEAR_LOCK = threading.Lock()
-
-
-def linear_texels(texels: np.ndarray) -> np.ndarray:
-    """8-bit display texels (T, 3) uint8 -> linear light (T, 3) float64, the decoding table's own values (so a
-    bilinear fetch over them is the arithmetic it was over the table): 8 bytes a channel, decoded once per
-    store of texels (an animated scene's geometries at every time share theirs)."""
-    key = id(texels)
-    with _LINEAR_LOCK:
-        held = _LINEAR.get(key)
-        if held is not None and held[0]() is texels:
-            return held[1]
-        linear = _DECODE[texels]
-        _LINEAR[key] = (weakref.ref(texels, lambda _: _LINEAR.pop(key, None)), linear)
-        return linear
-
-
-# one record per face, what shading reads of a hit face (float32, 128 bytes: two cache lines, not five arrays'
-# worth of them): corner colors, corner texture coordinates and corner normals (corner by corner), then the
-# texture and the material row (exact as float32 below 2**24)
-RECORD_COLORS, RECORD_UV, RECORD_NORMALS, RECORD_TEXTURE, RECORD_MATERIAL = 0, 9, 15, 24, 25
-RECORD = 32
-
-
-def face_records(
-    colors: np.ndarray, uv: np.ndarray, normals: np.ndarray, texture_id: np.ndarray, face_material: np.ndarray
-) -> np.ndarray:
-    """The faces' shading records, (F, RECORD) float32 (the layout of the ``RECORD_*`` offsets), from colors
-    (F, 3, 3), uv (F, 3, 2), normals (F, 3, 3) float32 and texture_id, face_material (F,) int32: the same
-    float32 values, so shading computes what it did from the arrays apart. Rows start on 64 bytes."""
-    count = len(colors)
-    raw = np.zeros(count * RECORD + 16, np.float32)
-    start = (-raw.ctypes.data % 64) // 4
-    records = raw[start : start + count * RECORD].reshape(count, RECORD)
-    records[:, RECORD_COLORS:RECORD_UV] = colors.reshape(count, 9)
-    records[:, RECORD_UV:RECORD_NORMALS] = uv.reshape(count, 6)
-    records[:, RECORD_NORMALS:RECORD_TEXTURE] = normals.reshape(count, 9)
-    records[:, RECORD_TEXTURE] = texture_id
-    records[:, RECORD_MATERIAL] = face_material
-    return records
 
 
 @numba.njit(inline="always")
@@ -243,10 +212,10 @@ def shade(
     pixel of the painting seen from the pixel's own eye, on the surface at that distance.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
-    rec = surfaces.face_records
-    texels, texture_offset = surfaces.linear_texels, surfaces.texture_offset
+    normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
+    texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
-    material_unlit = surfaces.material_unlit
+    face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
     material_bands, material_outline = surfaces.material_bands, surfaces.material_outline
     need_depth, need_normal, need_direction = need.depth, need.normal, need.direction
     material_emission, material_emission_texture = surfaces.material_emission, surfaces.material_emission_texture
@@ -306,12 +275,12 @@ def shade(
                     w1 = b1[s]
                     w2 = b2[s]
                     w0 = 1.0 - w1 - w2
-                    r = w0 * rec[f, 0] + w1 * rec[f, 3] + w2 * rec[f, 6]
-                    g = w0 * rec[f, 1] + w1 * rec[f, 4] + w2 * rec[f, 7]
-                    b = w0 * rec[f, 2] + w1 * rec[f, 5] + w2 * rec[f, 8]
-                    tid = int(rec[f, RECORD_TEXTURE])
-                    u = w0 * rec[f, RECORD_UV] + w1 * rec[f, RECORD_UV + 2] + w2 * rec[f, RECORD_UV + 4]
-                    v = w0 * rec[f, RECORD_UV + 1] + w1 * rec[f, RECORD_UV + 3] + w2 * rec[f, RECORD_UV + 5]
+                    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
+                    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
+                    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
+                    tid = texture_id[f]
+                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
+                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
                     if tid >= 0:
                         tw = texture_width[tid]
                         th = texture_height[tid]
@@ -319,16 +288,15 @@ def shade(
                         r *= tr
                         g *= tg
                         b *= tb
-                    q = RECORD_NORMALS
-                    nx = w0 * rec[f, q] + w1 * rec[f, q + 3] + w2 * rec[f, q + 6]
-                    ny = w0 * rec[f, q + 1] + w1 * rec[f, q + 4] + w2 * rec[f, q + 7]
-                    nz = w0 * rec[f, q + 2] + w1 * rec[f, q + 5] + w2 * rec[f, q + 8]
+                    nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
+                    ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
+                    nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
                     inv = _inverse_length(nx * nx + ny * ny + nz * nz)
                     if inv > 0.0:
                         nx *= inv
                         ny *= inv
                         nz *= inv
-                    mat = int(rec[f, RECORD_MATERIAL])
+                    mat = face_material[f]
                     if lit and not material_unlit[mat]:
                         # two-sided: light the side the ray sees
                         facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
@@ -447,7 +415,7 @@ def record_surfaces(origins, directions, hits, spp, pixels, surfaces, out, need)
                 surfaces.colors,
                 surfaces.uv,
                 surfaces.texture_id,
-                surfaces.linear_texels,
+                surfaces.texels,
                 surfaces.texture_offset,
                 surfaces.texture_width,
                 surfaces.texture_height,
