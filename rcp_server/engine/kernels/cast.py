@@ -65,7 +65,6 @@ def fill_field(field, plane, previous, z0, noise, noise_scale, pixels, out):
             out[pix, q] = v if math.isfinite(v) else 0.0
 
 
-@jit
 def cast_rays(
     eye,
     plane,
@@ -83,7 +82,7 @@ def cast_rays(
     origins,
     directions,
     write_origins,
-):
+) -> int:
     """Per-pixel cameras for every sample: camera assignment fused with the mapping. Returns the number
     of rays that came out non-finite (a NaN or infinite input), so the caller masks only when needed.
 
@@ -95,21 +94,63 @@ def cast_rays(
     pixels : (m,) int64 the pixels to cast, ascending: sample k of the m-th listed pixel is ray m * spp + k
     v_p, v_e : (n, 3) float64 scratch for the displacements, owned by the caller (a large allocation inside a
     kernel costs more than the whole pass); a field of kind FIELD_ZERO is not written, nor is any by the one pass
-    of an eye at rest (``_cast_flat``, which keeps the field in registers)
+    of an eye at rest (:func:`cast_flat`, which keeps the field in registers)
     origins, directions : (n*spp, 3) float32 out (the first m*spp rows): P_e' = eye_ij + V_e, unit direction to
     P_p' = P_p(s, t) + V_p with eye_ij and P_p as in camera.py. A non-finite displacement moves nothing.
     write_origins : False when the eyes do not move and origins already hold the eye (saves a pass of writes)
     """
+    count = len(pixels)
+    plain = target.kind in (FIELD_ZERO, FIELD_COLOR, FIELD_DEPTH) and eye_field.kind == FIELD_ZERO
+    flat = plane.projection != EQUIRECT and plane.layout == MONO
+    every = count > 0 and pixels[0] == 0 and pixels[-1] == count - 1  # they ascend: all of them, in order
+    if plain and flat and every and xi.shape[1] == 1 and noise_scale == 0.0:  # a walk's, a painting's
+        return int(cast_flat(eye, plane, previous, z0, target, count, origins, directions, write_origins))
+    return int(
+        cast_general(
+            eye=eye,
+            plane=plane,
+            xi=xi,
+            eta=eta,
+            previous=previous,
+            z0=z0,
+            target=target,
+            eye_field=eye_field,
+            noise=noise,
+            noise_scale=noise_scale,
+            pixels=pixels,
+            v_p=v_p,
+            v_e=v_e,
+            origins=origins,
+            directions=directions,
+            write_origins=write_origins,
+        )
+    )
+
+
+@jit
+def cast_general(
+    eye,
+    plane,
+    xi,
+    eta,
+    previous,
+    z0,
+    target,
+    eye_field,
+    noise,
+    noise_scale,
+    pixels,
+    v_p,
+    v_e,
+    origins,
+    directions,
+    write_origins,
+):
+    """:func:`cast_rays` in general, any projection, samples, fields and list of pixels (arguments as its)."""
     spp = xi.shape[1]
     # what does not move is neither filled nor read: at this size every pass over memory counts
     targets_move = target.kind != FIELD_ZERO
     eyes_move = eye_field.kind != FIELD_ZERO
-    plain = target.kind == FIELD_ZERO or target.kind == FIELD_COLOR or target.kind == FIELD_DEPTH
-    if plain and not eyes_move and noise_scale == 0.0 and spp == 1 and plane.projection != EQUIRECT:
-        count = len(pixels)
-        every = count > 0 and pixels[0] == 0 and pixels[count - 1] == count - 1  # they ascend: all, in order
-        if plane.layout == MONO and every:  # the common case (a walk, a painting), in one pass
-            return _cast_flat(eye, plane, previous, z0, target, count, origins, directions, write_origins)
     if targets_move:
         fill_field(target, plane, previous, z0, noise, noise_scale, pixels, v_p)
     if eyes_move:
@@ -179,7 +220,7 @@ def cast_rays(
 
 
 @jit
-def _cast_flat(eye, plane, previous, z0, target, count, origins, directions, write_origins):
+def cast_flat(eye, plane, previous, z0, target, count, origins, directions, write_origins):
     """:func:`cast_rays` of the tile's first ``count`` pixels (all of them, in order) seen by one eye at rest on a
     flat image plane, one sample a pixel at its centre, the target moved by the colour or depth field or not at
     all, without noise: the same arithmetic, in one pass a row without a branch (the compiler runs several pixels
