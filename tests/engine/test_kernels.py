@@ -195,6 +195,46 @@ def _check_cast(camera, region, spp, target_kind, eye_kind, noise_scale):
         assert not np.allclose(directions, plain, atol=1e-4)  # the fields did move something
 
 
+@pytest.mark.parametrize("target_kind", ["zero", "color", "depth"])
+@pytest.mark.parametrize("region", [Region(13, 9, 3, 2, 6, 4), Region(7, 5), Region(31, 17, 0, 9, 31, 8)])
+def test_cast_rays_one_pass_for_an_eye_at_rest_is_bit_for_bit_the_general_one(target_kind, region):
+    """One sample a pixel, one flat eye at rest, no noise: ``cast_rays`` takes its one-pass path when it casts
+    every pixel of the tile, and its general one for any other list. Both give the same bits and count the
+    same bad rays (non-finite colours and depths move nothing; a field of 1e300 overflows)."""
+    data, _, _ = _cast_inputs(4, region, 1)
+    centre = np.full((region.pixel_count, 1), 0.5)
+    data["color"][0] = (np.inf, 0.5, 0.5)
+    data["depth"][4] = np.nan
+    for scale in (0.07, 1e300):
+        args = _cast_args(CAST_CAMERA, region, centre, centre, data, 4.5, (KINDS[target_kind], scale), ("zero", 0.0), 0)
+        args["eye_field"] = args["eye_field"]._replace(kind=kernels.FIELD_ZERO)
+        for write_origins in (True, False):
+            one_pass = dict(
+                args, v_p=args["v_p"].copy(), origins=args["origins"].copy(), directions=args["directions"].copy()
+            )
+            general = dict(
+                args, v_p=args["v_p"].copy(), origins=args["origins"].copy(), directions=args["directions"].copy()
+            )
+            general["pixels"] = np.arange(1, region.pixel_count)  # not every pixel: the general path
+            bad = kernels.cast_rays(**one_pass, write_origins=write_origins)
+            bad_general = kernels.cast_rays(**general, write_origins=write_origins)
+            np.testing.assert_array_equal(one_pass["directions"][1:], general["directions"][:-1])
+            np.testing.assert_array_equal(one_pass["origins"][1:], general["origins"][:-1])
+            assert bad == bad_general + bool(np.isnan(one_pass["directions"][0]).any())
+            assert bad == int(np.isnan(one_pass["directions"]).any(axis=1).sum())
+            overflows = scale > 1 and target_kind != "zero"  # every pixel but the few whose field is not finite
+            assert (bad > region.pixel_count - 5) if overflows else bad == 0
+            assert np.all(one_pass["origins"] == 7.0) != write_origins
+            assert np.all(one_pass["v_p"] == 7.0)  # the one pass took it: it keeps the field in registers
+    frames = pixel_frames(CAST_CAMERA, region, *region.pixel_coords())[1:]
+    field = (data["color"], data["depth"], data["normal"], data["direction"], 4.5, data["given"], data["noise"], 0.0)
+    ref_vp = ref_field(KINDS[target_kind], 0.07, frames, *field)
+    _, ref_d, _ = ref_cast_rays(CAST_CAMERA, region, centre, centre, ref_vp, np.zeros_like(ref_vp))
+    args = _cast_args(CAST_CAMERA, region, centre, centre, data, 4.5, (KINDS[target_kind], 0.07), ("zero", 0.0), 0)
+    kernels.cast_rays(**dict(args, eye_field=args["eye_field"]._replace(kind=kernels.FIELD_ZERO)), write_origins=True)
+    np.testing.assert_allclose(args["directions"], ref_d, rtol=0, atol=2e-7)
+
+
 def test_cast_rays_counts_rays_that_overflow_and_leaves_them_nan():
     camera = Camera((0.0, 0.0, 0.0), (0.0, 0.0, -1.0))
     region = Region(8, 6)
