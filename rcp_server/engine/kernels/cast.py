@@ -4,7 +4,7 @@
 (``fill_field``, which the image-space method also runs alone). It chooses between two kernels, each compiled
 at its first use: ``cast_flat``, one pass a row for the common case (an eye at rest on a flat image plane, one
 sample a pixel: a walk's frames, a painting's), and ``cast_general`` for everything else; both give the same
-bits where both apply. ``tests/engine/test_kernels.py`` holds their numpy reference.
+bits where both apply. ``tests/engine/test_cast.py`` holds their numpy reference.
 """
 
 from __future__ import annotations
