@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import websockets
 
-from .harness import get_json, rcp_serve
+from ..service.loopback import get_json, rcp_serve
 from .latency import percentile
 
 WARM_S = 3.0  # walking before the window opens (each walker's actor starts, its planner finds its size)

@@ -228,8 +228,7 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
     """``RCP_RAY_ADDRESS``: the same video and the same PNG as the server's own threads paint."""
     import av
     import httpx
-
-    from rcp_server.bench.harness import BackgroundServer
+    from helpers.servers import BackgroundServer
 
     (tmp_path / "tiny.toml").write_text(TINY)
     body = {"scene": "tiny", "path": PATH, "width": 32, "height": 24, "temporal": 1, "paint": {"spp": 2}}
@@ -278,8 +277,8 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
     painted whole meanwhile, when a cancelled job stopped only at a frame that made it wait)."""
     import av
     import httpx
+    from helpers.servers import BackgroundServer
 
-    from rcp_server.bench.harness import BackgroundServer
     from rcp_server.service.store import Store
 
     caplog.set_level("INFO", "rcp.service")
@@ -329,14 +328,14 @@ def test_rcp_serve_with_a_ray_that_does_not_answer_fails_to_start_in_one_line(tm
     import subprocess
     import sys
 
-    from rcp_server.bench.harness import PACKAGE_ROOT, free_port
+    from helpers.servers import free_port, rcp_environment
 
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         if listening:
             probe.listen()
         address = f"127.0.0.1:{probe.getsockname()[1]}"
-        env = {**os.environ, "PYTHONPATH": str(PACKAGE_ROOT), "RCP_DATA": str(tmp_path), "RCP_RAY_ADDRESS": address}
+        env = rcp_environment(data=str(tmp_path), ray_address=address)
         clock = time.monotonic()
         started = subprocess.run(
             [sys.executable, "-m", "rcp_server.cli", "serve", "--port", str(free_port())],
@@ -376,8 +375,8 @@ def test_a_server_whose_ray_failed_paints_here_meanwhile_and_says_so_at_once(pai
     """While Ray backs off, a large REST render is painted on the server's own threads (the same PNG), and a
     painting asked of Ray fails at once rather than waiting for it."""
     import httpx
+    from helpers.servers import BackgroundServer
 
-    from rcp_server.bench.harness import BackgroundServer
     from rcp_server.service.state import service_of
 
     (tmp_path / "tiny.toml").write_text(TINY)
@@ -467,7 +466,7 @@ def _descendants(pid: int) -> list[str]:
 def test_rcp_serve_exits_0_on_sigterm_with_ray_joined_or_not(tmp_path, joined):
     """``ray.init`` puts its own SIGTERM handler in place (exit status 15): ``rcp serve`` keeps its own, and a
     stop asked for is a clean exit, 0, with Ray's runtime stopped with it."""
-    from rcp_server.bench.harness import rcp_serve
+    from helpers.servers import rcp_serve
 
     settings = {"ray_address": "local", "ray_walks": "0"} if joined else {}
     with rcp_serve(tmp_path, **settings) as served:

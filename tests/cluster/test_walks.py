@@ -22,10 +22,10 @@ import pytest
 
 ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs it
 
+from helpers.servers import BackgroundServer, get_json  # noqa: E402
 from helpers.wire import Walk  # noqa: E402
 from websockets.exceptions import ConnectionClosed  # noqa: E402
 
-from rcp_server.bench.harness import BackgroundServer, get_json  # noqa: E402
 from rcp_server.cluster.admission import Target  # noqa: E402
 from rcp_server.cluster.connection import Connection, connect  # noqa: E402
 from rcp_server.cluster.walks import NoRoom, Walks  # noqa: E402

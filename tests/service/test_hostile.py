@@ -13,10 +13,10 @@ from concurrent.futures import ThreadPoolExecutor
 
 import httpx
 import pytest
+from helpers.servers import BackgroundServer, rcp_serve
 from helpers.wire import Walk, decode
 from websockets.exceptions import ConnectionClosed
 
-from rcp_server.bench.harness import BackgroundServer, rcp_serve
 from rcp_server.service.server import Server
 
 BIG = {"scene": "default", "width": 1280, "height": 720, "paint": {"spp": 8}}  # seconds of work on 2 cores

@@ -11,9 +11,8 @@ import time
 
 import httpx
 import pytest
+from helpers.servers import BackgroundServer
 from websockets.exceptions import ConnectionClosed
-
-from rcp_server.bench.harness import BackgroundServer
 
 SMALL = {"scene": "sky", "width": 32, "height": 18}
 BOUND_S = 10  # generous: what a real client may wait for an answer on two busy cores

@@ -11,8 +11,8 @@ import httpx
 import numpy as np
 import pytest
 from helpers.scenes import SPINNING_BOX
+from helpers.servers import BackgroundServer
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene

@@ -9,8 +9,7 @@ import httpx
 import numpy as np
 import pytest
 from helpers.gltf import animated_camera, expected_camera
-
-from rcp_server.bench.harness import BackgroundServer
+from helpers.servers import BackgroundServer
 
 
 @pytest.fixture(scope="module")

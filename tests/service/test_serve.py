@@ -14,10 +14,9 @@ from pathlib import Path
 import httpx
 import pytest
 from helpers.browser import CHROMIUM, chromium
+from helpers.servers import free_port, rcp_environment
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect
-
-from rcp_server.bench.harness import PACKAGE_ROOT, free_port
 
 COLD_START_S = 5  # the page must answer within this of `rcp serve` starting, however cold the kernel cache
 LOADED_S = 60  # the same in wall time on a machine busy with other work (the CPU time keeps COLD_START_S)
@@ -65,14 +64,8 @@ def test_a_first_start_on_a_cold_kernel_cache_answers_at_once_and_says_how_far_i
     port = free_port()
     url = f"http://127.0.0.1:{port}"
     log = tmp_path / "serve.log"
-    env = {
-        **os.environ,
-        "NUMBA_CACHE_DIR": str(tmp_path / "numba"),  # empty: every kernel compiles
-        "RCP_PORT": str(port),
-        "RCP_DATA": str(tmp_path / "data"),
-        "PYTHONPATH": os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")])),
-        "PYTHONUNBUFFERED": "1",
-    }
+    env = rcp_environment(port=str(port), data=str(tmp_path / "data"))
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "numba")  # empty: every kernel compiles
     began = time.monotonic()
     with log.open("w") as out:
         command = [sys.executable, "-m", "rcp_server.cli", "serve"]

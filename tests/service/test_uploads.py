@@ -16,9 +16,9 @@ import httpx
 import numpy as np
 import pytest
 from helpers import uploads as files
+from helpers.servers import BackgroundServer
 from helpers.wire import Walk, decode
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.scene.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
 from rcp_server.scene.untrusted import Limits, NoRoom, read_model
 

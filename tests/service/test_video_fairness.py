@@ -9,8 +9,7 @@ import time
 import httpx
 import pytest
 from helpers.scenes import SPINNING_BOX
-
-from rcp_server.bench.harness import BackgroundServer
+from helpers.servers import BackgroundServer
 
 # a video far longer than the walk (6001 frames), of a modest size: it is still painting when the walk ends
 VIDEO = {

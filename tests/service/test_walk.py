@@ -9,9 +9,8 @@ import time
 import httpx
 import numpy as np
 import pytest
+from helpers.servers import BackgroundServer
 from helpers.wire import decode, post
-
-from rcp_server.bench.harness import BackgroundServer
 
 
 def test_hello_gives_ready_then_walk_and_refined_frames(walk):
