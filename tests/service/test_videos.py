@@ -13,7 +13,8 @@ import httpx
 import numpy as np
 import pytest
 from helpers.scenes import CAMERA, SPINNING_BOX, make_scene
-from helpers.servers import FINISHED, BackgroundServer, job_status, wait_until
+from helpers.servers import FINISHED, BackgroundServer, job_status
+from helpers.waits import wait_until
 from PIL import Image
 
 from rcp_server.cluster.painter import Backoff
