@@ -227,7 +227,7 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
     """``RCP_RAY_ADDRESS``: the same video and the same PNG as the server's own threads paint."""
     import av
     import httpx
-    from helpers.servers import BackgroundServer
+    from helpers.servers import BackgroundServer, job_status
 
     (tmp_path / "tiny.toml").write_text(TINY)
     body = {"scene": "tiny", "path": PATH, "width": 32, "height": 24, "temporal": 1, "paint": {"spp": 2}}
@@ -239,10 +239,7 @@ def test_the_server_paints_videos_and_large_renders_on_ray_when_told_to(painter,
             png = client.post("/api/render", json=render, timeout=60)
             assert png.status_code == 200, png.text
             job = client.post("/api/videos", json=body).json()
-            deadline = time.monotonic() + 60
-            while (status := client.get(f"/api/videos/{job['id']}").json())["state"] in ("queued", "running"):
-                assert time.monotonic() < deadline
-                time.sleep(0.05)
+            status = job_status(client, f"/api/videos/{job['id']}")
             assert status["state"] == "done", status
             data = client.get(f"/api/videos/{job['id']}/file").content
         with av.open(io.BytesIO(data)) as container:
@@ -276,7 +273,7 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
     painted whole meanwhile, when a cancelled job stopped only at a frame that made it wait)."""
     import av
     import httpx
-    from helpers.servers import BackgroundServer
+    from helpers.servers import FINISHED, BackgroundServer, job_status
 
     from rcp_server.service.store import Store
 
@@ -291,10 +288,10 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
         with BackgroundServer(scenes=tmp_path, data=data, ray_address="local") as live:
             with httpx.Client(base_url=live.url, timeout=60) as client:
                 job = client.post("/api/videos", json=body).json()
-                deadline = time.monotonic() + 180  # a fresh clone's actors load the kernels first
-                while (status := client.get(f"/api/videos/{job['id']}").json())["done_frames"] < 2:
-                    assert time.monotonic() < deadline and status["state"] in ("queued", "running"), status
-                    time.sleep(0.02)
+                # a fresh clone's actors load the kernels first
+                status = job_status(
+                    client, f"/api/videos/{job['id']}", lambda s: s["done_frames"] >= 2 or s["state"] in FINISHED, 180
+                )
         assert status["state"] == "running" and status["done_frames"] < job["frames"] == 91
         with Store(data) as store:  # as the stopped server left it: mid-way, to be resumed
             (left,) = [r for r in store.videos() if r.id == job["id"]]
@@ -306,10 +303,7 @@ def test_a_video_on_ray_stopped_mid_way_resumes_after_a_restart(painter, tmp_pat
                         video_id = job["id"]
                     else:
                         video_id = client.post("/api/videos", json=body).json()["id"]
-                    deadline = time.monotonic() + 120
-                    while (status := client.get(f"/api/videos/{video_id}").json())["state"] in ("queued", "running"):
-                        assert time.monotonic() < deadline
-                        time.sleep(0.05)
+                    status = job_status(client, f"/api/videos/{video_id}")
                     assert status["state"] == "done", status
                     if where:
                         assert any(m.startswith(f"video {job['id']} resumes at frame ") for m in caplog.messages)

@@ -318,12 +318,8 @@ def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(
         videos = Videos(settings, workshop, store, painter, Budget(settings.memory_bytes))
         try:
             job = videos.submit(make_scene(), parse_path(PATH).resolve(CAMERA), 32, 32, PaintParams(), None)
-            deadline = time.monotonic() + 30
             messages = set()
-            while job.state not in ("done", "failed", "cancelled"):
-                messages.add(job.message)
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
+            wait_until(lambda: messages.add(job.message) or job.state in FINISHED, pause=0.01)
             assert job.state == "done", job.message
             assert painter.asked == [0, 3]  # the three frames written were not asked for again
             assert "Ray went away; going on from frame 3 in 1 s" in messages
@@ -376,16 +372,11 @@ def test_a_video_waits_for_the_memory_others_hold_and_one_that_never_fits_is_ref
         try:
             memory.reserve("a walk", need, (32, 32), "a walk-through")
             job = videos.submit(make_scene(), path, 32, 32, PaintParams(), None)
-            deadline = time.monotonic() + 60
-            while "of memory" not in job.message:
-                assert time.monotonic() < deadline and job.state in ("queued", "running"), job.message
-                time.sleep(0.01)
+            wait_until(lambda: "of memory" in job.message or job.state not in ("queued", "running"), pause=0.01)
             assert job.message.startswith("this video of 32x32 pixels needs") and job.done_frames == 0
             assert memory.held(("video", job.id)) == 0
             memory.release("a walk")
-            while job.state not in ("done", "failed", "cancelled"):
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
+            wait_until(lambda: job.state in FINISHED, pause=0.01)
             assert job.state == "done" and job.message.startswith("7 frames"), job.message
             assert memory.used == 0  # given back
             with pytest.raises(Refusal) as refused:
