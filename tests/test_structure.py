@@ -2,7 +2,8 @@
 no two modules import each other, directly or round a cycle; nobody imports another module's underscore names;
 and the layers below the service (``util``, ``camera``, ``engine``, ``settings``, ``scene``, ``painting``,
 ``media``) never import the service, the benchmarks or the command line; no function outside the compiled kernels
-runs over sixty lines and no class over two hundred; no test module imports another test module, and the tests
+runs over sixty lines and no class over two hundred; no test module imports another test module, conftests hold
+fixtures only, and the tests
 reach servers through one door."""
 
 import ast
@@ -169,6 +170,26 @@ def test_no_test_module_imports_another_test_module_or_a_conftest():
             bad = [n for n in names if any(part.startswith("test_") or part == "conftest" for part in n.split("."))]
             if bad:
                 found.append(f"{path.relative_to(TESTS)}:{node.lineno} imports {bad[0]}")
+    assert found == []
+
+
+def _is_fixture(node: ast.FunctionDef) -> bool:
+    return any(
+        (isinstance(d, ast.Attribute) and d.attr == "fixture")
+        or (isinstance(d, ast.Call) and isinstance(d.func, ast.Attribute) and d.func.attr == "fixture")
+        for d in node.decorator_list
+    )
+
+
+def test_conftests_hold_fixtures_only():
+    """What a conftest defines is a fixture or a pytest hook; any other helper lives in ``tests/helpers/``."""
+    found = [
+        f"{path.relative_to(TESTS)}:{node.lineno} {node.name}"
+        for path in sorted(TESTS.rglob("conftest.py"))
+        for node in ast.parse(path.read_text(), str(path)).body
+        if isinstance(node, ast.ClassDef)
+        or (isinstance(node, ast.FunctionDef) and not _is_fixture(node) and not node.name.startswith("pytest_"))
+    ]
     assert found == []
 
 
