@@ -3,8 +3,7 @@ no two modules import each other, directly or round a cycle; nobody imports anot
 and the layers below the service (``util``, ``camera``, ``engine``, ``settings``, ``scene``, ``painting``,
 ``media``) never import the service, the benchmarks or the command line; no function outside the compiled kernels
 runs over sixty lines and no class over two hundred; no test module imports another test module, conftests hold
-fixtures only, and the tests
-reach servers through one door."""
+fixtures only, and the tests reach servers through one door."""
 
 import ast
 from pathlib import Path
