@@ -8,7 +8,6 @@ import io
 import os
 import signal
 import socket
-import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -456,14 +455,13 @@ def test_rcp_serve_exits_0_on_sigterm_with_ray_joined_or_not(tmp_path, joined):
     """``ray.init`` puts its own SIGTERM handler in place (exit status 15): ``rcp serve`` keeps its own, and a
     stop asked for is a clean exit, 0, with Ray's runtime stopped with it."""
     from helpers.servers import rcp_serve
+    from helpers.waits import wait_until
 
     settings = {"ray_address": "local", "ray_walks": "0"} if joined else {}
     with rcp_serve(tmp_path, **settings) as served:
         if joined:  # a local Ray runtime of the server's own
-            deadline = time.monotonic() + 60  # the driver starts the runtime off the serving path
-            while not {"raylet", "gcs_server"} <= set(_descendants(served.process.pid)) and time.monotonic() < deadline:
-                time.sleep(0.2)
-            assert {"raylet", "gcs_server"} <= set(_descendants(served.process.pid)), _descendants(served.process.pid)
+            # the driver starts the runtime off the serving path
+            wait_until(lambda: {"raylet", "gcs_server"} <= set(_descendants(served.process.pid)), pause=0.2)
         served.process.send_signal(signal.SIGTERM)
         assert served.process.wait(120) == 0, served.log.read_text()[-2000:]
     assert "Traceback" not in served.log.read_text()
