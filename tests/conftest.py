@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 from helpers.browser import SOFTWARE_WEBGL, chromium
 from helpers.scenes import facing_plane, gradient, make_scene, sphere
+from helpers.servers import BackgroundServer
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.scene.scene import Environment, Light, Scene
 
 
 @pytest.fixture(scope="session", autouse=True)
 def _own_data_folder(tmp_path_factory):
     """``RCP_DATA`` in a temporary folder for the whole session: no test touches the user's data folder (servers
-    started by tests get one of their own besides: ``bench.harness``)."""
+    started by tests get one of their own besides: ``helpers/servers.py``)."""
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("RCP_DATA", str(tmp_path_factory.mktemp("rcp-data")))
         yield

@@ -2,7 +2,8 @@
 no two modules import each other, directly or round a cycle; nobody imports another module's underscore names;
 and the layers below the service (``util``, ``camera``, ``engine``, ``settings``, ``scene``, ``painting``,
 ``media``) never import the service, the benchmarks or the command line; no function outside the compiled kernels
-runs over sixty lines and no class over two hundred; and no test module imports another test module."""
+runs over sixty lines and no class over two hundred; no test module imports another test module, conftests hold
+fixtures only, and the tests reach servers through one door."""
 
 import ast
 from pathlib import Path
@@ -171,6 +172,26 @@ def test_no_test_module_imports_another_test_module_or_a_conftest():
     assert found == []
 
 
+def _is_fixture(node: ast.FunctionDef) -> bool:
+    return any(
+        (isinstance(d, ast.Attribute) and d.attr == "fixture")
+        or (isinstance(d, ast.Call) and isinstance(d.func, ast.Attribute) and d.func.attr == "fixture")
+        for d in node.decorator_list
+    )
+
+
+def test_conftests_hold_fixtures_only():
+    """What a conftest defines is a fixture or a pytest hook; any other helper lives in ``tests/helpers/``."""
+    found = [
+        f"{path.relative_to(TESTS)}:{node.lineno} {node.name}"
+        for path in sorted(TESTS.rglob("conftest.py"))
+        for node in ast.parse(path.read_text(), str(path)).body
+        if isinstance(node, ast.ClassDef)
+        or (isinstance(node, ast.FunctionDef) and not _is_fixture(node) and not node.name.startswith("pytest_"))
+    ]
+    assert found == []
+
+
 # where the service picks its painter, here or on Ray, and the settings that declare the address it reads
 SERVICE_PORT_CHOICE = ("rcp_server.service.state", "rcp_server.service.settings")
 RAY_WORDS = {"cluster", "walks", "on_cluster", "ray_address", "RayPainter", "RayPort", "ClusterError"}
@@ -189,4 +210,25 @@ def test_nothing_in_the_service_but_the_painters_choice_asks_about_ray():
             word = node.attr if isinstance(node, ast.Attribute) else node.id if isinstance(node, ast.Name) else None
             if word in RAY_WORDS:
                 found.append(f"{name}:{node.lineno} reads {word}")
+    assert found == []
+
+
+SERVERS = "rcp_server.service.loopback"  # the servers on loopback that the benchmarks and the tests share
+
+
+def test_tests_reach_servers_only_through_the_helpers_door():
+    """``tests/helpers/servers.py`` is the tests' one import of the servers on loopback: nothing else in ``tests/``
+    imports that module, or the benchmarks' old home of it."""
+    found = []
+    for path in sorted(TESTS.rglob("*.py")):
+        if path == TESTS / "helpers" / "servers.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = []
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module] + [f"{node.module}.{alias.name}" for alias in node.names]
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            if any(n in (SERVERS, "rcp_server.bench.harness") for n in names):
+                found.append(f"{path.relative_to(TESTS)}:{node.lineno}")
     assert found == []

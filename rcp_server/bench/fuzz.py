@@ -12,7 +12,7 @@ from __future__ import annotations
 import random
 import time
 
-from .harness import BackgroundServer
+from ..service.loopback import BackgroundServer
 
 TOKEN = "fuzz-token"  # schemathesis brings it, and checks that requests without it or with another get 401
 AUTH = {"authorization": f"Bearer {TOKEN}"}

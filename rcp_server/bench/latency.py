@@ -27,8 +27,8 @@ import websockets
 
 from ..painting.loop import paint
 from ..scene.scenefile import load_scene
+from ..service.loopback import BackgroundServer, get_json, request
 from ..settings.params import PaintParams
-from .harness import BackgroundServer, get_json, request
 
 WINDOW = (1280, 720)
 RATE = 60.0  # camera messages per second while walking

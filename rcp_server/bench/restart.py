@@ -16,7 +16,7 @@ import urllib.request
 import uuid
 from pathlib import Path
 
-from .harness import TIMEOUT, rcp_serve, request
+from ..service.loopback import TIMEOUT, rcp_serve, request
 
 
 def model_bytes(triangles: int) -> tuple[str, bytes]:

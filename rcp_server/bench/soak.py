@@ -35,7 +35,7 @@ import numpy as np
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
-from .harness import TIMEOUT, Answer, ProcessSample, Served, get_json, rcp_serve, request
+from ..service.loopback import TIMEOUT, Answer, ProcessSample, Served, get_json, rcp_serve, request
 from .latency import percentile
 
 WIDTH, HEIGHT = 160, 90  # the walk-through canvas and the REST image

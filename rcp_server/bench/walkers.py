@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import websockets
 
-from .harness import get_json, rcp_serve
+from ..service.loopback import get_json, rcp_serve
 from .latency import percentile
 
 WARM_S = 3.0  # walking before the window opens (each walker's actor starts, its planner finds its size)
@@ -163,10 +163,15 @@ def bench_crew(nodes: int, scene_name: str, width: int, height: int, seconds: fl
         clock = time.perf_counter()
         images.encode(paint(scene, scene.camera, width, height, params, threads=nodes).image, "JPEG", 80)
         here.append(time.perf_counter() - clock)
+    print(f"one walker of {scene_name!r} at {width}x{height}, {params.iterations} iterations, {seconds:g} s each")
+    _report(times, here, nodes, seconds)
+
+
+def _report(times: list[tuple[float, float, int, float]], here: list[float], nodes: int, seconds: float) -> None:
+    """The crew's frames (round trip, slowest band's painting, bands, Ray's part) against the threads' ``here``."""
     trips = np.array([t for t, _, _, _ in times])
     overhead = np.array([t - p for t, p, _, _ in times])
     free = np.median([f for _, _, _, f in times]) * 1e3
-    print(f"one walker of {scene_name!r} at {width}x{height}, {params.iterations} iterations, {seconds:g} s each")
     print(f"{'where':>28} {'fps':>6} {'p95 ms':>7} {'overhead ms':>12} {'of it Ray':>10}")
     crew = f"a crew on {nodes} nodes ({times[-1][2] if times else 0} bands)"
     p95, median = np.percentile(trips, 95) * 1e3, np.median(overhead) * 1e3

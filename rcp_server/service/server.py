@@ -40,13 +40,12 @@ class Server(uvicorn.Server):
     slow connections and room for real ones (guard.py; uvicorn's ``limit_concurrency`` is not used: it counts
     idle connections and answers in plain text), and a stop that loses no answer.
 
-    On SIGINT or SIGTERM, requests and walk-throughs in flight get ``PAINTING_GRACE_S`` to finish; then their
-    paintings are stopped, so each caller is told "the server is stopping" (503) before uvicorn's own grace
-    runs out and cancels whatever is left (a 500 and a traceback). A second signal stops the paintings at
-    once; a third Ctrl-C is uvicorn's forced exit."""
+    On SIGINT or SIGTERM, requests and walk-throughs in flight get ``stop_grace_s`` (a setting) to finish; then
+    their paintings are stopped, so each caller is told "the server is stopping" (503) before uvicorn's own
+    grace, ``ANSWER_S`` longer, runs out and cancels whatever is left (a 500 and a traceback). A second signal
+    stops the paintings at once; a third Ctrl-C is uvicorn's forced exit."""
 
-    PAINTING_GRACE_S = 8
-    GRACE_S = PAINTING_GRACE_S + 4  # uvicorn's: time for the stopped paintings to answer
+    ANSWER_S = 4  # after the paintings are stopped, the time their callers have to be told so
 
     def __init__(self, settings: Settings, listening: Callable[[], None] | None = None, **options):
         self.app = create_app(settings)
@@ -58,7 +57,7 @@ class Server(uvicorn.Server):
             http=guarded_http(settings),  # deadlines for idle and slow clients, room for real ones (guard.py)
             ws_max_size=64 * settings.max_message_bytes,
             ws_per_message_deflate=False,  # frames are JPEGs: deflating them costs CPU and saves nothing
-            timeout_graceful_shutdown=self.GRACE_S,
+            timeout_graceful_shutdown=settings.stop_grace_s + self.ANSWER_S,
             **options,
         )
         for name in ("uvicorn.error", "uvicorn.access"):
@@ -100,7 +99,7 @@ class Server(uvicorn.Server):
         super().handle_exit(sig, stack)
 
     async def shutdown(self, sockets=None) -> None:
-        grace = asyncio.get_running_loop().call_later(self.PAINTING_GRACE_S, self._stop_paintings)
+        grace = asyncio.get_running_loop().call_later(self.settings.stop_grace_s, self._stop_paintings)
         try:
             await super().shutdown(sockets)
         finally:

@@ -176,6 +176,12 @@ class RequestLimits(SettingsGroup):
         gt=0,
         description="a REST render not done by then (waiting included) stops at its next tile: 503 and Retry-After",
     )
+    stop_grace_s: int = Field(
+        8,
+        ge=0,
+        description="on SIGTERM or Ctrl-C, the seconds renders and walk-throughs in flight get to finish; then their "
+        "paintings stop at the next tile (503). A second signal stops them at once",
+    )
     max_body_bytes: int = Field(
         64 * 1024, ge=1024, description="an HTTP request body, by Content-Length or as it streams; more is a 413"
     )

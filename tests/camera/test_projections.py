@@ -1,104 +1,32 @@
-"""Every projection (``camera.py``, "Other projections"): the compiled functions against their numpy twins, the
+"""Every projection (``camera.py``, "Other projections"): the local frame and the sizes each takes, the
 equirect panorama's conventions on scenes whose answer is known, and the method's guarantees on each: the plain
 render at lambda 0, a tile equal to its crop, each eye of a stereo painting as that eye's
-own painting, and the image-space lookup through the inverse map.
+own painting, and the image-space lookup through the inverse map. The compiled functions against their numpy
+twins are in ``tests/engine/test_projection.py`` and ``test_lookup.py``.
 """
 
-import numba
 import numpy as np
 import pytest
+from helpers.cameras import CAMERAS, EYE, EYE_SIZE, painting_size
 from helpers.scenes import facing_plane, make_scene, noise_texture, sphere, translate, wavy_sky
 
 from rcp_server.bench.projection import rivalry
-from rcp_server.camera.camera import (
-    Camera,
-    CameraError,
-    Region,
-    directions_at,
-    eye_pixels,
-    pixel_frames,
-    project,
-)
+from rcp_server.camera.camera import Camera, CameraError, Region, pixel_frames
 from rcp_server.engine import kernels
-from rcp_server.engine.kernels.projection import centre_frame, locate, target_offset, to_pixel
-from rcp_server.engine.paintstate import PaintState
-from rcp_server.painting.imagespace import bilinear, lookup_coords
+from rcp_server.painting.imagespace import bilinear
 from rcp_server.painting.loop import paint
 from rcp_server.painting.seen import visible_faces
 from rcp_server.painting.stereo import partners
 from rcp_server.scene.meshes import primitive
 from rcp_server.scene.scene import Environment, Light, SceneObject
-from rcp_server.settings.params import EDGES, PaintParams
+from rcp_server.settings.params import PaintParams
 
-EYE = Camera((0.2, 0.1, 0.3), (0.9, 0.0, -2.0), fov=60.0)
-CAMERAS = {
-    "equirect": EYE.moved(projection="equirect"),
-    "perspective top-bottom": EYE.moved(stereo="top-bottom", ipd=0.25),
-    "perspective side-by-side": EYE.moved(stereo="side-by-side", ipd=0.25),
-    "equirect top-bottom": EYE.moved(projection="equirect", stereo="top-bottom", ipd=0.25),
-}
-EYE_SIZE = {"equirect": (96, 48), "perspective": (64, 40)}
-
-
-def _size(camera: Camera) -> tuple[int, int]:
-    """The painting's size: an eye's image of this projection, both eyes where there are two."""
-    return camera.image_size(*EYE_SIZE[camera.projection])
-
-
-# ---- the compiled projection against its numpy twin ----
-
-
-@numba.njit
-def _kernel_map(plane, i, j, xs, ys, d):
-    """Per pixel (i, j) of the painting: locate, centre_frame, target_offset at (xs, ys), to_pixel of d."""
-    n = len(i)
-    side = np.empty(n, np.int64)
-    frame = np.empty((n, 9))
-    offset = np.empty((n, 3))
-    back = np.empty((n, 3))
-    for k in range(n):
-        s, li, lj = locate(plane, i[k], j[k])
-        side[k] = s
-        f = centre_frame(plane, li, lj)
-        for q in range(9):
-            frame[k, q] = f[q]
-        offset[k, 0], offset[k, 1], offset[k, 2] = target_offset(plane, li + xs[k], lj + ys[k])
-        x, y, ok = to_pixel(plane, s, d[k, 0], d[k, 1], d[k, 2])
-        back[k, 0], back[k, 1], back[k, 2] = x, y, 1.0 if ok else 0.0
-    return side, frame, offset, back
-
-
-@pytest.mark.parametrize("name", sorted(CAMERAS) + ["perspective"])
-def test_the_compiled_projection_is_its_numpy_twin(name):
-    camera = CAMERAS.get(name, EYE)
-    region = Region(*_size(camera))
-    i, j = region.pixel_coords()
-    rng = np.random.default_rng(3)
-    xs, ys = rng.uniform(0, 1, len(i)), rng.uniform(0, 1, len(i))
-    d = rng.normal(size=(len(i), 3))
-    side, frame, offset, back = _kernel_map(kernels.ImagePlane.of(camera, region), i, j, xs, ys, d)
-    twin_side, ei, ej = eye_pixels(camera, region, i, j)
-    np.testing.assert_array_equal(side, twin_side)
-    eyes, r, u, f = pixel_frames(camera, region, i, j)
-    np.testing.assert_allclose(frame, np.hstack([r, u, f]), atol=1e-12)
-    np.testing.assert_allclose(eyes, np.asarray(camera.eye) + (0.5 * camera.ipd * side)[:, None] * r, atol=1e-12)
-    twin_offset, *_ = directions_at(camera, region, ei + xs, ej + ys)
-    np.testing.assert_allclose(offset, twin_offset, atol=1e-12)
-    x, y, ok = project(camera, region, side, d)
-    np.testing.assert_array_equal(back[:, 2] == 1.0, ok)
-    np.testing.assert_allclose(back[ok, 0], x[ok], atol=1e-9)
-    np.testing.assert_allclose(back[ok, 1], y[ok], atol=1e-9)
-    # the inverse map takes each centre's own direction back to that centre
-    centre, *_ = directions_at(camera, region, ei + 0.5, ej + 0.5)
-    x, y, ok = project(camera, region, side, centre)
-    assert ok.all()
-    np.testing.assert_allclose(x, i, atol=1e-9)
-    np.testing.assert_allclose(y, j, atol=1e-9)
+# ---- the local frame and the sizes ----
 
 
 def test_the_local_frame_is_orthonormal_and_right_handed_all_around():
     camera = CAMERAS["equirect"]
-    region = Region(*_size(camera))
+    region = Region(*painting_size(camera))
     _, r, u, f = pixel_frames(camera, region, *region.pixel_coords())
     for a, b in ((r, u), (u, f), (f, r)):
         np.testing.assert_allclose((a * b).sum(axis=1), 0.0, atol=1e-12)
@@ -205,8 +133,8 @@ def _close_share(a: np.ndarray, b: np.ndarray) -> float:
 @pytest.mark.parametrize("name", sorted(CAMERAS))
 def test_lambda_zero_paints_the_plain_render_on_every_projection(surround, name):
     camera = CAMERAS[name]
-    plain = paint(surround, camera, *_size(camera), PaintParams(iterations=1)).image
-    still = paint(surround, camera, *_size(camera), PaintParams(lambda_p=0.0, iterations=4)).image
+    plain = paint(surround, camera, *painting_size(camera), PaintParams(iterations=1)).image
+    still = paint(surround, camera, *painting_size(camera), PaintParams(lambda_p=0.0, iterations=4)).image
     np.testing.assert_array_equal(still, plain)
 
 
@@ -218,8 +146,8 @@ def test_temporal_mode_continues_each_eyes_painting(surround, name):
         exact = None
         for k in range(3):
             step = camera.moved(eye=tuple(np.add(camera.eye, (0.05 * k, 0.0, -0.05 * k))))
-            exact = paint(surround, step, *_size(step), params, previous=exact and exact.state)
-        fresh = paint(surround, step, *_size(step), params).image
+            exact = paint(surround, step, *painting_size(step), params, previous=exact and exact.state)
+        fresh = paint(surround, step, *painting_size(step), params).image
         assert np.abs(exact.image - fresh).max() > 0.1  # it did continue, not start again
 
 
@@ -227,9 +155,9 @@ def test_temporal_mode_continues_each_eyes_painting(surround, name):
 def test_the_image_method_continues_a_panorama_and_a_pair(surround, name):
     camera = CAMERAS[name]
     params = PaintParams(lambda_p=6.0, iterations=2, method="image")
-    first = paint(surround, camera, *_size(camera), params)
-    again = paint(surround, camera, *_size(camera), params, previous=first.state)
-    plain = paint(surround, camera, *_size(camera), PaintParams(iterations=1)).image
+    first = paint(surround, camera, *painting_size(camera), params)
+    again = paint(surround, camera, *painting_size(camera), params, previous=first.state)
+    plain = paint(surround, camera, *painting_size(camera), PaintParams(iterations=1)).image
     assert np.abs(again.image - first.image).max() > 0.05 and np.abs(first.image - plain).max() > 0.1
     assert np.isfinite(again.image).all() and (again.image >= 0).all() and (again.image <= 1).all()
 
@@ -237,7 +165,7 @@ def test_the_image_method_continues_a_panorama_and_a_pair(surround, name):
 @pytest.mark.parametrize("name", sorted(CAMERAS))
 def test_a_tile_across_the_eyes_equals_its_crop(surround, name):
     camera = CAMERAS[name]
-    width, height = _size(camera)
+    width, height = painting_size(camera)
     for params in (PaintParams(lambda_p=12.0), PaintParams(lambda_p=12.0, spp=4, noise=0.3)):
         full = paint(surround, camera, width, height, params).state
         tile = Region(width, height, width // 3, height // 3, width // 2, height // 2)  # across both eyes
@@ -250,7 +178,7 @@ def test_a_tile_across_the_eyes_equals_its_crop(surround, name):
 def test_bands_are_the_crops_of_the_painting(surround, name):
     """How Ray paints a panorama or a stereo pair: in bands of rows, each painted apart."""
     camera = CAMERAS[name]
-    width, height = _size(camera)
+    width, height = painting_size(camera)
     params = PaintParams(lambda_p=12.0)
     full = paint(surround, camera, width, height, params).image
     for band in Region(width, height).tiles(17):
@@ -276,40 +204,6 @@ def test_each_eye_of_a_perspective_pair_is_the_painting_of_that_eye(surround):
 
 
 # ---- the image-space variant through the inverse map ----
-
-
-@pytest.mark.parametrize("name", sorted(CAMERAS))
-def test_the_image_lookup_kernel_is_its_numpy_twin_on_every_projection(name):
-    camera = CAMERAS[name]
-    width, height = _size(camera)
-    region = Region(width, height)
-    rng = np.random.default_rng(11)
-    n = region.pixel_count
-    plain = PaintState(region, rng.uniform(0, 1, (n, 3)).astype(np.float32))
-    v_p = rng.normal(scale=8 * camera.pixel_pitch(camera.eye_size(width, height)[1]), size=(n, 3))
-    v_p[::7] *= 30.0  # far off: across the seam, past a pole, off an image plane
-    out = PaintState.empty(region, frozenset({"color"}))
-    kernels.look_up(
-        v_p=v_p,
-        moves=True,
-        plane=kernels.ImagePlane.of(camera, region),
-        edge=EDGES.index("mirror"),
-        plain=kernels.channels(plain),
-        out=kernels.channels(out),
-    )
-    x, y, _ = lookup_coords(v_p, camera, region)
-    side, _, _ = eye_pixels(camera, region, *region.pixel_coords())
-    eye_w, eye_h = camera.eye_size(width, height)
-    image = plain.color.reshape(height, width, 3)
-    expected = np.empty((n, 3))
-    for s in camera.sides:
-        mine = side == s
-        x_off = eye_w if s > 0 and camera.stereo == "side-by-side" else 0
-        y_off = eye_h if s > 0 and camera.stereo == "top-bottom" else 0
-        own = image[y_off : y_off + eye_h, x_off : x_off + eye_w]
-        edge = "sphere" if camera.projection == "equirect" else "mirror"
-        expected[mine] = bilinear(own, x[mine], y[mine], edge)
-    np.testing.assert_allclose(out.color, expected, atol=2e-6)
 
 
 def test_an_equirect_lookup_wraps_round_the_seam_and_over_the_poles():
@@ -354,7 +248,7 @@ def test_shared_eyes_smudge_the_same_point_alike(surround, name):
     eyes' smudges of one point disagree (``rcp bench projection`` measures it on the shipped scenes)."""
     own = CAMERAS[name]
     shared = own.moved(eyes="shared")
-    width, height = _size(own)
+    width, height = painting_size(own)
     params = PaintParams(lambda_p=12.0)
     alone = paint(surround, own, width, height, params).image
     both = paint(surround, shared, width, height, params).image

@@ -25,8 +25,8 @@ from helpers.browser import (
     set_slider,
     wait_final,
 )
+from helpers.servers import BackgroundServer
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.loop import paint
 from rcp_server.service import protocol
 from rcp_server.settings.params import PaintParams

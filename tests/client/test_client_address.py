@@ -13,10 +13,10 @@ from urllib.parse import quote
 import pytest
 import uvicorn
 from helpers.browser import SIZE, WAIT_MS, fresh_page, needs_chromium, sent, wait_final
+from helpers.servers import BackgroundServer
 from starlette.applications import Starlette
 from starlette.routing import WebSocketRoute
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.camera.camera import COORDINATE_LIMIT
 
 pytestmark = needs_chromium

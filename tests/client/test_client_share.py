@@ -19,8 +19,8 @@ from helpers.browser import (
     set_slider,
     wait_final,
 )
+from helpers.servers import BackgroundServer
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.picking import object_pixels
 from rcp_server.service.walkview import pick_mask
 

@@ -22,10 +22,11 @@ import pytest
 
 ray = pytest.importorskip("ray")  # the cluster extra; the test extra installs it
 
+from helpers.servers import BackgroundServer, get_json  # noqa: E402
+from helpers.waits import wait_until  # noqa: E402
 from helpers.wire import Walk  # noqa: E402
 from websockets.exceptions import ConnectionClosed  # noqa: E402
 
-from rcp_server.bench.harness import BackgroundServer, get_json  # noqa: E402
 from rcp_server.cluster.admission import Target  # noqa: E402
 from rcp_server.cluster.connection import Connection, connect  # noqa: E402
 from rcp_server.cluster.walks import NoRoom, Walks  # noqa: E402
@@ -169,12 +170,9 @@ def test_walkers_are_admitted_while_there_is_room_and_none_starves(scenes, reque
         request.addfinalizer(stop.set)  # a failure below stops the walkers too
         for thread in threads[:3]:
             thread.start()
-        deadline = time.monotonic() + 60
-        while len(walks.on_ray) < 3 and time.monotonic() < deadline:  # each walker placed on Ray
-            time.sleep(0.05)
+        wait_until(lambda: len(walks.on_ray) >= 3)  # each walker placed on Ray
         threads[3].start()  # a fourth: painted here
-        while not counts[3] and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_until(lambda: counts[3])
         assert len(walks.on_ray) == 3 and len(walks.local) == 1
         fifth = Walk(live)  # a fifth: refused in one line, and its socket closed at once with the retry time
         fifth.send(type="hello", scene="tiny", width=W, height=H)
@@ -188,8 +186,7 @@ def test_walkers_are_admitted_while_there_is_room_and_none_starves(scenes, reque
         code, reason = closed.value.rcvd.code, closed.value.rcvd.reason
         assert code == 1013 and reason.endswith("; try again in 30 s") and len(reason.encode()) <= 123, reason
         fifth.close()
-        while min(driver.call("figures")["painted"]) < 5 and time.monotonic() < deadline + 60:
-            time.sleep(0.05)  # each crew warm (painted here meanwhile)
+        wait_until(lambda: min(driver.call("figures")["painted"]) >= 5)  # each crew warm (painted here meanwhile)
         time.sleep(1.0)
         before, on_ray = [len(c) for c in counts[:4]], walks.frames
         time.sleep(4)
@@ -286,10 +283,7 @@ def test_the_raylet_killed_and_the_runtime_stopped_mid_walk_leave_the_server_pai
             assert kill_rays(driver.pid, lambda args: b"raylet" in args[0]) == 1
 
         walk_through_failure(live, request, raylet)
-        deadline = time.monotonic() + 90
-        while (not driver.ready() or driver.pid == first) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert driver.pid != first and driver.ready()  # a new driver, on a new runtime
+        wait_until(lambda: driver.ready() and driver.pid != first)  # asked, it starts a new driver on a new runtime
         on_ray = service.painter.walks.frames
         walk_through_failure(live, request, lambda: kill_rays(driver.pid))  # back on Ray first, then stopped
         assert service.painter.walks.frames > on_ray

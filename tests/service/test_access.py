@@ -8,9 +8,9 @@ import socket
 
 import httpx
 import pytest
+from helpers.servers import BackgroundServer
 from helpers.wire import Walk
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.service.access import host_allowed
 from rcp_server.service.settings import Settings
 

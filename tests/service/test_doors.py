@@ -7,9 +7,8 @@ from __future__ import annotations
 import httpx
 import pytest
 from helpers.scenes import SPINNING_BOX
+from helpers.servers import BackgroundServer
 from helpers.wire import Walk
-
-from rcp_server.bench.harness import BackgroundServer
 
 SIDE = 540  # the limit is one eye of SIDE x SIDE: a stereo pair of it is twice over
 PIXELS = SIDE * SIDE

@@ -10,10 +10,9 @@ import sys
 import time
 
 import pytest
+from helpers.servers import BackgroundServer
 from helpers.wire import Walk
 from websockets.exceptions import ConnectionClosed
-
-from rcp_server.bench.harness import BackgroundServer
 
 FLOODERS = 6
 MESSAGES = 2000  # of each kind, per flooding socket

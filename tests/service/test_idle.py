@@ -1,6 +1,8 @@
 """Idle and slow connections cannot starve the service (``service/guard.py``), tried as an attacker would,
-against a real server on loopback, with bounded counts and times: half-open requests, WebSockets that never
-say hello, requests that fill the capacity, a client that never reads its answer."""
+against a real server on loopback, with bounded counts: half-open requests, WebSockets that never say hello,
+requests that fill the capacity, a client that never reads its answer. Each deadline is checked by what the
+server says or does when it passes (a 408, an error message, a closed socket) and by its lower bound: nothing
+is cut before its time."""
 
 from __future__ import annotations
 
@@ -11,21 +13,14 @@ import time
 
 import httpx
 import pytest
+from helpers.servers import BackgroundServer
+from helpers.waits import wait_until
 from websockets.exceptions import ConnectionClosed
 
-from rcp_server.bench.harness import BackgroundServer
-
 SMALL = {"scene": "sky", "width": 32, "height": 18}
-BOUND_S = 10  # generous: what a real client may wait for an answer on two busy cores
+BOUND_S = 30  # generous: what a real client may wait for an answer on two busy cores
 HALF_A_BODY = b"POST /api/render HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/json\r\n"
 HALF_A_BODY += b"Content-Length: 200\r\n\r\n{"  # 1 of its 200 bytes
-
-
-def until(condition, seconds: float, what: str) -> None:
-    deadline = time.monotonic() + seconds
-    while not condition():
-        assert time.monotonic() < deadline, f"{what} did not happen within {seconds} s"
-        time.sleep(0.05)
 
 
 @contextlib.contextmanager
@@ -58,23 +53,20 @@ def test_half_open_requests_neither_starve_health_and_renders_nor_stay_open():
     timeout = 2.0
     with BackgroundServer(header_timeout_s=timeout, max_connections=64) as server:
         with half_requests(server.settings.port, 200) as socks:
-            opened = time.monotonic()
             with httpx.Client(timeout=BOUND_S) as http:  # a real client, on its own connection
                 health = http.get(f"{server.url}/api/health")
                 assert health.status_code == 200 and health.json()["status"] == "ok"
                 render = http.post(f"{server.url}/api/render", json=SMALL)
                 assert render.status_code == 200 and render.headers["content-type"] == "image/png"
-            assert time.monotonic() - opened < BOUND_S
             assert connections(server) <= 64  # the idle ones were closed to make room
             # every half-open connection is closed by the server: evicted at once, or at the deadline with a 408
             answers = [read_to_end(sock, timeout + BOUND_S) for sock in socks]
-            assert time.monotonic() - opened < timeout + BOUND_S
         timed_out = [a for a in answers if a]
         assert timed_out and len(timed_out) <= 64
         for answer in timed_out:
             head, _, body = answer.partition(b"\r\n\r\n")
             assert head.startswith(b"HTTP/1.1 408") and json.loads(body) == {"detail": "no whole request within 2 s"}
-        until(lambda: connections(server) == 0, BOUND_S, "every connection to close")
+        wait_until(lambda: connections(server) == 0)  # every connection closed
 
 
 def test_a_slow_body_is_cut_off_at_the_deadline():
@@ -83,7 +75,7 @@ def test_a_slow_body_is_cut_off_at_the_deadline():
         with half_requests(server.settings.port, 1, head) as (sock,):
             clock = time.monotonic()
             assert read_to_end(sock, BOUND_S) == b""  # the app saw a disconnect: no answer, the socket closed
-            assert 0.9 < time.monotonic() - clock < BOUND_S
+            assert time.monotonic() - clock > 0.9  # at its deadline, not before
 
 
 def test_requests_past_the_capacity_get_a_json_503_with_retry_after_until_the_stalled_ones_are_cut():
@@ -96,16 +88,12 @@ def test_requests_past_the_capacity_get_a_json_503_with_retry_after_until_the_st
                 responses.append(httpx.post(f"{server.url}/api/render", json=SMALL, timeout=BOUND_S))
                 return responses[-1].status_code == 503
 
-            until(refused, BOUND_S, "a 503")
+            wait_until(refused)
             busy = responses[-1]
             assert busy.headers["content-type"] == "application/json" and int(busy.headers["retry-after"]) >= 1
             assert busy.json() == {"detail": "the server has 3 requests in progress, its limit; try again shortly"}
             # the stalled requests are cut at their deadline, and the capacity is free again
-            until(
-                lambda: httpx.post(f"{server.url}/api/render", json=SMALL, timeout=BOUND_S).status_code == 200,
-                2.0 + BOUND_S,
-                "a render to be served again",
-            )
+            wait_until(lambda: httpx.post(f"{server.url}/api/render", json=SMALL, timeout=BOUND_S).status_code == 200)
 
 
 def test_a_websocket_that_never_says_hello_is_closed_and_holds_no_place(walk_to):
@@ -118,7 +106,7 @@ def test_a_websocket_that_never_says_hello_is_closed_and_holds_no_place(walk_to)
         assert silent.next(BOUND_S) == {"type": "error", "message": "no hello within 1 s", "answers": None, "id": None}
         with pytest.raises(ConnectionClosed) as closed:
             silent.next(BOUND_S)
-        assert closed.value.rcvd.code == 1008 and 0.9 < time.monotonic() - clock < BOUND_S
+        assert closed.value.rcvd.code == 1008 and time.monotonic() - clock > 0.9  # at its deadline, not before
         walker.send(type="camera", eye=[0, 1, 5], look_at=[0, 1, 0])  # the walker is still served
         walker.frame()
 
@@ -133,7 +121,7 @@ def test_a_client_that_never_reads_its_answer_is_let_go():
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
             sock.connect(("127.0.0.1", server.settings.port))
             sock.sendall(request)
-            until(lambda: connections(server) == 0, 30, "the server to let the client go")  # painting included
+            wait_until(lambda: connections(server) == 0)  # the server let the client go (painting included)
             assert httpx.get(f"{server.url}/api/health", timeout=BOUND_S).status_code == 200
 
 

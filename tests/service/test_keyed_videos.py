@@ -4,15 +4,14 @@ scene cannot paint and keyed work over the limit refused in one line."""
 from __future__ import annotations
 
 import io
-import time
 
 import av
 import httpx
 import numpy as np
 import pytest
 from helpers.scenes import SPINNING_BOX
+from helpers.servers import BackgroundServer, job_status
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene
@@ -44,10 +43,7 @@ def server(scenes):
 def test_a_keyed_film_paints_each_frame_with_its_own_settings(server, scenes):
     answer = server.post("/api/videos", json={"scene": "tiny", "path": KEYED, "width": 64, "height": 48})
     assert answer.status_code == 202, answer.text
-    deadline = time.monotonic() + 120
-    while (status := server.get(f"/api/videos/{answer.json()['id']}").json())["state"] not in ("done", "failed"):
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
+    status = job_status(server, f"/api/videos/{answer.json()['id']}")
     assert status["state"] == "done", status
     video = server.get(f"/api/videos/{answer.json()['id']}/file").content
     with av.open(io.BytesIO(video)) as container:

@@ -11,10 +11,10 @@ import time
 
 import httpx
 import pytest
+from helpers.servers import BackgroundServer, rcp_serve
 from helpers.wire import Walk
 from websockets.sync.client import connect
 
-from rcp_server.bench.harness import BackgroundServer, rcp_serve
 from rcp_server.scene.scenefile import load_scene
 from rcp_server.service.memory import MB, RETRY_AFTER_S, WALK_KEEPS, Budget, NoRoom, painting_bytes
 

@@ -3,14 +3,11 @@ from ``POST /api/paths`` are the animation's, and ``POST /api/videos`` paints it
 
 from __future__ import annotations
 
-import time
-
 import httpx
 import numpy as np
 import pytest
 from helpers.gltf import animated_camera, expected_camera
-
-from rcp_server.bench.harness import BackgroundServer
+from helpers.servers import BackgroundServer, job_status
 
 
 @pytest.fixture(scope="module")
@@ -39,10 +36,7 @@ def test_an_uploaded_animated_camera_is_offered_played_and_filmed(server):
     created = server.post("/api/videos", json=body)
     assert created.status_code == 202, created.text
     assert created.json()["frames"] == 6
-    deadline = time.monotonic() + 120
-    while (status := server.get(f"/api/videos/{created.json()['id']}").json())["state"] in ("queued", "running"):
-        assert time.monotonic() < deadline
-        time.sleep(0.1)
+    status = job_status(server, f"/api/videos/{created.json()['id']}")
     assert status["state"] == "done", status
 
     unknown = server.post("/api/videos", json={**body, "path": {"camera": "Nope"}})

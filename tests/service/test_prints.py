@@ -4,15 +4,14 @@ progress in rows, cancel mid-painting, the work and disk limits and bad input in
 from __future__ import annotations
 
 import io
-import time
 
 import av
 import httpx
 import numpy as np
 import pytest
 from helpers.scenes import SPINNING_BOX
+from helpers.servers import FINISHED, BackgroundServer, job_status
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.painting.loop import paint
 from rcp_server.scene.scenefile import load_scene
 
@@ -31,12 +30,8 @@ def server(scenes):
             yield client
 
 
-def wait(server, print_id, states=("done", "failed", "cancelled")) -> dict:
-    deadline = time.monotonic() + 120
-    while (status := server.get(f"/api/prints/{print_id}").json())["state"] not in states:
-        assert time.monotonic() < deadline, status
-        time.sleep(0.05)
-    return status
+def wait(server, print_id, states=FINISHED) -> dict:
+    return job_status(server, f"/api/prints/{print_id}", lambda status: status["state"] in states)
 
 
 def test_a_print_is_the_painting_with_its_alpha_and_sixteen_bits(server, scenes):

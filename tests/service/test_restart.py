@@ -5,17 +5,14 @@ frame written and is, frame for frame, the uninterrupted run's; two servers cann
 from __future__ import annotations
 
 import io
-import os
 import subprocess
 import sys
-import time
 
 import av
 import httpx
 import numpy as np
 from helpers import uploads as files
-
-from rcp_server.bench.harness import PACKAGE_ROOT, free_port, rcp_serve
+from helpers.servers import free_port, job_status, rcp_environment, rcp_serve
 
 PATH = {  # 41 frames around the uploaded box
     "fps": 20,
@@ -27,12 +24,8 @@ PATH = {  # 41 frames around the uploaded box
 RENDER = {"width": 64, "height": 48, "paint": {"lambda_p": 6.0}}
 
 
-def wait_for(client: httpx.Client, video_id: str, until, timeout: float = 120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while not until(status := client.get(f"/api/videos/{video_id}").json()):
-        assert time.monotonic() < deadline, status
-        time.sleep(0.02)
-    return status
+def wait_for(client: httpx.Client, video_id: str, until) -> dict:
+    return job_status(client, f"/api/videos/{video_id}", until)
 
 
 def film(client: httpx.Client, video_id: str) -> list[np.ndarray]:
@@ -68,7 +61,7 @@ def test_a_restart_after_kill_9_keeps_the_upload_and_finishes_the_film_frame_for
         # a second server on the same data folder is refused at once, in one line
         second = subprocess.run(
             [sys.executable, "-m", "rcp_server.cli", "serve", "--port", str(free_port())],
-            env={**os.environ, "PYTHONPATH": str(PACKAGE_ROOT), "RCP_DATA": str(data)},
+            env=rcp_environment(data=str(data)),
             capture_output=True,
             text=True,
             timeout=60,

@@ -15,9 +15,9 @@ import time
 import httpx
 import pytest
 import schemathesis
+from helpers.servers import BackgroundServer
 
 from rcp_server.bench.fuzz import AUTH, SERVER_SETTINGS, SIZES, TIMEOUT, open_schema
-from rcp_server.bench.harness import BackgroundServer
 
 SEED = 20260101
 EXAMPLES = 150

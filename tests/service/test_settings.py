@@ -14,10 +14,10 @@ from pathlib import Path
 
 import httpx
 import pytest
+from helpers.servers import free_port, rcp_environment
 from pydantic import SecretStr
 from starlette.datastructures import Headers, QueryParams
 
-from rcp_server.bench.harness import PACKAGE_ROOT, free_port
 from rcp_server.service.access import admits
 from rcp_server.service.settings import ENGINE_VARIABLES, Settings, unknown_variable
 
@@ -28,8 +28,8 @@ def environment(tmp_path: Path, **settings: str) -> dict[str, str]:
     """This process's environment without any ``RCP_*`` of its own, with ``settings`` (``RCP_*`` names), the
     user's data folder in ``tmp_path`` and this checkout's code."""
     env = {name: value for name, value in os.environ.items() if not name.startswith("RCP_")}
-    path = os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")]))
-    return {**env, "PYTHONPATH": path, "XDG_DATA_HOME": str(tmp_path / "xdg"), **settings}
+    code = {name: rcp_environment()[name] for name in ("PYTHONPATH", "PYTHONUNBUFFERED")}
+    return {**env, **code, "XDG_DATA_HOME": str(tmp_path / "xdg"), **settings}
 
 
 def rcp(tmp_path: Path, *argv: str, **settings: str) -> subprocess.CompletedProcess:

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from helpers import uploads as files
 from helpers.scenes import CAMERA, SPINNING_BOX
+from helpers.servers import BackgroundServer, job_status
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.media.camerapath import PathSpec, parse_path
 from rcp_server.painting.loop import paint
 from rcp_server.service.store import DataFolderError, Store, load_state, save_state
@@ -79,12 +79,8 @@ def scenes(tmp_path_factory):
     return folder
 
 
-def wait_for(client, video_id, until, timeout=120.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while not until(status := client.get(f"/api/videos/{video_id}").json()):
-        assert time.monotonic() < deadline, status
-        time.sleep(0.02)
-    return status
+def wait_for(client, video_id, until) -> dict:
+    return job_status(client, f"/api/videos/{video_id}", until)
 
 
 def decoded(data: bytes) -> list[np.ndarray]:

@@ -16,9 +16,10 @@ import httpx
 import numpy as np
 import pytest
 from helpers import uploads as files
+from helpers.servers import FINISHED, BackgroundServer
+from helpers.waits import wait_until
 from helpers.wire import Walk, decode
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.scene.unpack import BYTES_PER_TRIANGLE, READER_ENVIRONMENT
 from rcp_server.scene.untrusted import Limits, NoRoom, read_model
 
@@ -330,13 +331,9 @@ def test_an_uploaded_scene_makes_a_video(server):
     )
     assert answer.status_code == 202, answer.text
     video = answer.json()["id"]
-    deadline = time.monotonic() + 60
-    while (status := httpx.get(f"{server.url}/api/videos/{video}", timeout=30).json())["state"] in (
-        "queued",
-        "running",
-    ):
-        assert time.monotonic() < deadline, status
-        time.sleep(0.1)
+    status = wait_until(
+        lambda: httpx.get(f"{server.url}/api/videos/{video}", timeout=30).json(), lambda s: s["state"] in FINISHED
+    )
     assert status["state"] == "done" and status["done_frames"] == 3, status
     assert httpx.get(f"{server.url}/api/videos/{video}/file", timeout=30).content[4:8] == b"ftyp"  # an MP4
     assert delete(server, name).status_code == 204

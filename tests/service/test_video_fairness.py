@@ -4,13 +4,11 @@ shared tile pool, and the video goes on painting throughout (the pool serves bot
 
 from __future__ import annotations
 
-import time
-
 import httpx
 import pytest
 from helpers.scenes import SPINNING_BOX
-
-from rcp_server.bench.harness import BackgroundServer
+from helpers.servers import FINISHED, BackgroundServer
+from helpers.waits import wait_until
 
 # a video far longer than the walk (6001 frames), of a modest size: it is still painting when the walk ends
 VIDEO = {
@@ -49,10 +47,10 @@ def test_a_walk_is_answered_step_by_step_while_a_video_paints(server, walk_to):
         created = client.post("/api/videos", json=VIDEO)
         assert created.status_code == 202, created.text
         video_id = created.json()["id"]
-        deadline = time.monotonic() + DEADLINE_S
-        while (status := video_status(client, video_id))["done_frames"] == 0:
-            assert status["state"] in ("queued", "running") and time.monotonic() < deadline, status
-            time.sleep(0.05)
+        started = wait_until(
+            lambda: video_status(client, video_id), lambda s: s["done_frames"] or s["state"] in FINISHED
+        )
+        assert started["state"] in ("queued", "running"), started  # a first frame painted, the rest to come
 
         walk = walk_to(server)
         walk.send(type="hello", scene="tiny", width=CANVAS[0], height=CANVAS[1])
@@ -75,7 +73,5 @@ def test_a_walk_is_answered_step_by_step_while_a_video_paints(server, walk_to):
         assert progress[0] < progress[half] < progress[-1] < status["frames"], progress
         stopped = client.delete(f"/api/videos/{video_id}").json()
         assert stopped["state"] in ("running", "cancelled") and stopped["done_frames"] < stopped["frames"]
-        while video_status(client, video_id)["state"] == "running":
-            assert time.monotonic() < deadline + DEADLINE_S
-            time.sleep(0.05)
+        wait_until(lambda: video_status(client, video_id)["state"] != "running")
         assert video_status(client, video_id)["state"] == "cancelled"

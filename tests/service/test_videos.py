@@ -13,9 +13,10 @@ import httpx
 import numpy as np
 import pytest
 from helpers.scenes import CAMERA, SPINNING_BOX, make_scene
+from helpers.servers import FINISHED, BackgroundServer, job_status
+from helpers.waits import wait_until
 from PIL import Image
 
-from rcp_server.bench.harness import BackgroundServer
 from rcp_server.cluster.painter import Backoff
 from rcp_server.media.camerapath import parse_path
 from rcp_server.painting.loop import paint
@@ -54,12 +55,8 @@ def server(scenes):
             yield client
 
 
-def wait_until(client, video_id, states=("done", "failed", "cancelled"), timeout=60.0) -> dict:
-    deadline = time.monotonic() + timeout
-    while (status := client.get(f"/api/videos/{video_id}").json())["state"] not in states:
-        assert time.monotonic() < deadline, status
-        time.sleep(0.05)
-    return status
+def wait_video(client, video_id, states=FINISHED) -> dict:
+    return job_status(client, f"/api/videos/{video_id}", lambda status: status["state"] in states)
 
 
 def one_line(answer: httpx.Response, status: int) -> str:
@@ -74,7 +71,7 @@ def test_a_path_becomes_an_mp4_of_its_paintings(server, scenes):
     assert answer.status_code == 202, answer.text
     created = answer.json()
     assert created["frames"] == 7
-    status = wait_until(server, created["id"])
+    status = wait_video(server, created["id"])
     assert status | {"message": ""} == {**created, "state": "done", "done_frames": 7, "message": ""}, status
     video = server.get(f"/api/videos/{created['id']}/file")
     assert video.status_code == 200 and video.headers["content-type"] == "video/mp4"
@@ -99,7 +96,7 @@ def test_a_video_takes_a_style_as_a_render_does(server, scenes):
     body = {"scene": "tiny", "path": {**PATH, "fps": 1}, "width": 32, "height": 24, "paint": paint_settings}
     answer = server.post("/api/videos", json=body)
     assert answer.status_code == 202, answer.text
-    assert wait_until(server, answer.json()["id"])["state"] == "done"
+    assert wait_video(server, answer.json()["id"])["state"] == "done"
     frame = server.get(f"/api/videos/{answer.json()['id']}/file").content
     with av.open(io.BytesIO(frame)) as container:
         first = next(container.decode(video=0)).to_ndarray(format="rgb24")
@@ -117,7 +114,7 @@ def test_a_video_takes_a_style_as_a_render_does(server, scenes):
 
 def test_cancelling_stops_the_painting_and_the_server_goes_on(server):
     created = server.post("/api/videos", json={"scene": "tiny", "path": LONG, "width": 64, "height": 48}).json()
-    wait_until(server, created["id"], states=("running",))
+    wait_video(server, created["id"], states=("running",))
     # one job paints and one waits: the next one is told to come back later
     waiting = server.post("/api/videos", json={"scene": "tiny", "path": LONG, "width": 64, "height": 48})
     assert waiting.status_code == 202
@@ -126,12 +123,9 @@ def test_cancelling_stops_the_painting_and_the_server_goes_on(server):
     assert server.delete(f"/api/videos/{waiting.json()['id']}").json()["state"] == "cancelled"
     assert server.get(f"/api/videos/{created['id']}/file").status_code == 409  # not done
     assert server.delete(f"/api/videos/{created['id']}").status_code == 200
-    status = wait_until(server, created["id"], timeout=10)
-    assert status["state"] == "cancelled" and status["done_frames"] < status["frames"] == 3601
-    deadline = time.monotonic() + 10
-    while server.get("/api/health").json()["painting"]:
-        assert time.monotonic() < deadline
-        time.sleep(0.05)
+    status = wait_video(server, created["id"])
+    assert status["state"] == "cancelled" and status["done_frames"] < status["frames"] == 3601  # stopped mid-way
+    wait_until(lambda: not server.get("/api/health").json()["painting"])
     assert server.post("/api/render", json={"scene": "tiny", "width": 32, "height": 32}).status_code == 200
 
 
@@ -209,7 +203,7 @@ def test_a_video_past_the_disk_budget_is_refused_at_submission_with_507(scenes, 
             f"about {estimate:,} bytes" in said
             and re.search(rf"have [\d,]+ of their {estimate * 3 // 2:,} left", said)  # the running job's frames vary
         )
-        assert wait_until(client, first.json()["id"])["state"] == "done"
+        assert wait_video(client, first.json()["id"])["state"] == "done"
     with BackgroundServer(scenes=scenes, video_disk_bytes=1) as live, httpx.Client(base_url=live.url) as client:
         assert "have 1 of their 1 left" in one_line(client.post("/api/videos", json=body), 507)
 
@@ -268,7 +262,7 @@ def test_a_film_counts_every_byte_it_writes_and_stops_at_the_budget_keeping_its_
     path = {**PATH, "fps": 24}
     with BackgroundServer(**settings) as live, httpx.Client(base_url=live.url, timeout=30) as client:
         created = client.post("/api/videos", json={"scene": "tiny", "path": path, "width": 32, "height": 32}).json()
-        status = wait_until(client, created["id"])
+        status = wait_video(client, created["id"])
         made = status["done_frames"]
         assert status["state"] == "failed" and 0 < made < status["frames"] == 25, status
         assert status["message"] == (
@@ -290,7 +284,7 @@ def test_cancelling_twice_keeps_the_cancelled_job_until_it_expires(scenes, tmp_p
         waiting = client.post("/api/videos", json={"scene": "tiny", "path": PATH, "width": 64, "height": 48}).json()
         for video in (waiting, running):
             first = client.delete(f"/api/videos/{video['id']}")
-            wait_until(client, video["id"], states=("cancelled",))
+            wait_video(client, video["id"], states=("cancelled",))
             second = client.delete(f"/api/videos/{video['id']}")
             assert first.status_code == second.status_code == 200
             assert second.json()["state"] == "cancelled" and second.json()["id"] == video["id"]
@@ -324,12 +318,8 @@ def test_a_video_on_ray_waits_out_a_ray_failure_and_goes_on_from_its_last_frame(
         videos = Videos(settings, workshop, store, painter, Budget(settings.memory_bytes))
         try:
             job = videos.submit(make_scene(), parse_path(PATH).resolve(CAMERA), 32, 32, PaintParams(), None)
-            deadline = time.monotonic() + 30
             messages = set()
-            while job.state not in ("done", "failed", "cancelled"):
-                messages.add(job.message)
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
+            wait_until(lambda: messages.add(job.message) or job.state in FINISHED, pause=0.01)
             assert job.state == "done", job.message
             assert painter.asked == [0, 3]  # the three frames written were not asked for again
             assert "Ray went away; going on from frame 3 in 1 s" in messages
@@ -348,7 +338,7 @@ def test_an_equirect_stereo_path_becomes_a_360_video_that_players_recognise(serv
     body = {"scene": "tiny", "path": {**PATH, "fps": 2, "keyframes": keyframes}, "width": 32, "height": 16}
     answer = server.post("/api/videos", json=body)
     assert answer.status_code == 202, answer.text
-    assert wait_until(server, answer.json()["id"])["state"] == "done"
+    assert wait_video(server, answer.json()["id"])["state"] == "done"
     video = server.get(f"/api/videos/{answer.json()['id']}/file").content
     with av.open(io.BytesIO(video)) as container:
         frame = next(container.decode(video=0))
@@ -382,16 +372,11 @@ def test_a_video_waits_for_the_memory_others_hold_and_one_that_never_fits_is_ref
         try:
             memory.reserve("a walk", need, (32, 32), "a walk-through")
             job = videos.submit(make_scene(), path, 32, 32, PaintParams(), None)
-            deadline = time.monotonic() + 60
-            while "of memory" not in job.message:
-                assert time.monotonic() < deadline and job.state in ("queued", "running"), job.message
-                time.sleep(0.01)
+            wait_until(lambda: "of memory" in job.message or job.state not in ("queued", "running"), pause=0.01)
             assert job.message.startswith("this video of 32x32 pixels needs") and job.done_frames == 0
             assert memory.held(("video", job.id)) == 0
             memory.release("a walk")
-            while job.state not in ("done", "failed", "cancelled"):
-                assert time.monotonic() < deadline
-                time.sleep(0.01)
+            wait_until(lambda: job.state in FINISHED, pause=0.01)
             assert job.state == "done" and job.message.startswith("7 frames"), job.message
             assert memory.used == 0  # given back
             with pytest.raises(Refusal) as refused:

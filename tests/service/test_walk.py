@@ -4,14 +4,13 @@ wins, temporal painting, bad messages, the session limit."""
 from __future__ import annotations
 
 import json
-import time
 
 import httpx
 import numpy as np
 import pytest
+from helpers.servers import BackgroundServer
+from helpers.waits import wait_until
 from helpers.wire import decode, post
-
-from rcp_server.bench.harness import BackgroundServer
 
 
 def test_hello_gives_ready_then_walk_and_refined_frames(walk):
@@ -153,9 +152,7 @@ def test_sessions_are_limited_and_freed_on_disconnect(walk_to):
         with pytest.raises(Exception):  # noqa: B017 - the server closes the socket (code 1013)
             second.next(5)
         first.close()
-        deadline = time.monotonic() + 10
-        while httpx.get(f"{server.url}/api/health").json()["sessions"] and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_until(lambda: not httpx.get(f"{server.url}/api/health").json()["sessions"])
         third = walk_to(server)
         third.send(type="hello", scene="sky", width=32, height=18)
         assert third.next()["type"] == "ready"

@@ -1,8 +1,9 @@
-"""The hot passes of an iteration, fused and compiled (numba): numpy cannot fuse them.
+"""The hot passes of an iteration, compiled (numba): numpy cannot fuse them.
 
-``cast.py``: camera assignment (``cast_rays``, with the built-in mappings fused in, and ``fill_field``);
+``cast.py``: camera assignment (``cast_rays``, with the built-in mappings fused in, and ``fill_field``;
+``cast_rays`` picks ``cast_flat`` or ``cast_general``, from Python);
 ``shade.py``: hits -> per-pixel data (``shade``); ``triangle.py``: where a ray meets the triangle it hits
-(``place_hits``); ``iterate.py``: one traced iteration of a tile, the steps above chained in one call
+(``place_hits``); ``iterate.py``: one traced iteration of a tile, the steps above called in turn
 (``paint_iteration``); ``alpha.py``: rays through cut-outs (``pass_masked``); ``lookup.py``: the
 image-space method's lookup (``look_up``); ``visibility.py``: the faces of rays from eyes at rest, from
 the screen cells of ``screencells.py`` where they prove Embree's answer (``find_faces``); ``embree.py``: the

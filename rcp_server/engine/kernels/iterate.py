@@ -5,8 +5,9 @@ module, tested there against its numpy reference; this only chains and times the
 
 Chained here rather than in one compiled function: numba compiles every kernel a compiled function could call,
 so a fused chain compiled the cut-out and extra-channel kernels of paintings that need neither, and itself
-(about 5 s of a cold start's 15, ``painting/warmup.py``). Here a kernel compiles at its first call, and the
-calls cost a few tens of microseconds an iteration of a tile.
+(about 5 s of a cold start's 15, ``painting/warmup.py``). Here a kernel compiles at its first call, the
+slowest (``shade``) in another process meanwhile (``jit.compile_beside``), and the calls cost a few tens
+of microseconds an iteration of a tile.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from __future__ import annotations
 from ...util.stopwatch import Stopwatch
 from .alpha import pass_masked
 from .cast import cast_rays
+from .jit import compile_beside
 from .shade import record_surfaces, shade
 from .triangle import place_hits
 from .visibility import find_faces
@@ -36,6 +38,25 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
     pixels = scratch.every[:n]
     traced = scratch.every[: n * spp]
     hits = scratch.hits
+    shading_arguments = dict(
+        origins=scratch.origins,
+        directions=scratch.directions,
+        hits=hits,
+        spp=spp,
+        pixels=pixels,
+        surfaces=shading.surfaces,
+        environment=shading.environment,
+        light_dir=shading.light_dir,
+        ambient=shading.ambient,
+        lit=shading.lit,
+        eye=cast.eye,
+        plane=cast.plane,
+        z_max=shading.z_max,
+        out=out,
+        need=shading.records,
+        ink=shading.ink,
+    )
+    beside = compile_beside(shade, shading_arguments)  # the slowest to compile: on a cold cache, on another core
     with watch.stage("camera"):
         cast_rays(
             eye=cast.eye,
@@ -90,24 +111,9 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
                     next_todo=scratch.next_todo,
                 )
     with watch.stage("shade"):
-        shade(
-            origins=scratch.origins,
-            directions=scratch.directions,
-            hits=hits,
-            spp=spp,
-            pixels=pixels,
-            surfaces=shading.surfaces,
-            environment=shading.environment,
-            light_dir=shading.light_dir,
-            ambient=shading.ambient,
-            lit=shading.lit,
-            eye=cast.eye,
-            plane=cast.plane,
-            z_max=shading.z_max,
-            out=out,
-            need=shading.records,
-            ink=shading.ink,
-        )
+        if beside is not None:
+            beside.wait()
+        shade(**shading_arguments)
         if any(getattr(shading.records, name) for name in SURFACE_RECORDS):
             record_surfaces(
                 origins=scratch.origins,

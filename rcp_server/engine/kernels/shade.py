@@ -1,6 +1,6 @@
 """Shading, fused and compiled: Embree's hits -> per-pixel data (shading plus the per-pixel mean).
 
-``tests/engine/test_kernels.py`` holds its numpy reference.
+``tests/engine/test_shade.py`` holds its numpy reference.
 """
 
 from __future__ import annotations

@@ -83,6 +83,7 @@ async def render(body: protocol.RenderRequest, asked: RenderAsked, request: Requ
                 watcher.cancel()
     except Abandoned:
         if gone.is_set():
+            log.info("a render stopped at its next tile: its caller left")
             return Response(status_code=499)  # nobody is left to tell (nginx's "client closed request")
         if workshop.stopping:
             message = "the server is stopping"

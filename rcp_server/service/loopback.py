@@ -1,5 +1,6 @@
-"""Real servers on a free loopback port, for benchmarks and tests: ``BackgroundServer`` runs ``rcp serve`` in a
-thread of this process, ``rcp_serve`` runs it as a subprocess (so that its memory and threads are its own).
+"""The service on a free loopback port, for the benchmarks (``rcp bench``) and the tests: ``BackgroundServer``
+runs ``rcp serve`` in a thread of this process, ``rcp_serve`` runs it as a subprocess (so that its memory and
+threads are its own), and ``rcp_environment`` is the environment such a subprocess runs in.
 
 Also ``request``, a small HTTP client on the standard library: a plain install has no other.
 """
@@ -22,9 +23,9 @@ import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..service.server import Server
-from ..service.settings import Settings
-from ..service.state import service_of
+from .server import Server
+from .settings import Settings
+from .state import service_of
 
 TIMEOUT = 30.0  # the longest any single wait on a server may take (an answer, a stop)
 START_TIMEOUT = 600.0  # a first start compiles the kernels: 30 s of one core, minutes on a busy machine
@@ -166,6 +167,16 @@ def _healthy(url: str) -> bool:
         return False
 
 
+def rcp_environment(**settings: str) -> dict[str, str]:
+    """This process's environment for an ``rcp`` subprocess, with ``settings`` as ``RCP_*`` variables (``token=``
+    is ``RCP_TOKEN``): it runs the code this module was imported from, whatever the working directory, and its
+    output is not buffered."""
+    path = os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")]))
+    env = {**os.environ, "PYTHONPATH": path, "PYTHONUNBUFFERED": "1"}
+    env.update({f"RCP_{name.upper()}": value for name, value in settings.items()})
+    return env
+
+
 @contextlib.contextmanager
 def rcp_serve(log_dir: Path, **settings: str):
     """``rcp serve`` in a subprocess on 127.0.0.1 and a free port (``settings`` as ``RCP_*`` variables: ``token=``
@@ -176,10 +187,7 @@ def rcp_serve(log_dir: Path, **settings: str):
     log = log_dir / "rcp-serve.log"
     command = [sys.executable, "-m", "rcp_server.cli", "serve", "--host", "127.0.0.1", "--port", str(port)]
     with log.open("w") as out:
-        # the server runs the code this module was imported from, whatever the working directory
-        path = os.pathsep.join(filter(None, [str(PACKAGE_ROOT), os.environ.get("PYTHONPATH")]))
-        env = {**os.environ, "PYTHONPATH": path, "PYTHONUNBUFFERED": "1"}
-        env.update({f"RCP_{name.upper()}": value for name, value in settings.items()})
+        env = rcp_environment(**settings)
         process = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, env=env)
     served = Served(process, port, log)
     try:
