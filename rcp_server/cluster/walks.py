@@ -298,7 +298,7 @@ class Walks:
                 return []
             dealt, sharing = _dealt(self.places, cores)
         splits = _splits(camera, params)
-        # the nodes with warm members first: a crew that shrinks keeps those it has rather than starting others
+        # the nodes with members first: a crew that shrinks keeps those it has rather than starting others
         wanted = sorted(dealt.get(key, [place.home]), key=lambda node: node not in place.crew)
         count = crew_size(len(wanted), height, place.paint_s, place.overhead_s) if splits else 1
         threads = {node: max(1, min(self.max_threads, int(cores[node] // sharing.get(node, 1)))) for node in cores}
