@@ -2,8 +2,8 @@
 
 The nodes a walker paints on are dealt by :func:`~.admission.crews` (fairly among walkers); its group reserves one
 bundle on each of them (``STRICT_SPREAD``, each bundle held to its node by Ray's ``ray.io/node-id`` label), and each
-band actor is started in its node's bundle. On KubeRay a bundle that cannot be placed is a demand the autoscaler
-sees, as the walkers' resource requests are.
+band actor is started in its node's bundle (the autoscaler is asked for nodes apart, by the walkers' resource
+requests: a bundle held to a node is no demand for a new one).
 
 The group is built and awaited on a thread, never on a frame's path: meanwhile the members already warm paint. A
 node lost leaves the crew at once (the frame is painted again by the others); the group, which still holds a
