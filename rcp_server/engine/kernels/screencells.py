@@ -327,6 +327,7 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
         cb = 0.5 * (corners[0, 1] + corners[3, 1])
         half = 0.5 * math.sqrt((corners[3, 0] - corners[0, 0]) ** 2 + (corners[3, 1] - corners[0, 1]) ** 2)
         nearest = math.inf  # the farthest the best covering face lies along a ray of the cell
+        covering = -1  # that face
         for k in range(first[c], first[c + 1]):
             f = every[k]
             # only a face whose projection reaches past the cell on every side can cover it: the cell lies
@@ -337,22 +338,23 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
                 and (cells_y[f, 0] < gy or gy == 0)
                 and (gy < cells_y[f, 1] or gy == rows - 1)
             ):
-                nearest = min(nearest, _covers(records, f, corners))
+                deepest = _covers(records, f, corners)
+                if deepest < nearest:
+                    nearest, covering = deepest, f
+        covering_err = _error(spread, covering, ca, cb, half, widest) if covering >= 0 else 0.0
         reach = nearest * widest * 1.01  # no ray of the cell meets the covering face farther than this
         begin = kept
         for k in range(first[c], first[c + 1]):
             f = every[k]
             if plane[f] * (1.0 - records[f, REL_T]) > reach and records[f, REL_T] < 1e-3:
                 continue  # hidden: Embree cannot place it nearer than its plane
-            # the ray's distance from the face's centre, anywhere in the cell, times |w|
-            x, y, z = spread[f, 0], spread[f, 1], spread[f, 2]
-            cx = y - z * cb
-            cy = z * ca - x
-            cz = x * cb - y * ca
-            distance = math.sqrt(cx * cx + cy * cy + cz * cz) + math.sqrt(x * x + y * y + z * z) * half
-            err = spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
+            err = _error(spread, f, ca, cb, half, widest)
+            if _missed(records, f, corners, err):
+                continue  # no ray of the cell meets it: the kernel would pass it by on every one
             if nearest < math.inf and _behind(records, f, corners, err, HIDDEN * nearest):
                 continue  # hidden: wherever Embree meets it in this cell, it is farther than the covering face
+            if f != covering and covering >= 0 and _behind_face(records, f, err, covering, covering_err, corners):
+                continue  # hidden ray by ray: on every ray of the cell Embree places it behind the covering face
             if kept - begin >= longest:
                 cover[c] = LONG_CELL
                 break
@@ -506,6 +508,68 @@ def _behind(records, f, corners, err, depth):
             return False
         behind = z < 0.0
     return True
+
+
+@numba.njit(inline="always")
+def _error(spread, f, ca, cb, half, widest):
+    """The bound of Embree's error on face ``f``'s edge functions anywhere in a cell (centre ``(ca, cb)`` on the
+    image plane, ``half`` its half diagonal, ``widest`` the longest ``|w|`` of its rays)."""
+    # the ray's distance from the face's centre, anywhere in the cell, times |w|
+    x, y, z = spread[f, 0], spread[f, 1], spread[f, 2]
+    cx = y - z * cb
+    cy = z * ca - x
+    cz = x * cb - y * ca
+    distance = math.sqrt(cx * cx + cy * cy + cz * cz) + math.sqrt(x * x + y * y + z * z) * half
+    return spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
+
+
+@jit
+def _missed(records, f, corners, err):
+    """Whether ``visibility.classify`` finds face ``f`` certainly missed by every ray of the cell of ``corners``
+    (edge error ``err``): one edge function below ``-err`` and another above ``err`` all over the cell, which
+    holds where it holds at the four corners (they are linear)."""
+    below = np.ones(3, np.bool_)
+    above = np.ones(3, np.bool_)
+    for q in range(4):
+        a = corners[q, 0]
+        b = corners[q, 1]
+        for i in range(3):
+            u = records[f, 3 * i] * a + records[f, 3 * i + 1] * b + records[f, 3 * i + 2]
+            below[i] = below[i] and u < -1.000001 * err  # a margin for the rounding of u at a ray inside
+            above[i] = above[i] and u > 1.000001 * err
+    return below.any() and above.any()
+
+
+@jit
+def _behind_face(records, f, err, c, err_c, corners):
+    """Whether, on every ray of the cell of ``corners``, the nearest Embree can place face ``f`` (edge error
+    ``err``) lies deeper than the farthest it can place face ``c`` (``err_c``), with the kernel's bound of the
+    error of t (``visibility.classify``'s). The ratio of the two depths is a ratio of linear functions over
+    the cell (``OFFSET / det`` each), so its least is at a corner, as is each bound's largest (``1 / |det|``
+    is convex where ``det`` keeps its sign)."""
+    sign_f = sign_c = 0.0
+    ratio = math.inf
+    rel_f = rel_c = 0.0
+    for q in range(4):
+        a = corners[q, 0]
+        b = corners[q, 1]
+        det_f = _det(records, f, a, b)
+        det_c = _det(records, c, a, b)
+        s_f = 1.0 if det_f > 0.0 else -1.0
+        s_c = 1.0 if det_c > 0.0 else -1.0
+        if not abs(det_f) > 6.0 * err or (sign_f != 0.0 and s_f != sign_f):
+            return False  # grazing somewhere in the cell
+        if not abs(det_c) > 6.0 * err_c or (sign_c != 0.0 and s_c != sign_c):
+            return False
+        sign_f, sign_c = s_f, s_c
+        z_f = records[f, OFFSET] / det_f
+        z_c = records[c, OFFSET] / det_c
+        if not (z_f > 0.0 and z_c > 0.0):
+            return False
+        ratio = min(ratio, z_f / z_c)
+        rel_f = max(rel_f, records[f, REL_T] + 3.0 * err / abs(det_f) + 1e-9)
+        rel_c = max(rel_c, records[c, REL_T] + 3.0 * err_c / abs(det_c) + 1e-9)
+    return rel_f < 0.5 and ratio * (1.0 - rel_f) > (1.0 + rel_c) * (1.0 + 1e-6)
 
 
 @jit
