@@ -185,7 +185,8 @@ def _rest_load(url: str, scene_name: str, on: bool):
             caller.join()
 
 
-VIDEO_LOAD = {"width": 640, "height": 360, "fps": 24, "seconds": 60}  # 1441 frames: longer than any walk, within RCP_VIDEO_DISK_BYTES
+# 1441 frames: longer than any walk, within the default RCP_VIDEO_DISK_BYTES
+VIDEO_LOAD = {"width": 640, "height": 360, "fps": 24, "seconds": 60}
 
 
 @dataclass
