@@ -528,16 +528,21 @@ def _missed(records, f, corners, err):
     """Whether ``visibility.classify`` finds face ``f`` certainly missed by every ray of the cell of ``corners``
     (edge error ``err``): one edge function below ``-err`` and another above ``err`` all over the cell, which
     holds where it holds at the four corners (they are linear)."""
-    below = np.ones(3, np.bool_)
-    above = np.ones(3, np.bool_)
+    below0 = below1 = below2 = above0 = above1 = above2 = True  # scalars: an array a call costs an allocation
+    bound = 1.000001 * err  # a margin for the rounding of u at a ray inside
     for q in range(4):
         a = corners[q, 0]
         b = corners[q, 1]
-        for i in range(3):
-            u = records[f, 3 * i] * a + records[f, 3 * i + 1] * b + records[f, 3 * i + 2]
-            below[i] = below[i] and u < -1.000001 * err  # a margin for the rounding of u at a ray inside
-            above[i] = above[i] and u > 1.000001 * err
-    return below.any() and above.any()
+        u0 = records[f, 0] * a + records[f, 1] * b + records[f, 2]
+        u1 = records[f, 3] * a + records[f, 4] * b + records[f, 5]
+        u2 = records[f, 6] * a + records[f, 7] * b + records[f, 8]
+        below0 &= u0 < -bound
+        below1 &= u1 < -bound
+        below2 &= u2 < -bound
+        above0 &= u0 > bound
+        above1 &= u1 > bound
+        above2 &= u2 > bound
+    return (below0 or below1 or below2) and (above0 or above1 or above2)
 
 
 @jit

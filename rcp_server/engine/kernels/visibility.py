@@ -61,24 +61,32 @@ def classify(screen, origins, directions, rays, status, face):
         screen.records,
         screen.ids,
     )
+    # the basis and the first eye as scalars: they stay in registers (read from the arrays, a ray's test
+    # cost a quarter more)
+    rx, ry, rz, ux, uy, uz, fx, fy, fz = b[0, 0], b[0, 1], b[0, 2], b[1, 0], b[1, 1], b[1, 2], b[2, 0], b[2, 1], b[2, 2]
+    first_x, first_y, first_z = eyes[0, 0], eyes[0, 1], eyes[0, 2]
     for k in range(len(rays)):
         s = rays[k]
-        e = -1
-        for q in range(eyes.shape[0]):  # which eye the ray's (float32) origin is, exactly
-            if origins[s, 0] == eyes[q, 0] and origins[s, 1] == eyes[q, 1] and origins[s, 2] == eyes[q, 2]:
-                e = q
-        if e < 0:
-            status[k] = OTHER_EYE
-            continue
+        ox, oy, oz = origins[s, 0], origins[s, 1], origins[s, 2]
+        if ox == first_x and oy == first_y and oz == first_z:  # which eye the ray's (float32) origin is, exactly
+            e = 0
+        else:
+            e = -1
+            for q in range(1, eyes.shape[0]):
+                if ox == eyes[q, 0] and oy == eyes[q, 1] and oz == eyes[q, 2]:
+                    e = q
+            if e < 0:
+                status[k] = OTHER_EYE
+                continue
         dx = float(directions[s, 0])
         dy = float(directions[s, 1])
         dz = float(directions[s, 2])
-        df = dx * b[2, 0] + dy * b[2, 1] + dz * b[2, 2]
+        df = dx * fx + dy * fy + dz * fz
         if not df > 0.0:  # behind the camera, along the image plane, or not finite
             status[k] = OUTSIDE
             continue
-        pa = (dx * b[0, 0] + dy * b[0, 1] + dz * b[0, 2]) / df
-        pb = (dx * b[1, 0] + dy * b[1, 1] + dz * b[1, 2]) / df
+        pa = (dx * rx + dy * ry + dz * rz) / df
+        pb = (dx * ux + dy * uy + dz * uz) / df
         gx = pa * scale_x + shift_x
         gy = pb * scale_y + shift_y
         if not (gx >= 0.0 and gx < columns and gy >= 0.0 and gy < rows):
@@ -101,36 +109,38 @@ def classify(screen, origins, directions, rays, status, face):
             if nearest[j] > best_hi:  # the list runs front to back: nothing further can come nearer
                 break
             f = faces[j]
-            err = errors[j]  # Embree's error on this face's edge functions, anywhere in the cell
+            err = float(errors[j])  # Embree's error on this face's edge functions, anywhere in the cell
             u0 = records[f, 0] * pa + records[f, 1] * pb + records[f, 2]
             u1 = records[f, 3] * pa + records[f, 4] * pb + records[f, 5]
             u2 = records[f, 6] * pa + records[f, 7] * pb + records[f, 8]
-            if (u0 > err or u1 > err or u2 > err) and (u0 < -err or u1 < -err or u2 < -err):
-                continue  # two edges certainly disagree: Embree misses it too
+            hi = max(u0, max(u1, u2))
+            lo = min(u0, min(u1, u2))
+            if (hi > err) & (lo < -err):  # two edges certainly disagree: Embree misses it too (one branch,
+                continue  # not six: whether a face is missed is a coin toss the CPU cannot predict)
             det = u0 + u1 + u2
             spread = 3.0 * err
-            if not abs(det) > 2.0 * spread:  # grazing: the side it is met from is anybody's guess
+            adet = abs(det)
+            if not adet > 2.0 * spread:  # grazing: the side it is met from is anybody's guess
                 verdict = GRAZING
                 break
             z = records[f, OFFSET] / det
-            rel = records[f, REL_T] + spread / abs(det) + 1e-9
+            rel = records[f, REL_T] + spread / adet + 1e-9
             if not rel < 0.5:
                 verdict = GRAZING
                 break
             if z <= 0.0:  # its plane is met behind the eye (the error cannot flip the sign of t)
                 continue
-            lo = z * (1.0 - rel)
-            hi = z * (1.0 + rel)
-            if det < 0.0:
-                u0, u1, u2 = -u0, -u1, -u2
+            lo_z = z * (1.0 - rel)
+            hi_z = z * (1.0 + rel)
             # inside by more than EDGE as Embree computes it: its packets do not ask the ray again alone (and
             # its depth known within 5%: a face dropped from the cell lies 10% deeper than one covering it)
-            margin = EDGE * (abs(det) + spread) + err
-            if u0 >= margin and u1 >= margin and u2 >= margin and rel < 0.05 and z < best_z:
+            inner = lo if det > 0.0 else -hi  # the least edge function on the side the ray meets it from
+            margin = EDGE * (adet + spread) + err
+            if (inner >= margin) & (rel < 0.05) & (z < best_z):
                 rival_lo = min(rival_lo, best_lo)
-                best, best_z, best_lo, best_hi = f, z, lo, hi
+                best, best_z, best_lo, best_hi = f, z, lo_z, hi_z
             else:
-                rival_lo = min(rival_lo, lo)
+                rival_lo = min(rival_lo, lo_z)
         if verdict != ANSWERED:
             status[k] = verdict
         elif best < 0:
