@@ -59,7 +59,9 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     hit_fraction = float((tracer.intersect(origins, directions).face >= 0).mean()) if tracer else 0.0
     if tracer is not None:
         screen.forget()  # a build of its own, timed, the kernels compiled
-        _screen_paths(Frame.of(scene, 0.0, camera, params, width, height).trace, origins, directions, repeats)
+        _screen_paths(
+            Frame.of(scene, 0.0, camera, params, width, height, threads=threads).trace, origins, directions, repeats
+        )
 
     # the two references: embreex (one rtcIntersect1 a ray, from its loop) and Embree's own coherent packets
     # on the same rays, without anything around them (the limit of this machine)

@@ -28,9 +28,18 @@ class Frame:
 
     @classmethod
     def of(
-        cls, scene: Scene, time: float, camera: Camera, params: PaintParams, width: int = 1, height: int = 1
+        cls,
+        scene: Scene,
+        time: float,
+        camera: Camera,
+        params: PaintParams,
+        width: int = 1,
+        height: int = 1,
+        *,
+        threads: int = 1,
     ) -> Frame:
-        """The frame of a ``width x height`` painting (its size: where outlines are drawn)."""
+        """The frame of a ``width x height`` painting (its size: where outlines are drawn), its screen cells
+        built on ``threads`` threads (the painting's own, idle meanwhile)."""
         geometry, tracer = scene.geometry(time)
         light = scene.light
         reads = params.reads()
@@ -46,6 +55,8 @@ class Frame:
             ink=ink(scene, time, camera, width, height),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
-        cells = screen.cells(camera, params, width, height, geometry.triangles) if tracer else kernels.NO_SCREEN
+        cells = (
+            screen.cells(camera, params, width, height, geometry.triangles, threads) if tracer else kernels.NO_SCREEN
+        )
         trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry), cells)
         return cls(trace, shading, tracer, Looks.of(params, geometry.object_names, geometry.material_names))

@@ -29,9 +29,11 @@ def forget() -> None:
         _kept.clear()
 
 
-def cells(camera: Camera, params: PaintParams, width: int, height: int, triangles: np.ndarray) -> kernels.Screen:
+def cells(
+    camera: Camera, params: PaintParams, width: int, height: int, triangles: np.ndarray, threads: int = 1
+) -> kernels.Screen:
     """The screen cells of a ``width x height`` painting of ``triangles`` (F, 3, 3) float32 by ``camera``, or
-    ``kernels.NO_SCREEN`` where they do not apply."""
+    ``kernels.NO_SCREEN`` where they do not apply; built on ``threads`` threads."""
     looks = params.looks()
     rays = width * height * params.spp * params.iterations
     if (
@@ -56,7 +58,7 @@ def cells(camera: Camera, params: PaintParams, width: int, height: int, triangle
             if known == key and faces is triangles:
                 _kept.append(_kept.pop(at))
                 return built
-    built = screencells.build(triangles, eyes, basis, camera.half_height(), eye_width, eye_height, guard)
+    built = screencells.build(triangles, eyes, basis, camera.half_height(), eye_width, eye_height, guard, threads)
     with _lock:
         _kept.append((key, triangles, built))
         del _kept[:-KEPT]

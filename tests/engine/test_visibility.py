@@ -47,9 +47,9 @@ def _hard():
     )
 
 
-def _screen(triangles, camera=CAMERA):
+def _screen(triangles, camera=CAMERA, threads=1):
     eyes = np.asarray(camera.eye, np.float64).astype(np.float32)[None]
-    return build(triangles, eyes, np.stack(camera.basis()), camera.half_height(), W, H, GUARD)
+    return build(triangles, eyes, np.stack(camera.basis()), camera.half_height(), W, H, GUARD, threads)
 
 
 def _rays(triangles, count, seed):
@@ -115,6 +115,15 @@ def test_the_cells_find_the_face_embree_finds_for_every_ray(triangles):
     found, alone, answered, _ = _both(triangles, origins[coherent], directions[coherent])
     np.testing.assert_array_equal(found, alone)
     assert answered > 0
+
+
+@pytest.mark.parametrize("threads", [2, 3, 7])
+def test_cells_built_on_threads_are_the_cells_built_on_one(threads):
+    # each thread takes a share of the faces, then a band of rows; a list or a cover never depends on the split
+    triangles = np.concatenate([_hard(), _grid(8, -6.0), _soup()]).astype(RAY_DTYPE)
+    one, many = _screen(triangles), _screen(triangles, threads=threads)
+    for name in ("start", "cover", "faces", "errors", "nearest", "records", "ids"):
+        np.testing.assert_array_equal(getattr(many, name), getattr(one, name), err_msg=name)
 
 
 def test_a_ray_on_a_shared_edge_or_vertex_goes_to_embree_and_past_the_guard_band_too():

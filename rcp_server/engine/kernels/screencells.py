@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -84,12 +85,21 @@ def build(
     width: int,
     height: int,
     guard: int,
+    threads: int = 1,
 ) -> Screen:
     """The screen cells of ``eyes`` (E, 3) float32 (the rays' own origins, exactly), looking along ``basis``
     (3, 3) float64 rows ``r, u, f`` with a vertical half field ``tan_half``, for an eye's image of
     ``width x height`` pixels and a guard band of ``guard`` pixels; ``triangles`` (F, 3, 3) float32, Embree's.
-    At most ``BYTES`` a pixel each eye; ``NO_SCREEN`` for an image too small to hold cells."""
+    At most ``BYTES`` a pixel each eye; ``NO_SCREEN`` for an image too small to hold cells. ``threads`` build
+    it side by side, each its share of the faces, then its band of rows (a painting waits for its cells)."""
+    with ThreadPoolExecutor(threads) as pool:
+        return _build(triangles, eyes, basis, tan_half, width, height, guard, threads, pool)
+
+
+def _build(triangles, eyes, basis, tan_half, width, height, guard, threads, pool) -> Screen:
+    """:func:`build` on the threads of ``pool``."""
     clock = time.thread_time()
+    helpers = 0.0  # the thread time of the work done on the pool's threads
     aspect = width / height
     columns = -(-(width + 2 * guard) // CELL)
     rows = -(-(height + 2 * guard) // CELL)
@@ -106,26 +116,12 @@ def build(
     most = (BYTES * width * height - 8 * (columns * rows + 1)) // 12  # entries of all lists, each eye
     if most <= 0:  # an image too small for cells
         return NO_SCREEN
+    frame = np.array([scale_x, shift_x, scale_y, shift_y])
     for eye in eyes:
-        record, box, plane, spread = _faces(triangles, eye, basis, reach)
-        x0 = np.floor(box[:, 0] * scale_x + shift_x - PAD)
-        x1 = np.floor(box[:, 1] * scale_x + shift_x + PAD)
-        y0 = np.floor(box[:, 3] * scale_y + shift_y - PAD)
-        y1 = np.floor(box[:, 2] * scale_y + shift_y + PAD)
-        live = ~np.isnan(box[:, 0]) & (x1 >= 0) & (x0 < columns) & (y1 >= 0) & (y0 < rows)
-        x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
-        cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
-        cells_y = np.stack([np.clip(y0, 0, rows - 1), np.clip(y1, 0, rows - 1)], axis=1).astype(np.int64)
-        start, cover, faces, error, near = _fill(
-            cells_x=cells_x,
-            cells_y=cells_y,
-            live=live,
-            records=record,
-            plane=plane,
-            spread=spread,
-            grid=np.array([columns, rows, LONGEST, most], np.int64),
-            frame=np.array([scale_x, shift_x, scale_y, shift_y]),
+        (start, cover, faces, error, near), record, seconds = _eye_lists(
+            triangles, eye, basis, reach, frame, columns, rows, most, pool, threads
         )
+        helpers += seconds
         # the listed faces renumbered in the order the lists first name them, their records in that order:
         # the faces of a cell lie side by side in memory
         named, local = _first_named(faces, len(record), sum(len(r) for r in records))
@@ -153,8 +149,54 @@ def build(
         nearest=np.concatenate(nearest),
         records=np.concatenate(records),
         ids=np.concatenate(ids).astype(np.int32),
-        seconds=time.thread_time() - clock,
+        seconds=time.thread_time() - clock + helpers,
     )
+
+
+def _eye_lists(triangles, eye, basis, reach, frame, columns, rows, most, pool, threads):
+    """The lists of one eye's cells (``_cap``'s five arrays), the records of every face (``_faces``) and the
+    thread time spent on the pool: each thread takes its share of the faces, then its band of rows."""
+    scale_x, shift_x, scale_y, shift_y = frame
+    parts = np.linspace(0, len(triangles), threads + 1).astype(np.int64)
+    faced, faces_seconds = _split(
+        pool, threads, lambda k: _faces(triangles[parts[k] : parts[k + 1]], eye, basis, reach)
+    )
+    record, box, plane, spread = (np.concatenate([part[at] for part in faced]) for at in range(4))
+    x0 = np.floor(box[:, 0] * scale_x + shift_x - PAD)
+    x1 = np.floor(box[:, 1] * scale_x + shift_x + PAD)
+    y0 = np.floor(box[:, 3] * scale_y + shift_y - PAD)
+    y1 = np.floor(box[:, 2] * scale_y + shift_y + PAD)
+    live = ~np.isnan(box[:, 0]) & (x1 >= 0) & (x0 < columns) & (y1 >= 0) & (y0 < rows)
+    x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
+    cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
+    cells_y = np.stack([np.clip(y0, 0, rows - 1), np.clip(y1, 0, rows - 1)], axis=1).astype(np.int64)
+    grid = np.array([columns, rows, LONGEST], np.int64)
+    bands = np.linspace(0, rows, threads + 1).astype(np.int64)
+    filled, fill_seconds = _split(
+        pool,
+        threads,
+        lambda k: _fill(cells_x, cells_y, live, record, plane, spread, grid, frame, bands[k], bands[k + 1]),
+    )
+    offsets = np.cumsum([0] + [len(part[2]) for part in filled])  # where each band's entries begin
+    lists = _cap(
+        np.concatenate([[0]] + [part[0][1:] + offset for part, offset in zip(filled, offsets, strict=False)]),
+        *(np.concatenate([part[at] for part in filled]) for at in range(1, 5)),
+        LONGEST,
+        most,
+    )
+    return lists, record, faces_seconds + fill_seconds
+
+
+def _split(pool, threads, work):
+    """``work(k)`` for every share ``k`` of ``threads``, side by side on ``pool``: the results in order, and the
+    thread time they took in all."""
+
+    def timed(k):
+        clock = time.thread_time()
+        return work(k), time.thread_time() - clock
+
+    done = list(pool.map(timed, range(threads)))
+    return [result for result, _ in done], sum(seconds for _, seconds in done)
 
 
 def _faces(triangles: np.ndarray, eye: np.ndarray, basis: np.ndarray, reach: float):
@@ -163,7 +205,7 @@ def _faces(triangles: np.ndarray, eye: np.ndarray, basis: np.ndarray, reach: flo
     from the eye (F,) float64; what Embree's error on its edge functions scales with (F, 5) float64: its
     centre from the eye (3), its corners' farthest distance from the eye times ``ERROR_ULPS`` ulps, its radius."""
     count = len(triangles)
-    record, box = np.empty((count, RECORD)), np.empty((count, 4))
+    record, box = np.zeros((count, RECORD)), np.empty((count, 4))  # zeros: a record pads its last word
     plane, spread = np.empty(count), np.empty((count, 5))
     _face_kernel(
         triangles=triangles,
@@ -282,29 +324,31 @@ def _projection(corner, side, eps):
 
 
 @jit
-def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
-    """The lists of every cell: ``(start (C+1,) int64, long (C,) bool, faces (K,) int32, errors (K,) float32)``,
-    each face of cells ``cells_x[f, 0]..cells_x[f, 1]`` x ``cells_y[f, 0]..cells_y[f, 1]`` listed where it is
-    not provably hidden, with the bound of Embree's error on its edge functions anywhere in the cell.
-    grid : columns, rows, the longest list, the most entries of all;  frame : scale_x, shift_x, scale_y, shift_y
+def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame, row0, row1):
+    """The lists of the cells of rows ``row0..row1 - 1``: ``(start (C+1,) int64, cover (C,) int32, faces (K,)
+    int32, errors (K,) float32, nearest (K,) float32)``, C their cells, each face of cells ``cells_x[f, 0]..
+    cells_x[f, 1]`` x ``cells_y[f, 0]..cells_y[f, 1]`` listed where it is not provably hidden, with the bound of
+    Embree's error on its edge functions anywhere in the cell and the nearest Embree can place it there. A band
+    of rows a call: the bands of a build run on threads side by side.
+    grid : columns, rows, the longest list;  frame : scale_x, shift_x, scale_y, shift_y
     """
-    columns, rows, longest, most = grid[0], grid[1], grid[2], grid[3]
+    columns, rows, longest = grid[0], grid[1], grid[2]
     scale_x, shift_x, scale_y, shift_y = frame[0], frame[1], frame[2], frame[3]
-    count = columns * rows
+    count = columns * (row1 - row0)
     sizes = np.zeros(count + 1, np.int64)
     for f in range(len(live)):
         if live[f]:
-            for gy in range(cells_y[f, 0], cells_y[f, 1] + 1):
+            for gy in range(max(cells_y[f, 0], row0), min(cells_y[f, 1] + 1, row1)):
                 for gx in range(cells_x[f, 0], cells_x[f, 1] + 1):
-                    sizes[gy * columns + gx + 1] += 1
+                    sizes[(gy - row0) * columns + gx + 1] += 1
     first = np.cumsum(sizes)
     every = np.empty(first[-1], np.int32)
     at = first[:-1].copy()
     for f in range(len(live)):
         if live[f]:
-            for gy in range(cells_y[f, 0], cells_y[f, 1] + 1):
+            for gy in range(max(cells_y[f, 0], row0), min(cells_y[f, 1] + 1, row1)):
                 for gx in range(cells_x[f, 0], cells_x[f, 1] + 1):
-                    c = gy * columns + gx
+                    c = (gy - row0) * columns + gx
                     every[at[c]] = f
                     at[c] += 1
     # ---- drop what is provably hidden, cap the lists ----
@@ -318,6 +362,7 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
     for c in range(count):
         gy = c // columns
         gx = c - gy * columns
+        gy += row0
         widest = 0.0  # the longest w = a r + b u + f of the cell's rays
         for q in range(4):
             corners[q, 0] = (gx + (q & 1) * (1.0 + 2e-3) - 1e-3 - shift_x) / scale_x
@@ -375,7 +420,15 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame):
         elif kept - begin == 1 and _answers_all(records, faces[begin], corners, errors[begin]):
             cover[c] = faces[begin]  # alone and inside it all over the cell: every ray of the cell meets it
         start[c + 1] = kept
-    # ---- within the budget: the longest lists go to Embree first ----
+    return start, cover, faces[:kept].copy(), errors[:kept].copy(), nearest_at[:kept].copy()
+
+
+@jit
+def _cap(start, cover, faces, errors, nearest_at, longest, most):
+    """The lists of ``_fill`` (all bands', one after the other) within ``most`` entries in all: the longest lists
+    go to Embree first (their cells marked long)."""
+    count = len(cover)
+    kept = start[count]
     lengths = np.zeros(longest + 1, np.int64)
     for c in range(count):
         lengths[start[c + 1] - start[c]] += 1
