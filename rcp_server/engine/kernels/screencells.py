@@ -156,26 +156,35 @@ def _build(triangles, eyes, basis, tan_half, width, height, guard, threads, pool
 def _eye_lists(triangles, eye, basis, reach, frame, columns, rows, most, pool, threads):
     """The lists of one eye's cells (``_cap``'s five arrays), the records of every face (``_faces``) and the
     thread time spent on the pool: each thread takes its share of the faces, then its band of rows."""
-    scale_x, shift_x, scale_y, shift_y = frame
-    parts = np.linspace(0, len(triangles), threads + 1).astype(np.int64)
-    faced, faces_seconds = _split(
-        pool, threads, lambda k: _faces(triangles[parts[k] : parts[k + 1]], eye, basis, reach)
-    )
-    record, box, plane, spread = (np.concatenate([part[at] for part in faced]) for at in range(4))
-    x0 = np.floor(box[:, 0] * scale_x + shift_x - PAD)
-    x1 = np.floor(box[:, 1] * scale_x + shift_x + PAD)
-    y0 = np.floor(box[:, 3] * scale_y + shift_y - PAD)
-    y1 = np.floor(box[:, 2] * scale_y + shift_y + PAD)
-    live = ~np.isnan(box[:, 0]) & (x1 >= 0) & (x0 < columns) & (y1 >= 0) & (y0 < rows)
-    x0, x1, y0, y1 = (np.where(live, c, 0.0) for c in (x0, x1, y0, y1))
-    cells_x = np.stack([np.clip(x0, 0, columns - 1), np.clip(x1, 0, columns - 1)], axis=1).astype(np.int64)
-    cells_y = np.stack([np.clip(y0, 0, rows - 1), np.clip(y1, 0, rows - 1)], axis=1).astype(np.int64)
+    count = len(triangles)
+    record = np.zeros((count, RECORD))  # zeros: a record pads its last word
+    plane, spread = np.empty(count), np.empty((count, 5))
+    cells, live = np.empty((count, 4), np.int64), np.empty(count, np.bool_)
     grid = np.array([columns, rows, LONGEST], np.int64)
+    parts = np.linspace(0, count, threads + 1).astype(np.int64)
+
+    def faces(k):
+        share = slice(parts[k], parts[k + 1])
+        _faces(
+            triangles[share],
+            eye,
+            basis,
+            reach,
+            frame,
+            grid,
+            record[share],
+            plane[share],
+            spread[share],
+            cells[share],
+            live[share],
+        )
+
     bands = np.linspace(0, rows, threads + 1).astype(np.int64)
+    _, faces_seconds = _split(pool, threads, faces)
     filled, fill_seconds = _split(
         pool,
         threads,
-        lambda k: _fill(cells_x, cells_y, live, record, plane, spread, grid, frame, bands[k], bands[k + 1]),
+        lambda k: _fill(cells, live, record, plane, spread, grid, frame, bands[k], bands[k + 1]),
     )
     offsets = np.cumsum([0] + [len(part[2]) for part in filled])  # where each band's entries begin
     lists = _cap(
@@ -199,32 +208,34 @@ def _split(pool, threads, work):
     return [result for result, _ in done], sum(seconds for _, seconds in done)
 
 
-def _faces(triangles: np.ndarray, eye: np.ndarray, basis: np.ndarray, reach: float):
-    """Per face, for rays from ``eye``: the kernel's record (F, RECORD) float64; the bounds of its projection
-    on the image plane ``(a_min, a_max, b_min, b_max)`` (F, 4) float64 (NaN: never seen); its plane's distance
-    from the eye (F,) float64; what Embree's error on its edge functions scales with (F, 5) float64: its
-    centre from the eye (3), its corners' farthest distance from the eye times ``ERROR_ULPS`` ulps, its radius."""
-    count = len(triangles)
-    record, box = np.zeros((count, RECORD)), np.empty((count, 4))  # zeros: a record pads its last word
-    plane, spread = np.empty(count), np.empty((count, 5))
+def _faces(triangles, eye, basis, reach, frame, grid, record, plane, spread, cells, live) -> None:
+    """Per face, for rays from ``eye``: the kernel's record (F, RECORD) float64; its plane's distance from the
+    eye (F,) float64; what Embree's error on its edge functions scales with (F, 5) float64: its centre from the
+    eye (3), its corners' farthest distance from the eye times ``ERROR_ULPS`` ulps, its radius; the cells its
+    projection may cover ``(x0, x1, y0, y1)`` (F, 4) int64, inclusive, and whether it may cover any (F,) bool.
+    frame : scale_x, shift_x, scale_y, shift_y;  grid : columns, rows"""
     _face_kernel(
         triangles=triangles,
         eye=eye.astype(np.float64),
         basis=np.ascontiguousarray(basis, np.float64),
         reach=reach,
         ulp=ERROR_ULPS * 2.0**-24,
+        frame=frame,
+        grid=grid,
         record=record,
-        box=box,
         plane=plane,
         spread=spread,
+        cells=cells,
+        live=live,
     )
-    return record, box, plane, spread
 
 
 @jit
-def _face_kernel(triangles, eye, basis, reach, ulp, record, box, plane, spread):
+def _face_kernel(triangles, eye, basis, reach, ulp, frame, grid, record, plane, spread, cells, live):
     """``_faces``, a face at a time."""
     corner = np.empty((3, 3))
+    scale_x, shift_x, scale_y, shift_y = frame[0], frame[1], frame[2], frame[3]
+    columns, rows = grid[0], grid[1]
     for f in range(len(triangles)):
         # corners from the eye in the camera's frame: x along r, y along u, z along f
         for i in range(3):
@@ -284,20 +295,26 @@ def _face_kernel(triangles, eye, basis, reach, ulp, record, box, plane, spread):
         # ---- its projection: what lies nearer than eps along the view axis lies farther than ``reach`` ----
         eps = 0.5 * distance / math.sqrt(reach * reach + 1.0)
         if not distance > 1e-9 * far:  # its plane holds the eye, within rounding: it may be met anywhere
-            box[f, 0] = box[f, 2] = -math.inf
-            box[f, 1] = box[f, 3] = math.inf
-            continue
-        lo_a, hi_a, lo_b, hi_b = _projection(corner, 1.0, eps)
-        if not record[f, REL_T] < 1.0:  # Embree may see it on the wrong side of the eye: its mirror image too
-            la, ha, lb, hb = _projection(corner, -1.0, eps)
-            lo_a, hi_a, lo_b, hi_b = min(lo_a, la), max(hi_a, ha), min(lo_b, lb), max(hi_b, hb)
-        if lo_a > hi_a:  # nothing in front of the eye
-            box[f, 0] = box[f, 1] = box[f, 2] = box[f, 3] = math.nan
-            continue
-        box[f, 0] = lo_a
-        box[f, 1] = hi_a
-        box[f, 2] = lo_b
-        box[f, 3] = hi_b
+            lo_a = lo_b = -math.inf
+            hi_a = hi_b = math.inf
+        else:
+            lo_a, hi_a, lo_b, hi_b = _projection(corner, 1.0, eps)
+            if not record[f, REL_T] < 1.0:  # Embree may see it on the wrong side of the eye: its mirror image too
+                la, ha, lb, hb = _projection(corner, -1.0, eps)
+                lo_a, hi_a, lo_b, hi_b = min(lo_a, la), max(hi_a, ha), min(lo_b, lb), max(hi_b, hb)
+        # ---- the cells of its projection, PAD wider; none when nothing of it lies in front of the eye ----
+        x0 = np.floor(lo_a * scale_x + shift_x - PAD)
+        x1 = np.floor(hi_a * scale_x + shift_x + PAD)
+        y0 = np.floor(hi_b * scale_y + shift_y - PAD)  # scale_y < 0: rows run down the image
+        y1 = np.floor(lo_b * scale_y + shift_y + PAD)
+        live[f] = lo_a <= hi_a and x1 >= 0.0 and x0 < columns and y1 >= 0.0 and y0 < rows
+        if live[f]:
+            cells[f, 0] = int(min(max(x0, 0.0), columns - 1.0))
+            cells[f, 1] = int(min(max(x1, 0.0), columns - 1.0))
+            cells[f, 2] = int(min(max(y0, 0.0), rows - 1.0))
+            cells[f, 3] = int(min(max(y1, 0.0), rows - 1.0))
+        else:
+            cells[f, 0] = cells[f, 1] = cells[f, 2] = cells[f, 3] = 0
 
 
 @numba.njit(inline="always")
@@ -324,10 +341,10 @@ def _projection(corner, side, eps):
 
 
 @jit
-def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame, row0, row1):
+def _fill(cells, live, records, plane, spread, grid, frame, row0, row1):
     """The lists of the cells of rows ``row0..row1 - 1``: ``(start (C+1,) int64, cover (C,) int32, faces (K,)
-    int32, errors (K,) float32, nearest (K,) float32)``, C their cells, each face of cells ``cells_x[f, 0]..
-    cells_x[f, 1]`` x ``cells_y[f, 0]..cells_y[f, 1]`` listed where it is not provably hidden, with the bound of
+    int32, errors (K,) float32, nearest (K,) float32)``, C their cells, each face of cells ``cells[f, 0]..
+    cells[f, 1]`` x ``cells[f, 2]..cells[f, 3]`` listed where it is not provably hidden, with the bound of
     Embree's error on its edge functions anywhere in the cell and the nearest Embree can place it there. A band
     of rows a call: the bands of a build run on threads side by side.
     grid : columns, rows, the longest list;  frame : scale_x, shift_x, scale_y, shift_y
@@ -338,16 +355,16 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame, row0, row
     sizes = np.zeros(count + 1, np.int64)
     for f in range(len(live)):
         if live[f]:
-            for gy in range(max(cells_y[f, 0], row0), min(cells_y[f, 1] + 1, row1)):
-                for gx in range(cells_x[f, 0], cells_x[f, 1] + 1):
+            for gy in range(max(cells[f, 2], row0), min(cells[f, 3] + 1, row1)):
+                for gx in range(cells[f, 0], cells[f, 1] + 1):
                     sizes[(gy - row0) * columns + gx + 1] += 1
     first = np.cumsum(sizes)
     every = np.empty(first[-1], np.int32)
     at = first[:-1].copy()
     for f in range(len(live)):
         if live[f]:
-            for gy in range(max(cells_y[f, 0], row0), min(cells_y[f, 1] + 1, row1)):
-                for gx in range(cells_x[f, 0], cells_x[f, 1] + 1):
+            for gy in range(max(cells[f, 2], row0), min(cells[f, 3] + 1, row1)):
+                for gx in range(cells[f, 0], cells[f, 1] + 1):
                     c = (gy - row0) * columns + gx
                     every[at[c]] = f
                     at[c] += 1
@@ -378,10 +395,10 @@ def _fill(cells_x, cells_y, live, records, plane, spread, grid, frame, row0, row
             # only a face whose projection reaches past the cell on every side can cover it: the cell lies
             # inside its box of cells (clipped to the grid at its borders); most faces span a cell or two
             if (
-                (cells_x[f, 0] < gx or gx == 0)
-                and (gx < cells_x[f, 1] or gx == columns - 1)
-                and (cells_y[f, 0] < gy or gy == 0)
-                and (gy < cells_y[f, 1] or gy == rows - 1)
+                (cells[f, 0] < gx or gx == 0)
+                and (gx < cells[f, 1] or gx == columns - 1)
+                and (cells[f, 2] < gy or gy == 0)
+                and (gy < cells[f, 3] or gy == rows - 1)
             ):
                 deepest = _covers(records, f, corners)
                 if deepest < nearest:
@@ -471,7 +488,7 @@ def _first_named(faces, count, offset):
     return named[:m], local
 
 
-@jit
+@numba.njit(inline="always")
 def _answers_all(records, f, corners, err):
     """Whether every ray of the cell of ``corners`` meets face ``f`` provably as the kernel requires (inside by
     its margins at every corner, ``visibility._answer``), so that the kernel need not test it ray by ray."""
@@ -514,7 +531,7 @@ def _det(records, f, a, b):
     return det
 
 
-@jit
+@numba.njit(inline="always")
 def _nearest(records, f, corners, err):
     """The nearest depth at which Embree can place face ``f`` on a ray of the cell of ``corners`` (its edge
     functions' error ``err``), rounded down to float32; -infinity where it cannot be bounded (grazing
@@ -538,7 +555,7 @@ def _nearest(records, f, corners, err):
     return np.float32(low * (1.0 - 1e-6))
 
 
-@jit
+@numba.njit(inline="always")
 def _behind(records, f, corners, err, depth):
     """Whether Embree, meeting face ``f`` anywhere in the cell of ``corners`` (its edge functions' error
     ``err``), places it deeper than ``depth`` or behind the eye: its plane's depth over the cell (extreme at
@@ -576,7 +593,7 @@ def _error(spread, f, ca, cb, half, widest):
     return spread[f, 3] * (distance + spread[f, 4] * widest) * 1.001
 
 
-@jit
+@numba.njit(inline="always")
 def _missed(records, f, corners, err):
     """Whether ``visibility.classify`` finds face ``f`` certainly missed by every ray of the cell of ``corners``
     (edge error ``err``): one edge function below ``-err`` and another above ``err`` all over the cell, which
@@ -598,7 +615,7 @@ def _missed(records, f, corners, err):
     return (below0 or below1 or below2) and (above0 or above1 or above2)
 
 
-@jit
+@numba.njit(inline="always")
 def _behind_face(records, f, err, c, err_c, corners):
     """Whether, on every ray of the cell of ``corners``, the nearest Embree can place face ``f`` (edge error
     ``err``) lies deeper than the farthest it can place face ``c`` (``err_c``), with the kernel's bound of the
@@ -630,7 +647,7 @@ def _behind_face(records, f, err, c, err_c, corners):
     return rel_f < 0.5 and ratio * (1.0 - rel_f) > (1.0 + rel_c) * (1.0 + 1e-6)
 
 
-@jit
+@numba.njit(inline="always")
 def _covers(records, f, corners):
     """How deep face ``f`` lies at most, where it covers the whole cell of the four ``corners`` (points
     ``(a, b)`` of the image plane): its largest depth over the cell; infinity where it does not cover it."""
