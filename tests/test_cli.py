@@ -216,6 +216,7 @@ def test_bench_speed_prints_the_stage_split_and_the_ratios_to_embreex_and_to_emb
 def test_compile_warms_every_kernel_the_server_warms_and_says_so(capsys):
     """``rcp compile`` (the container image's build step) runs the server's warm-up: afterwards every engine
     kernel a painting calls has a compiled version in this process."""
+    from rcp_server.engine.kernels import screencells, visibility
     from rcp_server.painting import warmup
 
     assert main(["compile"]) == 0
@@ -223,3 +224,5 @@ def test_compile_warms_every_kernel_the_server_warms_and_says_so(capsys):
     assert out.startswith(f"rcp: the kernels of {len(scene_names())} scenes are compiled (in ") and out.count("\n") == 1
     called = [kernel for kernel in warmup.kernels() if kernel.overloads]
     assert len(called) >= 2  # at least the iteration and the first cast (the others load inside them)
+    # the screen cells too, which only large paintings build
+    assert screencells._fill in called and visibility.answer_listed in called

@@ -14,11 +14,14 @@ import sys
 from collections.abc import Iterable
 from dataclasses import replace
 
+import numpy as np
 from numba.core.registry import CPUDispatcher
 
 from ..camera.camera import Camera
+from ..engine.kernels import visibility
 from ..scene.scene import Scene
 from ..settings.params import PaintParams
+from . import screen
 from .loop import paint
 
 SIZE = 16  # pixels a side: enough to reach every kernel, nothing more
@@ -59,6 +62,21 @@ def first_frame(scene: Scene) -> None:
     paint(scene, scene.camera, *tiny(scene.camera), replace(scene.paint, iterations=ITERATIONS), threads=1)
 
 
+def screen_cells(scene: Scene) -> None:
+    """Builds the screen cells of a tiny image of ``scene`` and asks them a few rays: ``auto`` builds them only
+    for large paintings, whose first one would otherwise wait for their compiler (about 10 s of one core)."""
+    geometry, tracer = scene.geometry(0.0)
+    camera = scene.camera.moved(projection="perspective", stereo="mono")
+    if tracer is None:
+        return
+    built = screen.cells(camera, PaintParams(), SIZE, SIZE, geometry.triangles, mode="on")
+    rays = np.arange(8)
+    origins = np.repeat(np.asarray([camera.eye], np.float32), len(rays), axis=0)
+    directions = np.repeat(np.asarray([camera.basis()[2]], np.float32), len(rays), axis=0)
+    face = np.empty(len(rays), np.int32)
+    visibility.find_faces(built, tracer.embree, origins, directions, rays, face, np.empty(len(rays), np.int64))
+
+
 def warm(scenes: Iterable[Scene]) -> None:
     """Paints a tiny image of every scene with its own settings, and the image-space method once: after this the
     kernels a visitor's painting calls are compiled (and in numba's cache for the next process). A scene whose
@@ -67,6 +85,7 @@ def warm(scenes: Iterable[Scene]) -> None:
     for scene in scenes:
         first_frame(scene)
         if first:  # the other projections, mappings and sample counts compile nothing more (measured)
+            screen_cells(scene)
             paint(
                 scene, scene.camera, *tiny(scene.camera), PaintParams(iterations=ITERATIONS, method="image"), threads=1
             )

@@ -109,15 +109,32 @@ def test_auto_builds_the_cells_only_for_paintings_that_cast_enough_rays_a_triang
     monkeypatch.setenv(screencells.VARIABLE, "auto")
     scene, params = _fine_scene(), PaintParams(iterations=6)
     faces = scene.geometry(0.0)[0].face_count
-    small = Frame.of(scene, 0.0, CAMERA, params, 16, 9)
+    small = Frame.of(scene, 0.0, CAMERA, params, 64, 36)
     large = Frame.of(scene, 0.0, CAMERA, params, 320, 180)
-    assert 16 * 9 * 6 < screencells.PAYS * faces <= 320 * 180 * 6
+    assert 64 * 36 * 6 < screencells.PAYS * faces <= 320 * 180 * 6
     assert not small.trace.screen.on and large.trace.screen.on
     monkeypatch.delenv(screencells.VARIABLE)
-    assert screencells.mode() == "off" and not Frame.of(scene, 0.0, CAMERA, params, 320, 180).trace.screen.on
+    assert screencells.mode() == "auto"
+    monkeypatch.setenv(screencells.VARIABLE, "off")
+    assert not Frame.of(scene, 0.0, CAMERA, params, 320, 180).trace.screen.on
     monkeypatch.setenv(screencells.VARIABLE, "sometimes")
     with pytest.raises(ValueError, match="RCP_SCREEN_CELLS"):
         screencells.mode()
+
+
+def test_auto_drops_the_cells_where_crowded_triangles_would_send_their_rays_to_embree_anyway(monkeypatch):
+    # a fine sphere far off: more than LONGEST triangles a cell wherever it is seen, no cell answers it
+    far = sphere(center=(0.0, 0.0, -12.0), radius=0.8, subdivisions=5)
+    scene, params = make_scene([far]), PaintParams(iterations=6, spp=4)
+    faces = scene.geometry(0.0)[0].face_count
+    assert 320 * 180 * 6 * 4 >= screencells.PAYS * faces
+    monkeypatch.setenv(screencells.VARIABLE, "on")
+    built = Frame.of(scene, 0.0, CAMERA, params, 320, 180).trace.screen
+    assert built.on and not screencells.answers(built)
+    monkeypatch.setenv(screencells.VARIABLE, "auto")
+    assert not Frame.of(scene, 0.0, CAMERA, params, 320, 180).trace.screen.on
+    on, off = _both(monkeypatch, scene, CAMERA, 64, 36, params)
+    np.testing.assert_array_equal(on, off)
 
 
 def test_the_cells_take_no_more_bytes_than_declared(monkeypatch):

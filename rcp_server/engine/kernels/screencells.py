@@ -40,26 +40,37 @@ HIDDEN = 1.1  # a face deeper than this times the depth of one that covers the c
 ERROR_ULPS = 64.0  # bound of Embree's float32 error, in ulps of the magnitudes it multiplies
 VARIABLE = "RCP_SCREEN_CELLS"
 MODES = ("auto", "on", "off")
-"""``RCP_SCREEN_CELLS``: ``off`` (the default, or ``0``) builds no screen cells: every ray goes to Embree;
-``auto`` builds them for a painting that casts at least ``PAYS`` rays a triangle of the scene (building them
-costs about as much as tracing that many rays); ``on`` for every painting they apply to. The pictures are the
-same in every mode. Off by default: measured with ``rcp bench speed``, a ray the cells answer costs about what
-Embree's packets cost on the default scene, and the cells' build comes on top."""
-PAYS = 8.0
+"""``RCP_SCREEN_CELLS``: ``auto`` (the default) builds screen cells for a painting that casts at least ``PAYS``
+rays a triangle of the scene, and keeps them where they answer its surfaces (:func:`answers`); ``on`` for every
+painting they apply to; ``off`` (or ``0``) builds none: every ray goes to Embree. The pictures are the same in
+every mode. Measured side by side (``rcp bench speed``, and a painting with the cells on and off in turn), the
+cells pay where each triangle is met by many rays (a large painting, several samples a pixel) and lose where a
+painting casts few rays a triangle, or where its triangles crowd past ``LONGEST`` a cell (a fine mesh far away:
+those rays go to Embree after the cells' test)."""
+PAYS = 48.0
+LONG_SHARE = 0.25  # at most this share of the cells that list a face may be long for ``auto`` to keep them
 
 
 def mode() -> str:
     """The mode of ``RCP_SCREEN_CELLS`` (:data:`MODES`); raises ValueError for another value."""
-    given = os.environ.get(VARIABLE, "off").strip().lower()
-    given = {"0": "off", "1": "on", "false": "off", "true": "on", "": "off"}.get(given, given)
+    given = os.environ.get(VARIABLE, "auto").strip().lower()
+    given = {"0": "off", "1": "on", "false": "off", "true": "on", "": "auto"}.get(given, given)
     if given not in MODES:
         raise ValueError(f"{VARIABLE} is one of {', '.join(MODES)}, not {given!r}")
     return given
 
 
-def pays(rays: int, faces: int) -> bool:
-    """Whether the cells are worth building for a painting of ``rays`` rays over ``faces`` triangles."""
-    chosen = mode()
+def answers(screen: Screen) -> bool:
+    """Whether built cells answer the surfaces they list: at most ``LONG_SHARE`` of the cells that list a face
+    are long (their rays would take the cells' test and Embree's both)."""
+    long = int((screen.cover == LONG_CELL).sum())
+    listing = long + int((np.diff(screen.start, axis=1) > 0).sum())
+    return long <= LONG_SHARE * listing
+
+
+def pays(rays: int, faces: int, chosen: str) -> bool:
+    """Whether the cells are worth building in mode ``chosen`` (:data:`MODES`) for a painting of ``rays`` rays
+    over ``faces`` triangles."""
     return chosen == "on" or (chosen == "auto" and rays >= PAYS * faces)
 
 
