@@ -69,7 +69,7 @@ def speed(scene_name: str, width: int, height: int, iterations: int, repeats: in
     scratch = np.empty(n, np.int32)
     queries = {
         "embreex": embreex.bare_query if embreex else None,
-        "packets": (lambda o, d: tracer.bare_query(o, d, scratch[: len(o)])) if tracer else None,
+        "packets": (lambda o, d: tracer.bare_query(o, d, scratch[: len(o)], width)) if tracer else None,
     }
     painted, stage_sums, alone = _paired_repeats(
         scene, width, height, params, threads, repeats, queries, (origins, directions, bands)

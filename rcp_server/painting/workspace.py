@@ -19,7 +19,7 @@ import numpy as np
 from ..camera.camera import RAY_DTYPE, Region
 from ..engine import kernels
 from ..engine.kernels import screencells
-from ..engine.kernels.embree import Hits
+from ..engine.kernels.embree import Hits, packet_order
 from ..engine.paintstate import CHANNELS, PaintState, channel_shape
 from ..settings.params import PaintParams
 
@@ -50,6 +50,7 @@ class TileBuffers:
             directions=np.empty((rays, 3), RAY_DTYPE),
             hits=Hits.empty(rays),
             every=np.arange(rays),
+            packets=np.empty(rays, np.int64),
             starts=np.empty((cut, 3), RAY_DTYPE),
             todo=np.empty(cut, np.int64),
             next_todo=np.empty(cut, np.int64),
@@ -76,6 +77,7 @@ class TileBuffers:
             directions=s.directions[:rays],
             hits=Hits(*(a[:rays] for a in s.hits)),
             every=s.every[:rays],
+            packets=packet_order(region.width, region.height, self.spp, s.packets),
             starts=s.starts[cut],
             todo=s.todo[cut],
             next_todo=s.next_todo[cut],

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from rcp_server.engine.kernels.embree import EmbreexScene, Hits, Tracer, intersect_rays
+from rcp_server.engine.kernels.embree import EmbreexScene, Hits, Tracer, intersect_rays, packet_order
 from rcp_server.scene.meshes import primitive
 
 RNG = np.random.default_rng(11)
@@ -95,6 +95,24 @@ def test_packets_answer_as_single_rays(soup):
         shifted = np.full(n, -7, np.int32)
         intersect_rays(ours.embree, origins, directions, np.arange(3, n), shifted, True)
         np.testing.assert_array_equal(shifted[3:], singles[3:])
+
+
+@pytest.mark.parametrize(("width", "height", "spp"), [(7, 5, 1), (8, 4, 1), (5, 3, 2), (3, 3, 4), (4, 2, 3)])
+def test_packets_in_blocks_take_every_ray_of_a_tile_once_and_answer_as_rows(soup, width, height, spp):
+    order = packet_order(width, height, spp, np.full(width * height * spp + 5, -1, np.int64))
+    np.testing.assert_array_equal(np.sort(order), np.arange(width * height * spp))
+    if spp == 1 and width % 4 == 0:  # the first packet: the block at the top left, 4 x 2 pixels
+        np.testing.assert_array_equal(order[:8], [0, 1, 2, 3, width, width + 1, width + 2, width + 3])
+    # a grid of primary rays over the soup's edges and corners answers the same in either order
+    triangles, ours, _ = soup
+    n = 120 * 80
+    y, x = np.divmod(np.arange(n), 120)
+    directions = _unit(np.stack([(x - 60) / 60.0, (40 - y) / 60.0, -np.ones(n)], axis=1))
+    origins = np.zeros((n, 3), np.float32)
+    rows, blocks = np.full(n, -7, np.int32), np.full(n, -7, np.int32)
+    intersect_rays(ours.embree, origins, directions, np.arange(n), rows, True)
+    intersect_rays(ours.embree, origins, directions, packet_order(120, 80, 1, np.empty(n, np.int64)), blocks, True)
+    np.testing.assert_array_equal(blocks, rows)
 
 
 def test_only_the_listed_rays_are_written(soup):

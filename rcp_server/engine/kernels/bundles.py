@@ -230,6 +230,7 @@ class Scratch(NamedTuple):
     directions: np.ndarray  # (n*spp, 3) float32
     hits: Hits  # of n*spp rays
     every: np.ndarray  # (n*spp,) int64 0, 1, 2, ...
+    packets: np.ndarray  # (n*spp,) int64 the same rays in the order of Embree's packets (embree.packet_order)
     starts: np.ndarray  # (n*spp, 3) float32 where rays through cut-outs go on (one row when none can)
     todo: np.ndarray  # (n*spp,) int64 rays through cut-outs, two lists in turn (one entry when none can)
     next_todo: np.ndarray

@@ -85,7 +85,7 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
                 embree=trace.embree,
                 origins=scratch.origins,
                 directions=scratch.directions,
-                rays=traced,
+                rays=scratch.packets,
                 face=hits.face,
                 queue=scratch.queue,
             )
