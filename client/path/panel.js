@@ -54,6 +54,7 @@ class PathPanel {
     this.player = new Player($("play"), {
       cameras: () => this.cameras(),
       place: hooks.place,
+      keyed: hooks.keyed,
       loop: () => $("loop").checked,
       notice: hooks.notice,
     });
@@ -191,11 +192,11 @@ class PathPanel {
     return { fps: Number(this.$("fps").value) || 24, loop: this.$("loop").checked, keyframes };
   }
 
-  /** The server's cameras of the path's frames. */
+  /** The server's cameras of the path's frames, and the painting it keys for each over the film's. */
   async cameras() {
     const scene = this.hooks.scene();
     if (!scene) throw new Error("no scene yet");
-    return this.call("api/paths", "POST", { scene: scene.name, path: this.spec() });
+    return this.call("api/paths", "POST", { scene: scene.name, path: this.spec(), paint: this.hooks.request().paint });
   }
 
   play() {

@@ -1,19 +1,21 @@
 // @ts-check
 // Playback: the walk follows the server's camera of every frame (POST /api/paths: the spline is declared once,
-// in rcp_server/media/camerapath.py, so what plays here is what the video paints), at the path's frame rate.
+// in rcp_server/media/camerapath.py, so what plays here is what the video paints), at the path's frame rate,
+// each frame painted with the painting the path keys there (as scrubbing shows it, scrub.js).
 
 export class Player {
   /**
-   * `toggle` is the Play button. `hooks`: cameras() -> the server's answer for the path ({cameras, fps});
-   * place(camera) moves the walk; loop() -> whether the path loops; notice(text).
+   * `toggle` is the Play button. `hooks`: cameras() -> the server's answer for the path ({cameras, paints,
+   * fps}); place(camera) moves the walk; keyed(table) has it paint the path's keyed settings there (null:
+   * none); loop() -> whether the path loops; notice(text).
    * @param {HTMLElement} toggle
-   * @param {{cameras: () => Promise<{cameras: any[], fps: number}>, place: (camera: any) => void,
-   *   loop: () => boolean, notice: (text: string) => void}} hooks
+   * @param {{cameras: () => Promise<{cameras: any[], paints: any[], fps: number}>, place: (camera: any) => void,
+   *   keyed: (table: any) => void, loop: () => boolean, notice: (text: string) => void}} hooks
    */
   constructor(toggle, hooks) {
     this.toggle = toggle;
     this.hooks = hooks;
-    /** @type {{cameras: any[], fps: number, start: number, frame: number} | null} */
+    /** @type {{cameras: any[], paints: any[], fps: number, start: number, frame: number} | null} */
     this.playing = null;
     this.step = this.step.bind(this);
   }
@@ -23,7 +25,8 @@ export class Player {
     if (this.playing) return this.stop();
     try {
       const answer = await this.hooks.cameras();
-      this.playing = { cameras: answer.cameras, fps: answer.fps, start: performance.now(), frame: -1 };
+      const { cameras, paints, fps } = answer;
+      this.playing = { cameras, paints, fps, start: performance.now(), frame: -1 };
       this.toggle.textContent = "Stop";
       requestAnimationFrame(this.step);
     } catch (error) {
@@ -43,6 +46,7 @@ export class Player {
     if (frame !== playing.frame) {
       playing.frame = frame;
       this.hooks.place(playing.cameras[frame]);
+      this.hooks.keyed(playing.paints[frame] ?? null);
     }
     requestAnimationFrame(this.step);
   }

@@ -200,3 +200,26 @@ def test_scrubbing_paints_the_paths_keyed_painting_at_that_time(page, tmp_path):
         f" && rcp.overlay.frame.paint.mapping === {json.dumps(own.mapping)}",
         timeout=WAIT_MS,
     )
+
+
+def test_playback_paints_each_frame_with_the_paths_keyed_painting(page, tmp_path):
+    """Played back, a path that keys its painting paints each frame as the film does: the painting asked for
+    the frame being played is the film's painting of that frame."""
+    keyframes = [
+        {"t": 0, **SIDE, "paint": {"lambda_p": 2}},
+        {"t": 2, **AHEAD, "paint": {"lambda_p": 20}},
+    ]
+    file = tmp_path / "keyed.json"
+    file.write_text(json.dumps({"fps": 24, "loop": True, "keyframes": keyframes}))
+    page.locator("#path [data-path=file]").set_input_files(str(file))
+    page.wait_for_function("rcp.path.path.keyframes.length === 2", timeout=WAIT_MS)
+    scene = load_scene("sky")
+    path = parse_path(page.evaluate("rcp.path.spec()")).resolve(scene.camera).with_painting(scene.painting({}))
+    films = {shot.index: shot.looks[-1][0] for shot in path.frames()}
+    page.locator("#path [data-path=play]").click()
+    page.wait_for_function("rcp.path.player.playing?.frame > 12 && rcp.state.keyed !== null", timeout=WAIT_MS)
+    frame, sent = page.evaluate("[rcp.path.player.playing.frame, rcp.sent.filter((m) => m.type === 'paint').at(-1)]")
+    page.locator("#path [data-path=play]").click()  # stop
+    assert 2 < films[frame].lambda_p < 20
+    assert sent["lambda_p"] == pytest.approx(films[frame].lambda_p)
+    assert page.evaluate("rcp.state.paint") == {}  # the page's own settings stay its own
