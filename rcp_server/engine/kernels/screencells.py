@@ -386,6 +386,8 @@ def _fill(cells, live, records, plane, spread, grid, frame, row0, row1):
     errors = np.empty(len(faces), np.float32)
     nearest_at = np.empty(len(faces), np.float32)
     corners = np.empty((4, 2))
+    values = np.empty((4, 4))  # a face's edge functions and their sum at the cell's corners (_at_corners)
+    dets_c = np.empty(4)  # the covering face's sums there
     kept = 0
     for c in range(count):
         gy = c // columns
@@ -415,6 +417,9 @@ def _fill(cells, live, records, plane, spread, grid, frame, row0, row1):
                 if deepest < nearest:
                     nearest, covering = deepest, f
         covering_err = _error(spread, covering, ca, cb, half, widest) if covering >= 0 else 0.0
+        if covering >= 0:
+            for q in range(4):
+                dets_c[q] = _det(records, covering, corners[q, 0], corners[q, 1])
         reach = nearest * widest * 1.01  # no ray of the cell meets the covering face farther than this
         begin = kept
         for k in range(first[c], first[c + 1]):
@@ -422,17 +427,22 @@ def _fill(cells, live, records, plane, spread, grid, frame, row0, row1):
             if plane[f] * (1.0 - records[f, REL_T]) > reach and records[f, REL_T] < 1e-3:
                 continue  # hidden: Embree cannot place it nearer than its plane
             err = _error(spread, f, ca, cb, half, widest)
-            if _missed(records, f, corners, err):
+            _at_corners(records, f, corners, values)  # once: every test below reads them
+            if _missed(values, err):
                 continue  # no ray of the cell meets it: the kernel would pass it by on every one
-            if nearest < math.inf and _behind(records, f, corners, err, HIDDEN * nearest):
+            if nearest < math.inf and _behind(records, f, values, err, HIDDEN * nearest):
                 continue  # hidden: wherever Embree meets it in this cell, it is farther than the covering face
-            if f != covering and covering >= 0 and _behind_face(records, f, err, covering, covering_err, corners):
+            if (
+                f != covering
+                and covering >= 0
+                and _behind_face(records, f, err, values, covering, covering_err, dets_c)
+            ):
                 continue  # hidden ray by ray: on every ray of the cell Embree places it behind the covering face
             if kept - begin >= longest:
                 cover[c] = LONG_CELL
                 break
             # front to back by the nearest Embree can place it in the cell (insertion: a list is short)
-            near = _nearest(records, f, corners, err)
+            near = _nearest(records, f, values, err)
             at = kept
             while at > begin and nearest_at[at - 1] > near:
                 faces[at] = faces[at - 1]
@@ -543,16 +553,27 @@ def _det(records, f, a, b):
 
 
 @numba.njit(inline="always")
-def _nearest(records, f, corners, err):
-    """The nearest depth at which Embree can place face ``f`` on a ray of the cell of ``corners`` (its edge
-    functions' error ``err``), rounded down to float32; -infinity where it cannot be bounded (grazing
-    somewhere in the cell, its depth's sign uncertain)."""
-    sign = 0.0
-    low = math.inf
+def _at_corners(records, f, corners, values):
+    """Face ``f``'s three edge functions at the four ``corners`` of a cell and their sum term by term in record
+    order (:func:`_det`) into ``values`` (4, 4): computed once for all of a cell's tests of the face."""
     for q in range(4):
         a = corners[q, 0]
         b = corners[q, 1]
-        det = _det(records, f, a, b)
+        values[q, 0] = records[f, 0] * a + records[f, 1] * b + records[f, 2]
+        values[q, 1] = records[f, 3] * a + records[f, 4] * b + records[f, 5]
+        values[q, 2] = records[f, 6] * a + records[f, 7] * b + records[f, 8]
+        values[q, 3] = _det(records, f, a, b)
+
+
+@numba.njit(inline="always")
+def _nearest(records, f, values, err):
+    """The nearest depth at which Embree can place face ``f`` on a ray of the cell whose corners give it
+    ``values`` (:func:`_at_corners`; its edge functions' error ``err``), rounded down to float32; -infinity
+    where it cannot be bounded (grazing somewhere in the cell, its depth's sign uncertain)."""
+    sign = 0.0
+    low = math.inf
+    for q in range(4):
+        det = values[q, 3]
         s = 1.0 if det > 0.0 else -1.0
         if not abs(det) > 6.0 * err or (sign != 0.0 and s != sign):
             return -math.inf
@@ -567,16 +588,14 @@ def _nearest(records, f, corners, err):
 
 
 @numba.njit(inline="always")
-def _behind(records, f, corners, err, depth):
-    """Whether Embree, meeting face ``f`` anywhere in the cell of ``corners`` (its edge functions' error
-    ``err``), places it deeper than ``depth`` or behind the eye: its plane's depth over the cell (extreme at
-    the corners: its inverse is linear) with the error of t that the kernel allows."""
+def _behind(records, f, values, err, depth):
+    """Whether Embree, meeting face ``f`` anywhere in the cell whose corners give it ``values`` (its edge
+    functions' error ``err``), places it deeper than ``depth`` or behind the eye: its plane's depth over the
+    cell (extreme at the corners: its inverse is linear) with the error of t that the kernel allows."""
     sign = 0.0
     behind = False
     for q in range(4):
-        a = corners[q, 0]
-        b = corners[q, 1]
-        det = _det(records, f, a, b)
+        det = values[q, 3]
         s = 1.0 if det > 0.0 else -1.0
         if not abs(det) > 6.0 * err or (sign != 0.0 and s != sign):
             return False  # grazing somewhere in the cell
@@ -605,18 +624,14 @@ def _error(spread, f, ca, cb, half, widest):
 
 
 @numba.njit(inline="always")
-def _missed(records, f, corners, err):
-    """Whether ``visibility.classify`` finds face ``f`` certainly missed by every ray of the cell of ``corners``
-    (edge error ``err``): one edge function below ``-err`` and another above ``err`` all over the cell, which
-    holds where it holds at the four corners (they are linear)."""
+def _missed(values, err):
+    """Whether ``visibility.classify`` finds a face certainly missed by every ray of the cell whose corners give
+    it ``values`` (edge error ``err``): one edge function below ``-err`` and another above ``err`` all over the
+    cell, which holds where it holds at the four corners (they are linear)."""
     below0 = below1 = below2 = above0 = above1 = above2 = True  # scalars: an array a call costs an allocation
     bound = 1.000001 * err  # a margin for the rounding of u at a ray inside
     for q in range(4):
-        a = corners[q, 0]
-        b = corners[q, 1]
-        u0 = records[f, 0] * a + records[f, 1] * b + records[f, 2]
-        u1 = records[f, 3] * a + records[f, 4] * b + records[f, 5]
-        u2 = records[f, 6] * a + records[f, 7] * b + records[f, 8]
+        u0, u1, u2 = values[q, 0], values[q, 1], values[q, 2]
         below0 &= u0 < -bound
         below1 &= u1 < -bound
         below2 &= u2 < -bound
@@ -627,20 +642,18 @@ def _missed(records, f, corners, err):
 
 
 @numba.njit(inline="always")
-def _behind_face(records, f, err, c, err_c, corners):
-    """Whether, on every ray of the cell of ``corners``, the nearest Embree can place face ``f`` (edge error
-    ``err``) lies deeper than the farthest it can place face ``c`` (``err_c``), with the kernel's bound of the
-    error of t (``visibility.classify``'s). The ratio of the two depths is a ratio of linear functions over
-    the cell (``OFFSET / det`` each), so its least is at a corner, as is each bound's largest (``1 / |det|``
-    is convex where ``det`` keeps its sign)."""
+def _behind_face(records, f, err, values, c, err_c, dets_c):
+    """Whether, on every ray of the cell, the nearest Embree can place face ``f`` (edge error ``err``, its ``values``
+    at the cell's corners) lies deeper than the farthest it can place face ``c`` (``err_c``, its sums at the
+    corners ``dets_c``), with the kernel's bound of the error of t (``visibility.classify``'s). The ratio of the
+    two depths is a ratio of linear functions over the cell (``OFFSET / det`` each), so its least is at a
+    corner, as is each bound's largest (``1 / |det|`` is convex where ``det`` keeps its sign)."""
     sign_f = sign_c = 0.0
     ratio = math.inf
     rel_f = rel_c = 0.0
     for q in range(4):
-        a = corners[q, 0]
-        b = corners[q, 1]
-        det_f = _det(records, f, a, b)
-        det_c = _det(records, c, a, b)
+        det_f = values[q, 3]
+        det_c = dets_c[q]
         s_f = 1.0 if det_f > 0.0 else -1.0
         s_c = 1.0 if det_c > 0.0 else -1.0
         if not abs(det_f) > 6.0 * err or (sign_f != 0.0 and s_f != sign_f):
