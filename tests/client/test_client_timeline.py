@@ -153,6 +153,17 @@ def test_an_uploaded_models_animated_camera_becomes_the_path(page):
     assert keys(page) == []
 
 
+def keyed_path(page, tmp_path, keyframes: list[dict], loop: bool):
+    """Loads a path of ``keyframes`` into the page from its file; returns the film's frames of it (each with
+    its keyed painting, ``looks``), as ``rcp render --path`` would paint them."""
+    file = tmp_path / "keyed.json"
+    file.write_text(json.dumps({"fps": 24, "loop": loop, "keyframes": keyframes}))
+    page.locator("#path [data-path=file]").set_input_files(str(file))
+    page.wait_for_function(f"rcp.path.path.keyframes.length === {len(keyframes)}", timeout=WAIT_MS)
+    scene = load_scene("sky")
+    return parse_path(page.evaluate("rcp.path.spec()")).resolve(scene.camera).with_painting(scene.painting({})).frames()
+
+
 def test_scrubbing_paints_the_paths_keyed_painting_at_that_time(page, tmp_path):
     """A path that keys its painting, loaded from its file: the frame shown at a scrubbed time is painted with
     the film's painting of that frame (a setting between two keys on its curve; within a fade, the steps of the
@@ -162,13 +173,8 @@ def test_scrubbing_paints_the_paths_keyed_painting_at_that_time(page, tmp_path):
         {"t": 1, **AHEAD, "paint": {"lambda_p": 20, "noise": 0.5}},
         {"t": 2, **SIDE, "paint": {"style": "layered"}, "fade": 1},
     ]
-    file = tmp_path / "keyed.json"
-    file.write_text(json.dumps({"fps": 24, "loop": False, "keyframes": keyframes}))
-    page.locator("#path [data-path=file]").set_input_files(str(file))
-    page.wait_for_function("rcp.path.path.keyframes.length === 3", timeout=WAIT_MS)
+    films = {shot.index: shot for shot in keyed_path(page, tmp_path, keyframes, loop=False)}
     scene = load_scene("sky")
-    path = parse_path(page.evaluate("rcp.path.spec()")).resolve(scene.camera).with_painting(scene.painting({}))
-    films = {shot.index: shot for shot in path.frames()}
     scrub = page.locator("#path [data-path=scrub]")
     for t, frame in ((0.5, 12), (1.5, 36)):
         scrub.fill(str(t))
@@ -209,13 +215,7 @@ def test_playback_paints_each_frame_with_the_paths_keyed_painting(page, tmp_path
         {"t": 0, **SIDE, "paint": {"lambda_p": 2}},
         {"t": 2, **AHEAD, "paint": {"lambda_p": 20}},
     ]
-    file = tmp_path / "keyed.json"
-    file.write_text(json.dumps({"fps": 24, "loop": True, "keyframes": keyframes}))
-    page.locator("#path [data-path=file]").set_input_files(str(file))
-    page.wait_for_function("rcp.path.path.keyframes.length === 2", timeout=WAIT_MS)
-    scene = load_scene("sky")
-    path = parse_path(page.evaluate("rcp.path.spec()")).resolve(scene.camera).with_painting(scene.painting({}))
-    films = {shot.index: shot.looks[-1][0] for shot in path.frames()}
+    films = {shot.index: shot.looks[-1][0] for shot in keyed_path(page, tmp_path, keyframes, loop=True)}
     page.locator("#path [data-path=play]").click()
     page.wait_for_function("rcp.path.player.playing?.frame > 12 && rcp.state.keyed !== null", timeout=WAIT_MS)
     frame, sent = page.evaluate("[rcp.path.player.playing.frame, rcp.sent.filter((m) => m.type === 'paint').at(-1)]")
