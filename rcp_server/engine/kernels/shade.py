@@ -158,16 +158,22 @@ def _ink_at(ink, plane, side, ex, ey, ez, x, y, z):
 
 
 @numba.njit(inline="always")
-def _albedo(colors, uv, texture_id, texels, texture_offset, texture_width, texture_height, f, w0, w1, w2):
-    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2), its corner colors times its texture,
-    and the texture coordinates there: (r, g, b, u, v), for :func:`record_surfaces`. ``shade`` writes the
-    same lines out: through this helper (inlined all the same) it ran a fifth slower, through one taking the
-    bundle twice as slow (measured on 200k hits)."""
+def _corners(colors, uv, f, w0, w1, w2):
+    """Face ``f``'s corner colors and texture coordinates at barycentric weights (w0, w1, w2): (r, g, b, u, v)."""
     r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
     g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
     b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
     u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
     v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
+    return r, g, b, u, v
+
+
+@numba.njit(inline="always")
+def _albedo(colors, uv, texture_id, texels, texture_offset, texture_width, texture_height, f, w0, w1, w2):
+    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2), its corner colors times its texture,
+    and the texture coordinates there: (r, g, b, u, v), for :func:`record_surfaces`. ``shade`` runs the same two
+    steps (:func:`_corners`, then :func:`texel_color`) in passes of its own."""
+    r, g, b, u, v = _corners(colors, uv, f, w0, w1, w2)
     tid = texture_id[f]
     if tid >= 0:
         tr, tg, tb = texel_color(texels, texture_offset[tid], texture_width[tid], texture_height[tid], u, v)
@@ -210,6 +216,10 @@ def shade(
     A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading); one with
     an outline (``surfaces.material_outline``) is inked where ``ink`` (a bundles.Ink) has ink at the hit's
     pixel of the painting seen from the pixel's own eye, on the surface at that distance.
+
+    A block of pixels at a time, in passes of short loops (the sky, the surfaces, their textures, the means):
+    the CPU overlaps the iterations of a short loop, whose loads wait on the one before (the face, then its
+    corners, then the texels), where one long loop ran sample after sample.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
@@ -226,6 +236,9 @@ def shade(
     env_flat = environment.reshape(env_h * env_w, 3)
     inv_spp = 1.0 / spp
     panorama = env_w * env_h > 1
+    lx = light_dir[0]
+    ly = light_dir[1]
+    lz = light_dir[2]
     # each pixel's eye and f_ij, for depth: one for the whole image on a mono image plane
     _, _, _, _, _, _, fx, fy, fz = centre_frame(plane, 0, 0)
     ex = eye[0]
@@ -234,146 +247,196 @@ def shade(
     side = 0
     per_pixel = (need_depth or ink.any) and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
     block = 256  # pixels
-    sky = np.empty((block * spp, 2))  # panorama texel coordinates of one block's misses
+    # one block's samples: colour so far (r, g, b) and the light's factor on it; texture coordinates; normal
+    rgbk = np.empty((block * spp, 4))
+    coords = np.empty((block * spp, 2))
+    normal = np.empty((block * spp, 3)) if need_normal else np.empty((1, 3))
+    textured = np.empty(block * spp, np.int64)  # the samples on a textured face, and the face's texture
+    textures = np.empty(block * spp, np.int64)
+    special = np.empty(block * spp, np.int64)  # the samples on a material that glows or is inked
     for first in range(0, n_pix, block):
         last = min(first + block, n_pix)
         base = first * spp
-        # ---- where this block's misses look in the panorama: the trigonometry runs in a short loop of its
-        # own, whose iterations the CPU overlaps; inside the shading loop it cost three times as much ----
-        if panorama:
-            for s in range(base, last * spp):
-                if face[s] < 0:
-                    dx = directions[s, 0]
-                    dy = directions[s, 1]
-                    dz = directions[s, 2]
+        end = last * spp
+        # ---- misses: the environment, equirectangular (a NaN ray sees black) ----
+        for s in range(base, end):
+            if face[s] < 0:
+                q = s - base
+                dx = directions[s, 0]
+                dy = directions[s, 1]
+                dz = directions[s, 2]
+                rgbk[q, 3] = 1.0
+                if not (dx == dx and dy == dy and dz == dz):
+                    rgbk[q, 0] = rgbk[q, 1] = rgbk[q, 2] = 0.0
+                elif panorama:
                     lon = fast_atan2(dx, -dz)
                     lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
-                    sky[s - base, 0] = (lon / (2.0 * math.pi) + 0.5) * env_w
-                    sky[s - base, 1] = lat / math.pi * env_h
-        # scalars rather than small arrays throughout: they stay in registers
+                    r, g, b = _bilinear(
+                        env_flat, 0, env_w, env_h, (lon / (2.0 * math.pi) + 0.5) * env_w, lat / math.pi * env_h, False
+                    )
+                    rgbk[q, 0] = r
+                    rgbk[q, 1] = g
+                    rgbk[q, 2] = b
+                else:
+                    rgbk[q, 0] = env_flat[0, 0]
+                    rgbk[q, 1] = env_flat[0, 1]
+                    rgbk[q, 2] = env_flat[0, 2]
+        # ---- hits: the corners' colour and texture coordinates, the light on the normal ----
+        n_textured = 0
+        n_special = 0
+        for s in range(base, end):
+            f = face[s]
+            if f < 0:
+                continue
+            q = s - base
+            w1 = b1[s]
+            w2 = b2[s]
+            w0 = 1.0 - w1 - w2
+            r, g, b, u, v = _corners(colors, uv, f, w0, w1, w2)
+            rgbk[q, 0] = r
+            rgbk[q, 1] = g
+            rgbk[q, 2] = b
+            coords[q, 0] = u
+            coords[q, 1] = v
+            tid = texture_id[f]
+            if tid >= 0:
+                textured[n_textured] = q
+                textures[n_textured] = tid
+                n_textured += 1
+            nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
+            ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
+            nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
+            inv = _inverse_length(nx * nx + ny * ny + nz * nz)
+            if inv > 0.0:
+                nx *= inv
+                ny *= inv
+                nz *= inv
+            if need_normal:
+                normal[q, 0] = nx
+                normal[q, 1] = ny
+                normal[q, 2] = nz
+            mat = face_material[f]
+            k = 1.0  # unlit: the albedo as it is (a product by 1 changes no bit)
+            if lit and not material_unlit[mat]:
+                # two-sided: light the side the ray sees
+                facing = nx * directions[s, 0] + ny * directions[s, 1] + nz * directions[s, 2] > 0.0
+                lambert = max((nx * lx + ny * ly + nz * lz) * (1.0 if facing else -1.0), 0.0)
+                if mat > 0 and material_bands[mat] > 0 and lambert > 0.0:
+                    # toon: the lit side in flat bands, the last one full light
+                    bands = material_bands[mat]
+                    lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
+                k = ambient + (1.0 - ambient) * lambert
+            rgbk[q, 3] = k
+            if mat > 0:
+                special[n_special] = s
+                n_special += 1
+        # ---- the textures, times the corners' colour ----
+        for i in range(n_textured):
+            q = textured[i]
+            tid = textures[i]
+            tr, tg, tb = texel_color(
+                texels, texture_offset[tid], texture_width[tid], texture_height[tid], coords[q, 0], coords[q, 1]
+            )
+            rgbk[q, 0] *= tr
+            rgbk[q, 1] *= tg
+            rgbk[q, 2] *= tb
+        # ---- emission (glTF's emissiveFactor, times its texture): added after the light; then the ink ----
+        for i in range(n_special):
+            s = special[i]
+            q = s - base
+            mat = face_material[face[s]]
+            k = rgbk[q, 3]
+            r = rgbk[q, 0] * k
+            g = rgbk[q, 1] * k
+            b = rgbk[q, 2] * k
+            er = material_emission[mat, 0]
+            eg = material_emission[mat, 1]
+            eb = material_emission[mat, 2]
+            etid = material_emission_texture[mat]
+            if etid >= 0:
+                tw = texture_width[etid]
+                th = texture_height[etid]
+                tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, coords[q, 0], coords[q, 1])
+                er *= tr
+                eg *= tg
+                eb *= tb
+            r += er
+            g += eg
+            b += eb
+            if ink.any and material_outline[mat] > 0.0:
+                if per_pixel:
+                    col, row = tile_pixel(plane, pixels[s // spp])
+                    side, col, row = locate(plane, col, row)
+                    rx, ry, rz, _, _, _, _, _, _ = centre_frame(plane, col, row)
+                    ex = eye[0] + side * plane.half_ipd * rx
+                    ey = eye[1] + side * plane.half_ipd * ry
+                    ez = eye[2] + side * plane.half_ipd * rz
+                ts = t[s]
+                hx = origins[s, 0] + ts * directions[s, 0]
+                hy = origins[s, 1] + ts * directions[s, 1]
+                hz = origins[s, 2] + ts * directions[s, 2]
+                inked = 1.0 - material_outline[mat] * _ink_at(ink, plane, side, ex, ey, ez, hx, hy, hz)
+                r *= inked
+                g *= inked
+                b *= inked
+            rgbk[q, 0] = r
+            rgbk[q, 1] = g
+            rgbk[q, 2] = b
+            rgbk[q, 3] = 1.0
+        # ---- each pixel's mean ----
         for m in range(first, last):
             pix = pixels[m]
             if per_pixel:
-                i, j = tile_pixel(plane, pix)
-                side, i, j = locate(plane, i, j)
-                rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, i, j)
+                col, row = tile_pixel(plane, pix)
+                side, col, row = locate(plane, col, row)
+                rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, col, row)
                 ex = eye[0] + side * plane.half_ipd * rx
                 ey = eye[1] + side * plane.half_ipd * ry
                 ez = eye[2] + side * plane.half_ipd * rz
             acc_r = acc_g = acc_b = 0.0
-            acc_nx = acc_ny = acc_nz = 0.0
-            acc_dx = acc_dy = acc_dz = 0.0
-            acc_z = 0.0
             for s in range(m * spp, (m + 1) * spp):
-                f = face[s]
-                dx = directions[s, 0]
-                dy = directions[s, 1]
-                dz = directions[s, 2]
-                finite = dx == dx and dy == dy and dz == dz  # a NaN ray misses and sees black
-                if f >= 0:
-                    # ---- surface: albedo from corner colors (times texture), then light (as _albedo) ----
-                    w1 = b1[s]
-                    w2 = b2[s]
-                    w0 = 1.0 - w1 - w2
-                    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
-                    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
-                    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
-                    tid = texture_id[f]
-                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
-                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
-                    if tid >= 0:
-                        tw = texture_width[tid]
-                        th = texture_height[tid]
-                        tr, tg, tb = texel_color(texels, texture_offset[tid], tw, th, u, v)
-                        r *= tr
-                        g *= tg
-                        b *= tb
-                    nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
-                    ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
-                    nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
-                    inv = _inverse_length(nx * nx + ny * ny + nz * nz)
-                    if inv > 0.0:
-                        nx *= inv
-                        ny *= inv
-                        nz *= inv
-                    mat = face_material[f]
-                    if lit and not material_unlit[mat]:
-                        # two-sided: light the side the ray sees
-                        facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-                        lambert = max(-facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2]), 0.0)
-                        if mat > 0 and material_bands[mat] > 0 and lambert > 0.0:
-                            # toon: the lit side in flat bands, the last one full light
-                            bands = material_bands[mat]
-                            lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
-                        k = ambient + (1.0 - ambient) * lambert
-                        r *= k
-                        g *= k
-                        b *= k
-                    # ---- emission (glTF's emissiveFactor, times its texture): added after the light ----
-                    if mat > 0:
-                        er = material_emission[mat, 0]
-                        eg = material_emission[mat, 1]
-                        eb = material_emission[mat, 2]
-                        etid = material_emission_texture[mat]
-                        if etid >= 0:
-                            tw = texture_width[etid]
-                            th = texture_height[etid]
-                            tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, u, v)
-                            er *= tr
-                            eg *= tg
-                            eb *= tb
-                        r += er
-                        g += eg
-                        b += eb
-                        if ink.any and material_outline[mat] > 0.0:
-                            ts = t[s]
-                            hx = origins[s, 0] + ts * dx
-                            hy = origins[s, 1] + ts * dy
-                            hz = origins[s, 2] + ts * dz
-                            inked = 1.0 - material_outline[mat] * _ink_at(ink, plane, side, ex, ey, ez, hx, hy, hz)
-                            r *= inked
-                            g *= inked
-                            b *= inked
-                    if need_depth:
-                        ts = t[s]
-                        acc_z += (
-                            (origins[s, 0] + ts * dx - ex) * fx
-                            + (origins[s, 1] + ts * dy - ey) * fy
-                            + (origins[s, 2] + ts * dz - ez) * fz
-                        )
-                    if need_normal:
-                        acc_nx += nx
-                        acc_ny += ny
-                        acc_nz += nz
-                else:
-                    # ---- miss: the environment, equirectangular ----
-                    if not finite:
-                        r = g = b = 0.0
-                    elif env_w * env_h == 1:
-                        r = env_flat[0, 0]
-                        g = env_flat[0, 1]
-                        b = env_flat[0, 2]
-                    else:
-                        r, g, b = _bilinear(env_flat, 0, env_w, env_h, sky[s - base, 0], sky[s - base, 1], False)
-                    if need_depth:
-                        acc_z += z_max
-                acc_r += min(max(r, 0.0), 1.0)
-                acc_g += min(max(g, 0.0), 1.0)
-                acc_b += min(max(b, 0.0), 1.0)
-                if need_direction and finite:
-                    acc_dx += dx
-                    acc_dy += dy
-                    acc_dz += dz
+                q = s - base
+                k = rgbk[q, 3]
+                acc_r += min(max(rgbk[q, 0] * k, 0.0), 1.0)
+                acc_g += min(max(rgbk[q, 1] * k, 0.0), 1.0)
+                acc_b += min(max(rgbk[q, 2] * k, 0.0), 1.0)
             out_color[pix, 0] = acc_r * inv_spp
             out_color[pix, 1] = acc_g * inv_spp
             out_color[pix, 2] = acc_b * inv_spp
             if need_depth:
+                acc_z = 0.0
+                for s in range(m * spp, (m + 1) * spp):
+                    if face[s] < 0:
+                        acc_z += z_max
+                    else:
+                        ts = t[s]
+                        acc_z += (
+                            (origins[s, 0] + ts * directions[s, 0] - ex) * fx
+                            + (origins[s, 1] + ts * directions[s, 1] - ey) * fy
+                            + (origins[s, 2] + ts * directions[s, 2] - ez) * fz
+                        )
                 out_depth[pix] = acc_z * inv_spp
             if need_normal:
+                acc_nx = acc_ny = acc_nz = 0.0
+                for s in range(m * spp, (m + 1) * spp):
+                    if face[s] >= 0:
+                        q = s - base
+                        acc_nx += normal[q, 0]
+                        acc_ny += normal[q, 1]
+                        acc_nz += normal[q, 2]
                 out_normal[pix, 0] = acc_nx * inv_spp
                 out_normal[pix, 1] = acc_ny * inv_spp
                 out_normal[pix, 2] = acc_nz * inv_spp
             if need_direction:
+                acc_dx = acc_dy = acc_dz = 0.0
+                for s in range(m * spp, (m + 1) * spp):
+                    dx = directions[s, 0]
+                    dy = directions[s, 1]
+                    dz = directions[s, 2]
+                    if dx == dx and dy == dy and dz == dz:
+                        acc_dx += dx
+                        acc_dy += dy
+                        acc_dz += dz
                 dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
                 inv = 1.0 / dlen if dlen > 0.0 else 0.0
                 out_direction[pix, 0] = acc_dx * inv
