@@ -11,6 +11,7 @@ import numba
 import numpy as np
 
 from .jit import jit
+from .prefetch import prefetch
 from .projection import (
     EQUIRECT,
     SIDE_BY_SIDE,
@@ -308,7 +309,12 @@ def shade(
         # ---- misses: the environment, equirectangular (a NaN ray sees black) ----
         n_sky = 0
         for s in range(base, end):
-            if face[s] < 0:
+            f = face[s]
+            if f >= 0:  # the hits' corners, read two passes on
+                prefetch(colors, 9 * f)
+                prefetch(uv, 6 * f)
+                prefetch(normals, 9 * f)
+            else:
                 q = s - base
                 dx = directions[s, 0]
                 dy = directions[s, 1]
@@ -420,6 +426,8 @@ def shade(
             k00, k01, k10, k11, tx, ty = _texel_site(
                 texture_offset[tid], texture_width[tid], texture_height[tid], coords[q, 0], coords[q, 1]
             )
+            prefetch(texels, 3 * k00)  # the texels' two rows, read in the next loop
+            prefetch(texels, 3 * k10)
             sites[i, 0] = k00
             sites[i, 1] = k01
             sites[i, 2] = k10
