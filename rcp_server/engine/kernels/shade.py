@@ -43,16 +43,16 @@ def _wrap(k, n):
     return k if 0 <= k < n else k % n
 
 
-@numba.njit(inline="always")  # two call sites in shade; an out-of-line call passes the array by value
-def _bilinear(texels, offset, width, height, x, y, wrap_y):
-    """Bilinear lookup at continuous texel coordinates (x, y), as an (r, g, b) tuple: x wraps; y wraps for
-    a tiling texture and clamps for a panorama (whose top and bottom rows are the poles)."""
+@numba.njit(inline="always")
+def _bilinear_site(offset, width, height, x, y, wrap_y):
+    """Where a bilinear lookup at continuous texel coordinates (x, y) reads, in an image whose first texel is
+    ``offset``: its four nearest texels (top left, top right, bottom left, bottom right) and the weights of the
+    right and bottom ones. x wraps; y wraps for a tiling texture and clamps for a panorama (whose top and bottom
+    rows are the poles)."""
     x -= 0.5
     y -= 0.5
     fx0 = math.floor(x)
     fy0 = math.floor(y)
-    fx = x - fx0
-    fy = y - fy0
     c0 = _wrap(int(fx0), width)
     c1 = c0 + 1 if c0 + 1 < width else 0
     if wrap_y:
@@ -63,14 +63,21 @@ def _bilinear(texels, offset, width, height, x, y, wrap_y):
         r1 = min(max(int(fy0) + 1, 0), height - 1)
     a = offset + r0 * width
     b = offset + r1 * width
+    return a + c0, a + c1, b + c0, b + c1, x - fx0, y - fy0
+
+
+@numba.njit(inline="always")
+def _bilinear_mix(texels, k00, k01, k10, k11, fx, fy):
+    """The bilinear blend of texels k00, k01, k10, k11 (:func:`_bilinear_site`) of (T, 3) float ``texels``, as
+    an (r, g, b) tuple."""
     w00 = (1.0 - fx) * (1.0 - fy)
     w01 = fx * (1.0 - fy)
     w10 = (1.0 - fx) * fy
     w11 = fx * fy
     return (
-        w00 * texels[a + c0, 0] + w01 * texels[a + c1, 0] + w10 * texels[b + c0, 0] + w11 * texels[b + c1, 0],
-        w00 * texels[a + c0, 1] + w01 * texels[a + c1, 1] + w10 * texels[b + c0, 1] + w11 * texels[b + c1, 1],
-        w00 * texels[a + c0, 2] + w01 * texels[a + c1, 2] + w10 * texels[b + c0, 2] + w11 * texels[b + c1, 2],
+        w00 * texels[k00, 0] + w01 * texels[k01, 0] + w10 * texels[k10, 0] + w11 * texels[k11, 0],
+        w00 * texels[k00, 1] + w01 * texels[k01, 1] + w10 * texels[k10, 1] + w11 * texels[k11, 1],
+        w00 * texels[k00, 2] + w01 * texels[k01, 2] + w10 * texels[k10, 2] + w11 * texels[k11, 2],
     )
 
 
@@ -97,19 +104,8 @@ def _encode(linear):
 
 @numba.njit(inline="always")
 def _texel_site(offset, width, height, u, v):
-    """Where a texture's bilinear lookup at (u, v) (both wrap) reads: its four nearest texels (top left, top
-    right, bottom left, bottom right) and the weights of the right and bottom ones along x and y."""
-    x = u * width - 0.5
-    y = (1.0 - v) * height - 0.5
-    fx0 = math.floor(x)
-    fy0 = math.floor(y)
-    c0 = _wrap(int(fx0), width)
-    c1 = c0 + 1 if c0 + 1 < width else 0
-    r0 = _wrap(int(fy0), height)
-    r1 = r0 + 1 if r0 + 1 < height else 0
-    a = offset + r0 * width
-    b = offset + r1 * width
-    return a + c0, a + c1, b + c0, b + c1, x - fx0, y - fy0
+    """Where a texture's bilinear lookup at (u, v) (both wrap) reads (:func:`_bilinear_site`)."""
+    return _bilinear_site(offset, width, height, u * width, (1.0 - v) * height, True)
 
 
 @numba.njit(inline="always")
@@ -298,7 +294,8 @@ def shade(
     hit_k = np.empty(size)
     textured = np.empty(size, np.int64)  # the samples on a textured face, and the face's texture
     textures = np.empty(size, np.int64)
-    sites = np.empty((size, 4), np.int64)  # the textured samples' texels and weights (_texel_site)
+    sites = np.empty((size, 4), np.int64)  # the texels a lookup reads and their weights (_bilinear_site), in turn
+    # the sky's and the textures'
     weights = np.empty((size, 2))
     special = np.empty(size, np.int64)  # the hits (their index among hits) on a material beyond plain
     normal = np.empty((size, 3)) if need_normal else np.empty((1, 3))  # each hit's unit normal, by sample
@@ -340,9 +337,21 @@ def shade(
             lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
             sky_x[i] = (lon / (2.0 * math.pi) + 0.5) * env_w
             sky_y[i] = lat / math.pi * env_h
+        for i in range(n_sky):  # where each reads: its texels asked for, read in the next loop
+            k00, k01, k10, k11, tx, ty = _bilinear_site(0, env_w, env_h, sky_x[i], sky_y[i], False)
+            prefetch(env_flat, 3 * k00)
+            prefetch(env_flat, 3 * k10)
+            sites[i, 0] = k00
+            sites[i, 1] = k01
+            sites[i, 2] = k10
+            sites[i, 3] = k11
+            weights[i, 0] = tx
+            weights[i, 1] = ty
         for i in range(n_sky):
             q = sky[i]
-            r, g, b = _bilinear(env_flat, 0, env_w, env_h, sky_x[i], sky_y[i], False)
+            r, g, b = _bilinear_mix(
+                env_flat, sites[i, 0], sites[i, 1], sites[i, 2], sites[i, 3], weights[i, 0], weights[i, 1]
+            )
             rgbk[q, 0] = r
             rgbk[q, 1] = g
             rgbk[q, 2] = b
