@@ -240,7 +240,8 @@ def shade(
     materials, the means), each a short loop: the CPU overlaps the iterations of a short loop, whose loads wait
     on one another (the face, then its corners, then the texels), where one long loop ran sample after sample;
     and the arithmetic of the sky and of the light runs on contiguous columns without a branch, which the
-    compiler vectorizes (the same operations, so the same bits).
+    compiler vectorizes (the same operations, so the same bits). The scattered reads (a hit's corners, a lookup's
+    texels) are asked for a loop before the one that reads them (``prefetch``): then many wait on memory at once.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
@@ -294,8 +295,8 @@ def shade(
     hit_k = np.empty(size)
     textured = np.empty(size, np.int64)  # the samples on a textured face, and the face's texture
     textures = np.empty(size, np.int64)
-    sites = np.empty((size, 4), np.int64)  # the texels a lookup reads and their weights (_bilinear_site), in turn
-    # the sky's and the textures'
+    # the texels each lookup reads and their weights (_bilinear_site): the sky's, then the textures'
+    sites = np.empty((size, 4), np.int64)
     weights = np.empty((size, 2))
     special = np.empty(size, np.int64)  # the hits (their index among hits) on a material beyond plain
     normal = np.empty((size, 3)) if need_normal else np.empty((1, 3))  # each hit's unit normal, by sample
