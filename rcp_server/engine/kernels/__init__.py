@@ -9,6 +9,7 @@ image-space method's lookup (``look_up``); ``visibility.py``: the faces of rays 
 the screen cells of ``screencells.py`` where they prove Embree's answer (``find_faces``); ``embree.py``: the
 binding to Embree's C API that the others call (``intersect_rays``). Each releases the GIL, so tiles run on
 threads side by side, and each has a plain numpy reference in ``tests/engine`` that it is checked against.
+``prefetch.py`` is a helper of theirs: a hint that brings a cache line in before a later loop reads it.
 
 Call them by keyword, with the bundles of ``bundles.py``: two arrays of the same type passed in each
 other's place must be an error, not a wrong image.

@@ -11,6 +11,7 @@ import numba
 import numpy as np
 
 from .jit import jit
+from .prefetch import prefetch
 from .projection import (
     EQUIRECT,
     SIDE_BY_SIDE,
@@ -42,16 +43,16 @@ def _wrap(k, n):
     return k if 0 <= k < n else k % n
 
 
-@numba.njit(inline="always")  # two call sites in shade; an out-of-line call passes the array by value
-def _bilinear(texels, offset, width, height, x, y, wrap_y):
-    """Bilinear lookup at continuous texel coordinates (x, y), as an (r, g, b) tuple: x wraps; y wraps for
-    a tiling texture and clamps for a panorama (whose top and bottom rows are the poles)."""
+@numba.njit(inline="always")
+def _bilinear_site(offset, width, height, x, y, wrap_y):
+    """Where a bilinear lookup at continuous texel coordinates (x, y) reads, in an image whose first texel is
+    ``offset``: its four nearest texels (top left, top right, bottom left, bottom right) and the weights of the
+    right and bottom ones. x wraps; y wraps for a tiling texture and clamps for a panorama (whose top and bottom
+    rows are the poles)."""
     x -= 0.5
     y -= 0.5
     fx0 = math.floor(x)
     fy0 = math.floor(y)
-    fx = x - fx0
-    fy = y - fy0
     c0 = _wrap(int(fx0), width)
     c1 = c0 + 1 if c0 + 1 < width else 0
     if wrap_y:
@@ -62,14 +63,21 @@ def _bilinear(texels, offset, width, height, x, y, wrap_y):
         r1 = min(max(int(fy0) + 1, 0), height - 1)
     a = offset + r0 * width
     b = offset + r1 * width
+    return a + c0, a + c1, b + c0, b + c1, x - fx0, y - fy0
+
+
+@numba.njit(inline="always")
+def _bilinear_mix(texels, k00, k01, k10, k11, fx, fy):
+    """The bilinear blend of texels k00, k01, k10, k11 (:func:`_bilinear_site`) of (T, 3) float ``texels``, as
+    an (r, g, b) tuple."""
     w00 = (1.0 - fx) * (1.0 - fy)
     w01 = fx * (1.0 - fy)
     w10 = (1.0 - fx) * fy
     w11 = fx * fy
     return (
-        w00 * texels[a + c0, 0] + w01 * texels[a + c1, 0] + w10 * texels[b + c0, 0] + w11 * texels[b + c1, 0],
-        w00 * texels[a + c0, 1] + w01 * texels[a + c1, 1] + w10 * texels[b + c0, 1] + w11 * texels[b + c1, 1],
-        w00 * texels[a + c0, 2] + w01 * texels[a + c1, 2] + w10 * texels[b + c0, 2] + w11 * texels[b + c1, 2],
+        w00 * texels[k00, 0] + w01 * texels[k01, 0] + w10 * texels[k10, 0] + w11 * texels[k11, 0],
+        w00 * texels[k00, 1] + w01 * texels[k01, 1] + w10 * texels[k10, 1] + w11 * texels[k11, 1],
+        w00 * texels[k00, 2] + w01 * texels[k01, 2] + w10 * texels[k10, 2] + w11 * texels[k11, 2],
     )
 
 
@@ -95,45 +103,48 @@ def _encode(linear):
 
 
 @numba.njit(inline="always")
-def texel_color(texels, offset, width, height, u, v):
-    """A texture's display color at (u, v) (both wrap), an (r, g, b) tuple in [0, 1]: bilinear between its
-    four nearest 8-bit texels, filtered in linear light (a blend of display values darkens an edge
-    between light and dark texels) and encoded back. texels : (T, 3) uint8 RGB, every texture packed."""
-    x = u * width - 0.5
-    y = (1.0 - v) * height - 0.5
-    fx0 = math.floor(x)
-    fy0 = math.floor(y)
-    fx = x - fx0
-    fy = y - fy0
-    c0 = _wrap(int(fx0), width)
-    c1 = c0 + 1 if c0 + 1 < width else 0
-    r0 = _wrap(int(fy0), height)
-    r1 = r0 + 1 if r0 + 1 < height else 0
-    a = offset + r0 * width
-    b = offset + r1 * width
+def _texel_site(offset, width, height, u, v):
+    """Where a texture's bilinear lookup at (u, v) (both wrap) reads (:func:`_bilinear_site`)."""
+    return _bilinear_site(offset, width, height, u * width, (1.0 - v) * height, True)
+
+
+@numba.njit(inline="always")
+def _texel_mix(texels, k00, k01, k10, k11, fx, fy):
+    """The display color of the bilinear blend of texels k00, k01, k10, k11 (``_texel_site``), an (r, g, b)
+    tuple in [0, 1], filtered in linear light (a blend of display values darkens an edge between light and dark
+    texels) and encoded back."""
     w00 = (1.0 - fx) * (1.0 - fy)
     w01 = fx * (1.0 - fy)
     w10 = (1.0 - fx) * fy
     w11 = fx * fy
     out_r = (
-        w00 * _DECODE[texels[a + c0, 0]]
-        + w01 * _DECODE[texels[a + c1, 0]]
-        + w10 * _DECODE[texels[b + c0, 0]]
-        + w11 * _DECODE[texels[b + c1, 0]]
+        w00 * _DECODE[texels[k00, 0]]
+        + w01 * _DECODE[texels[k01, 0]]
+        + w10 * _DECODE[texels[k10, 0]]
+        + w11 * _DECODE[texels[k11, 0]]
     )
     out_g = (
-        w00 * _DECODE[texels[a + c0, 1]]
-        + w01 * _DECODE[texels[a + c1, 1]]
-        + w10 * _DECODE[texels[b + c0, 1]]
-        + w11 * _DECODE[texels[b + c1, 1]]
+        w00 * _DECODE[texels[k00, 1]]
+        + w01 * _DECODE[texels[k01, 1]]
+        + w10 * _DECODE[texels[k10, 1]]
+        + w11 * _DECODE[texels[k11, 1]]
     )
     out_b = (
-        w00 * _DECODE[texels[a + c0, 2]]
-        + w01 * _DECODE[texels[a + c1, 2]]
-        + w10 * _DECODE[texels[b + c0, 2]]
-        + w11 * _DECODE[texels[b + c1, 2]]
+        w00 * _DECODE[texels[k00, 2]]
+        + w01 * _DECODE[texels[k01, 2]]
+        + w10 * _DECODE[texels[k10, 2]]
+        + w11 * _DECODE[texels[k11, 2]]
     )
     return _encode(out_r), _encode(out_g), _encode(out_b)
+
+
+@numba.njit(inline="always")
+def texel_color(texels, offset, width, height, u, v):
+    """A texture's display color at (u, v) (both wrap), an (r, g, b) tuple in [0, 1]: bilinear between its
+    four nearest 8-bit texels in linear light (:func:`_texel_site`, :func:`_texel_mix`).
+    texels : (T, 3) uint8 RGB, every texture packed."""
+    k00, k01, k10, k11, fx, fy = _texel_site(offset, width, height, u, v)
+    return _texel_mix(texels, k00, k01, k10, k11, fx, fy)
 
 
 @numba.njit(inline="always")
@@ -158,16 +169,30 @@ def _ink_at(ink, plane, side, ex, ey, ez, x, y, z):
 
 
 @numba.njit(inline="always")
-def _albedo(colors, uv, texture_id, texels, texture_offset, texture_width, texture_height, f, w0, w1, w2):
-    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2), its corner colors times its texture,
-    and the texture coordinates there: (r, g, b, u, v), for :func:`record_surfaces`. ``shade`` writes the
-    same lines out: through this helper (inlined all the same) it ran a fifth slower, through one taking the
-    bundle twice as slow (measured on 200k hits)."""
+def _lambert(nx, ny, nz, dx, dy, dz, lx, ly, lz):
+    """The light on unit normal n seen along ray direction d from light travelling along l: two-sided, on the
+    side the ray sees."""
+    facing = nx * dx + ny * dy + nz * dz > 0.0
+    return max((nx * lx + ny * ly + nz * lz) * (1.0 if facing else -1.0), 0.0)
+
+
+@numba.njit(inline="always")
+def _corners(colors, uv, f, w0, w1, w2):
+    """Face ``f``'s corner colors and texture coordinates at barycentric weights (w0, w1, w2): (r, g, b, u, v)."""
     r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
     g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
     b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
     u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
     v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
+    return r, g, b, u, v
+
+
+@numba.njit(inline="always")
+def _albedo(colors, uv, texture_id, texels, texture_offset, texture_width, texture_height, f, w0, w1, w2):
+    """The unlit colour of face ``f`` at barycentric weights (w0, w1, w2), its corner colors times its texture,
+    and the texture coordinates there: (r, g, b, u, v), for :func:`record_surfaces`. ``shade`` runs the same two
+    steps (:func:`_corners`, then :func:`texel_color`) in passes of its own."""
+    r, g, b, u, v = _corners(colors, uv, f, w0, w1, w2)
     tid = texture_id[f]
     if tid >= 0:
         tr, tg, tb = texel_color(texels, texture_offset[tid], texture_width[tid], texture_height[tid], u, v)
@@ -210,6 +235,13 @@ def shade(
     A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading); one with
     an outline (``surfaces.material_outline``) is inked where ``ink`` (a bundles.Ink) has ink at the hit's
     pixel of the painting seen from the pixel's own eye, on the surface at that distance.
+
+    A block of pixels at a time, in passes (the sky, the surfaces, their light, their textures, the rare
+    materials, the means), each a short loop: the CPU overlaps the iterations of a short loop, whose loads wait
+    on one another (the face, then its corners, then the texels), where one long loop ran sample after sample;
+    and the arithmetic of the sky and of the light runs on contiguous columns without a branch, which the
+    compiler vectorizes (the same operations, so the same bits). The scattered reads (a hit's corners, a lookup's
+    texels) are asked for a loop before the one that reads them (``prefetch``): then many wait on memory at once.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
@@ -226,6 +258,9 @@ def shade(
     env_flat = environment.reshape(env_h * env_w, 3)
     inv_spp = 1.0 / spp
     panorama = env_w * env_h > 1
+    lx = light_dir[0]
+    ly = light_dir[1]
+    lz = light_dir[2]
     # each pixel's eye and f_ij, for depth: one for the whole image on a mono image plane
     _, _, _, _, _, _, fx, fy, fz = centre_frame(plane, 0, 0)
     ex = eye[0]
@@ -234,146 +269,295 @@ def shade(
     side = 0
     per_pixel = (need_depth or ink.any) and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
     block = 256  # pixels
-    sky = np.empty((block * spp, 2))  # panorama texel coordinates of one block's misses
+    size = block * spp
+    # one block's samples, by sample: colour so far (r, g, b) and the light's factor on it; texture coordinates
+    rgbk = np.empty((size, 4))
+    coords = np.empty((size, 2))
+    # the misses that look into the panorama: which sample, their direction, where they look
+    sky = np.empty(size, np.int64)
+    sky_dx = np.empty(size, np.float32)
+    sky_dy = np.empty(size, np.float32)
+    sky_dz = np.empty(size, np.float32)
+    sky_x = np.empty(size)
+    sky_y = np.empty(size)
+    # the hits: which sample, face, barycentric weights, ray direction, normal, the light's factor
+    hit = np.empty(size, np.int64)
+    hit_face = np.empty(size, np.int64)
+    hit_w0 = np.empty(size)
+    hit_w1 = np.empty(size, np.float32)
+    hit_w2 = np.empty(size, np.float32)
+    hit_dx = np.empty(size, np.float32)
+    hit_dy = np.empty(size, np.float32)
+    hit_dz = np.empty(size, np.float32)
+    hit_nx = np.empty(size)
+    hit_ny = np.empty(size)
+    hit_nz = np.empty(size)
+    hit_k = np.empty(size)
+    textured = np.empty(size, np.int64)  # the samples on a textured face, and the face's texture
+    textures = np.empty(size, np.int64)
+    # the texels each lookup reads and their weights (_bilinear_site): the sky's, then the textures'
+    sites = np.empty((size, 4), np.int64)
+    weights = np.empty((size, 2))
+    special = np.empty(size, np.int64)  # the hits (their index among hits) on a material beyond plain
+    normal = np.empty((size, 3)) if need_normal else np.empty((1, 3))  # each hit's unit normal, by sample
     for first in range(0, n_pix, block):
         last = min(first + block, n_pix)
         base = first * spp
-        # ---- where this block's misses look in the panorama: the trigonometry runs in a short loop of its
-        # own, whose iterations the CPU overlaps; inside the shading loop it cost three times as much ----
-        if panorama:
-            for s in range(base, last * spp):
-                if face[s] < 0:
-                    dx = directions[s, 0]
-                    dy = directions[s, 1]
-                    dz = directions[s, 2]
-                    lon = fast_atan2(dx, -dz)
-                    lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
-                    sky[s - base, 0] = (lon / (2.0 * math.pi) + 0.5) * env_w
-                    sky[s - base, 1] = lat / math.pi * env_h
-        # scalars rather than small arrays throughout: they stay in registers
-        for m in range(first, last):
-            pix = pixels[m]
-            if per_pixel:
-                i, j = tile_pixel(plane, pix)
-                side, i, j = locate(plane, i, j)
-                rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, i, j)
-                ex = eye[0] + side * plane.half_ipd * rx
-                ey = eye[1] + side * plane.half_ipd * ry
-                ez = eye[2] + side * plane.half_ipd * rz
-            acc_r = acc_g = acc_b = 0.0
-            acc_nx = acc_ny = acc_nz = 0.0
-            acc_dx = acc_dy = acc_dz = 0.0
-            acc_z = 0.0
-            for s in range(m * spp, (m + 1) * spp):
-                f = face[s]
+        end = last * spp
+        # ---- misses: the environment, equirectangular (a NaN ray sees black) ----
+        n_sky = 0
+        for s in range(base, end):
+            f = face[s]
+            if f >= 0:  # the hits' corners, read two passes on
+                prefetch(colors, 9 * f)
+                prefetch(uv, 6 * f)
+                prefetch(normals, 9 * f)
+            else:
+                q = s - base
                 dx = directions[s, 0]
                 dy = directions[s, 1]
                 dz = directions[s, 2]
-                finite = dx == dx and dy == dy and dz == dz  # a NaN ray misses and sees black
-                if f >= 0:
-                    # ---- surface: albedo from corner colors (times texture), then light (as _albedo) ----
-                    w1 = b1[s]
-                    w2 = b2[s]
-                    w0 = 1.0 - w1 - w2
-                    r = w0 * colors[f, 0, 0] + w1 * colors[f, 1, 0] + w2 * colors[f, 2, 0]
-                    g = w0 * colors[f, 0, 1] + w1 * colors[f, 1, 1] + w2 * colors[f, 2, 1]
-                    b = w0 * colors[f, 0, 2] + w1 * colors[f, 1, 2] + w2 * colors[f, 2, 2]
-                    tid = texture_id[f]
-                    u = w0 * uv[f, 0, 0] + w1 * uv[f, 1, 0] + w2 * uv[f, 2, 0]
-                    v = w0 * uv[f, 0, 1] + w1 * uv[f, 1, 1] + w2 * uv[f, 2, 1]
-                    if tid >= 0:
-                        tw = texture_width[tid]
-                        th = texture_height[tid]
-                        tr, tg, tb = texel_color(texels, texture_offset[tid], tw, th, u, v)
-                        r *= tr
-                        g *= tg
-                        b *= tb
-                    nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
-                    ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
-                    nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
-                    inv = _inverse_length(nx * nx + ny * ny + nz * nz)
-                    if inv > 0.0:
-                        nx *= inv
-                        ny *= inv
-                        nz *= inv
-                    mat = face_material[f]
-                    if lit and not material_unlit[mat]:
-                        # two-sided: light the side the ray sees
-                        facing = -1.0 if nx * dx + ny * dy + nz * dz > 0.0 else 1.0
-                        lambert = max(-facing * (nx * light_dir[0] + ny * light_dir[1] + nz * light_dir[2]), 0.0)
-                        if mat > 0 and material_bands[mat] > 0 and lambert > 0.0:
-                            # toon: the lit side in flat bands, the last one full light
-                            bands = material_bands[mat]
-                            lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
-                        k = ambient + (1.0 - ambient) * lambert
-                        r *= k
-                        g *= k
-                        b *= k
-                    # ---- emission (glTF's emissiveFactor, times its texture): added after the light ----
-                    if mat > 0:
-                        er = material_emission[mat, 0]
-                        eg = material_emission[mat, 1]
-                        eb = material_emission[mat, 2]
-                        etid = material_emission_texture[mat]
-                        if etid >= 0:
-                            tw = texture_width[etid]
-                            th = texture_height[etid]
-                            tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, u, v)
-                            er *= tr
-                            eg *= tg
-                            eb *= tb
-                        r += er
-                        g += eg
-                        b += eb
-                        if ink.any and material_outline[mat] > 0.0:
-                            ts = t[s]
-                            hx = origins[s, 0] + ts * dx
-                            hy = origins[s, 1] + ts * dy
-                            hz = origins[s, 2] + ts * dz
-                            inked = 1.0 - material_outline[mat] * _ink_at(ink, plane, side, ex, ey, ez, hx, hy, hz)
-                            r *= inked
-                            g *= inked
-                            b *= inked
-                    if need_depth:
-                        ts = t[s]
-                        acc_z += (
-                            (origins[s, 0] + ts * dx - ex) * fx
-                            + (origins[s, 1] + ts * dy - ey) * fy
-                            + (origins[s, 2] + ts * dz - ez) * fz
-                        )
-                    if need_normal:
-                        acc_nx += nx
-                        acc_ny += ny
-                        acc_nz += nz
+                rgbk[q, 3] = 1.0
+                if not (dx == dx and dy == dy and dz == dz):
+                    rgbk[q, 0] = rgbk[q, 1] = rgbk[q, 2] = 0.0
+                elif panorama:
+                    sky[n_sky] = q
+                    sky_dx[n_sky] = dx
+                    sky_dy[n_sky] = dy
+                    sky_dz[n_sky] = dz
+                    n_sky += 1
                 else:
-                    # ---- miss: the environment, equirectangular ----
-                    if not finite:
-                        r = g = b = 0.0
-                    elif env_w * env_h == 1:
-                        r = env_flat[0, 0]
-                        g = env_flat[0, 1]
-                        b = env_flat[0, 2]
-                    else:
-                        r, g, b = _bilinear(env_flat, 0, env_w, env_h, sky[s - base, 0], sky[s - base, 1], False)
-                    if need_depth:
-                        acc_z += z_max
-                acc_r += min(max(r, 0.0), 1.0)
-                acc_g += min(max(g, 0.0), 1.0)
-                acc_b += min(max(b, 0.0), 1.0)
-                if need_direction and finite:
-                    acc_dx += dx
-                    acc_dy += dy
-                    acc_dz += dz
+                    rgbk[q, 0] = env_flat[0, 0]
+                    rgbk[q, 1] = env_flat[0, 1]
+                    rgbk[q, 2] = env_flat[0, 2]
+        for i in range(n_sky):  # vectorized
+            dx = sky_dx[i]
+            dy = sky_dy[i]
+            dz = sky_dz[i]
+            lon = fast_atan2(dx, -dz)
+            lat = 0.5 * math.pi - fast_atan2(dy, math.sqrt(dx * dx + dz * dz))
+            sky_x[i] = (lon / (2.0 * math.pi) + 0.5) * env_w
+            sky_y[i] = lat / math.pi * env_h
+        for i in range(n_sky):  # where each reads: its texels asked for, read in the next loop
+            k00, k01, k10, k11, tx, ty = _bilinear_site(0, env_w, env_h, sky_x[i], sky_y[i], False)
+            prefetch(env_flat, 3 * k00)
+            prefetch(env_flat, 3 * k10)
+            sites[i, 0] = k00
+            sites[i, 1] = k01
+            sites[i, 2] = k10
+            sites[i, 3] = k11
+            weights[i, 0] = tx
+            weights[i, 1] = ty
+        for i in range(n_sky):
+            q = sky[i]
+            r, g, b = _bilinear_mix(
+                env_flat, sites[i, 0], sites[i, 1], sites[i, 2], sites[i, 3], weights[i, 0], weights[i, 1]
+            )
+            rgbk[q, 0] = r
+            rgbk[q, 1] = g
+            rgbk[q, 2] = b
+        # ---- hits: the corners' colour and texture coordinates ----
+        n_hit = 0
+        n_textured = 0
+        n_special = 0
+        for s in range(base, end):
+            f = face[s]
+            if f < 0:
+                continue
+            q = s - base
+            w1 = b1[s]
+            w2 = b2[s]
+            w0 = 1.0 - w1 - w2
+            r, g, b, u, v = _corners(colors, uv, f, w0, w1, w2)
+            rgbk[q, 0] = r
+            rgbk[q, 1] = g
+            rgbk[q, 2] = b
+            coords[q, 0] = u
+            coords[q, 1] = v
+            tid = texture_id[f]
+            if tid >= 0:
+                textured[n_textured] = q
+                textures[n_textured] = tid
+                n_textured += 1
+            if face_material[f] > 0:
+                special[n_special] = n_hit
+                n_special += 1
+            hit[n_hit] = q
+            hit_face[n_hit] = f
+            hit_w0[n_hit] = w0
+            hit_w1[n_hit] = w1
+            hit_w2[n_hit] = w2
+            hit_dx[n_hit] = directions[s, 0]
+            hit_dy[n_hit] = directions[s, 1]
+            hit_dz[n_hit] = directions[s, 2]
+            n_hit += 1
+        # ---- the light: the normal at each hit, then its length and the light on it (two-sided: on the side
+        # the ray sees), vectorized; a material beyond plain may be unlit or toon (below) ----
+        if lit or need_normal:
+            for i in range(n_hit):
+                f = hit_face[i]
+                w0 = hit_w0[i]
+                w1 = hit_w1[i]
+                w2 = hit_w2[i]
+                hit_nx[i] = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
+                hit_ny[i] = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
+                hit_nz[i] = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
+            for i in range(n_hit):  # vectorized
+                nx = hit_nx[i]
+                ny = hit_ny[i]
+                nz = hit_nz[i]
+                inv = _inverse_length(nx * nx + ny * ny + nz * nz)
+                if inv > 0.0:
+                    nx *= inv
+                    ny *= inv
+                    nz *= inv
+                hit_nx[i] = nx
+                hit_ny[i] = ny
+                hit_nz[i] = nz
+                hit_k[i] = ambient + (1.0 - ambient) * _lambert(nx, ny, nz, hit_dx[i], hit_dy[i], hit_dz[i], lx, ly, lz)
+        for i in range(n_special if lit else 0):
+            h = special[i]
+            mat = face_material[hit_face[h]]
+            if material_unlit[mat]:
+                hit_k[h] = 1.0
+            elif material_bands[mat] > 0:
+                # toon: the lit side in flat bands, the last one full light
+                lambert = _lambert(hit_nx[h], hit_ny[h], hit_nz[h], hit_dx[h], hit_dy[h], hit_dz[h], lx, ly, lz)
+                if lambert > 0.0:
+                    bands = material_bands[mat]
+                    lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
+                hit_k[h] = ambient + (1.0 - ambient) * lambert
+        for i in range(n_hit):
+            rgbk[hit[i], 3] = hit_k[i] if lit else 1.0  # unlit: the albedo as it is (a product by 1 changes no bit)
+        # ---- the textures, times the corners' colour: where each lookup reads, then the reads ----
+        for i in range(n_textured):
+            q = textured[i]
+            tid = textures[i]
+            k00, k01, k10, k11, tx, ty = _texel_site(
+                texture_offset[tid], texture_width[tid], texture_height[tid], coords[q, 0], coords[q, 1]
+            )
+            prefetch(texels, 3 * k00)  # the texels' two rows, read in the next loop
+            prefetch(texels, 3 * k10)
+            sites[i, 0] = k00
+            sites[i, 1] = k01
+            sites[i, 2] = k10
+            sites[i, 3] = k11
+            weights[i, 0] = tx
+            weights[i, 1] = ty
+        for i in range(n_textured):
+            q = textured[i]
+            tr, tg, tb = _texel_mix(
+                texels, sites[i, 0], sites[i, 1], sites[i, 2], sites[i, 3], weights[i, 0], weights[i, 1]
+            )
+            rgbk[q, 0] *= tr
+            rgbk[q, 1] *= tg
+            rgbk[q, 2] *= tb
+        # ---- emission (glTF's emissiveFactor, times its texture): added after the light; then the ink ----
+        for i in range(n_special):
+            q = hit[special[i]]
+            s = base + q
+            mat = face_material[face[s]]
+            k = rgbk[q, 3]
+            r = rgbk[q, 0] * k
+            g = rgbk[q, 1] * k
+            b = rgbk[q, 2] * k
+            er = material_emission[mat, 0]
+            eg = material_emission[mat, 1]
+            eb = material_emission[mat, 2]
+            etid = material_emission_texture[mat]
+            if etid >= 0:
+                tw = texture_width[etid]
+                th = texture_height[etid]
+                tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, coords[q, 0], coords[q, 1])
+                er *= tr
+                eg *= tg
+                eb *= tb
+            r += er
+            g += eg
+            b += eb
+            if ink.any and material_outline[mat] > 0.0:
+                if per_pixel:
+                    col, row = tile_pixel(plane, pixels[s // spp])
+                    side, col, row = locate(plane, col, row)
+                    rx, ry, rz, _, _, _, _, _, _ = centre_frame(plane, col, row)
+                    ex = eye[0] + side * plane.half_ipd * rx
+                    ey = eye[1] + side * plane.half_ipd * ry
+                    ez = eye[2] + side * plane.half_ipd * rz
+                ts = t[s]
+                hx = origins[s, 0] + ts * directions[s, 0]
+                hy = origins[s, 1] + ts * directions[s, 1]
+                hz = origins[s, 2] + ts * directions[s, 2]
+                inked = 1.0 - material_outline[mat] * _ink_at(ink, plane, side, ex, ey, ez, hx, hy, hz)
+                r *= inked
+                g *= inked
+                b *= inked
+            rgbk[q, 0] = r
+            rgbk[q, 1] = g
+            rgbk[q, 2] = b
+            rgbk[q, 3] = 1.0
+        # ---- each pixel's mean ----
+        for m in range(first, last):
+            pix = pixels[m]
+            acc_r = acc_g = acc_b = 0.0
+            for s in range(m * spp, (m + 1) * spp):
+                q = s - base
+                k = rgbk[q, 3]
+                acc_r += min(max(rgbk[q, 0] * k, 0.0), 1.0)
+                acc_g += min(max(rgbk[q, 1] * k, 0.0), 1.0)
+                acc_b += min(max(rgbk[q, 2] * k, 0.0), 1.0)
             out_color[pix, 0] = acc_r * inv_spp
             out_color[pix, 1] = acc_g * inv_spp
             out_color[pix, 2] = acc_b * inv_spp
+        if not (need_depth or need_normal or need_direction):
+            continue
+        if need_normal:  # each hit's unit normal, by sample
+            for i in range(n_hit):
+                normal[hit[i], 0] = hit_nx[i]
+                normal[hit[i], 1] = hit_ny[i]
+                normal[hit[i], 2] = hit_nz[i]
+        for m in range(first, last):
+            pix = pixels[m]
+            if per_pixel:
+                col, row = tile_pixel(plane, pix)
+                side, col, row = locate(plane, col, row)
+                rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, col, row)
+                ex = eye[0] + side * plane.half_ipd * rx
+                ey = eye[1] + side * plane.half_ipd * ry
+                ez = eye[2] + side * plane.half_ipd * rz
             if need_depth:
+                acc_z = 0.0
+                for s in range(m * spp, (m + 1) * spp):
+                    if face[s] < 0:
+                        acc_z += z_max
+                    else:
+                        ts = t[s]
+                        acc_z += (
+                            (origins[s, 0] + ts * directions[s, 0] - ex) * fx
+                            + (origins[s, 1] + ts * directions[s, 1] - ey) * fy
+                            + (origins[s, 2] + ts * directions[s, 2] - ez) * fz
+                        )
                 out_depth[pix] = acc_z * inv_spp
-            if need_normal:
+            if need_normal:  # a miss adds nothing
+                acc_nx = acc_ny = acc_nz = 0.0
+                for s in range(m * spp, (m + 1) * spp):
+                    if face[s] >= 0:
+                        q = s - base
+                        acc_nx += normal[q, 0]
+                        acc_ny += normal[q, 1]
+                        acc_nz += normal[q, 2]
                 out_normal[pix, 0] = acc_nx * inv_spp
                 out_normal[pix, 1] = acc_ny * inv_spp
                 out_normal[pix, 2] = acc_nz * inv_spp
             if need_direction:
+                acc_dx = acc_dy = acc_dz = 0.0
+                for s in range(m * spp, (m + 1) * spp):
+                    dx = directions[s, 0]
+                    dy = directions[s, 1]
+                    dz = directions[s, 2]
+                    if dx == dx and dy == dy and dz == dz:
+                        acc_dx += dx
+                        acc_dy += dy
+                        acc_dz += dz
                 dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
                 inv = 1.0 / dlen if dlen > 0.0 else 0.0
                 out_direction[pix, 0] = acc_dx * inv
