@@ -37,9 +37,12 @@ class Frame:
         height: int = 1,
         *,
         threads: int = 1,
+        whole: bool = True,
     ) -> Frame:
         """The frame of a ``width x height`` painting (its size: where outlines are drawn), its screen cells
-        built on ``threads`` threads (the painting's own, idle meanwhile)."""
+        built on ``threads`` threads (the painting's own, idle meanwhile). ``whole``: the painting paints the
+        whole image; a band of a larger one (a print's) builds no cells, whose bytes grow with the whole image
+        where a print's memory must not."""
         geometry, tracer = scene.geometry(time)
         light = scene.light
         reads = params.reads()
@@ -56,7 +59,9 @@ class Frame:
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
         cells = (
-            screen.cells(camera, params, width, height, geometry.triangles, threads) if tracer else kernels.NO_SCREEN
+            screen.cells(camera, params, width, height, geometry.triangles, threads)
+            if tracer and whole
+            else kernels.NO_SCREEN
         )
         trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry), cells)
         return cls(trace, shading, tracer, Looks.of(params, geometry.object_names, geometry.material_names))

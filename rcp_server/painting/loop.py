@@ -185,7 +185,7 @@ class Job:
             threads=threads,
             pool=pool,
             should_stop=should_stop,
-            frame=Frame.of(scene, time, camera, params, width, height, threads=threads),
+            frame=Frame.of(scene, time, camera, params, width, height, threads=threads, whole=region == full),
             tiles=region.tiles(tile_rows(region, threads, params.spp * params.iterations)),
             keep=[np.empty((height, width, 3), np.float32) for _ in range(params.iterations)]
             if keep_iterations

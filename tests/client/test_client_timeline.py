@@ -218,8 +218,15 @@ def test_playback_paints_each_frame_with_the_paths_keyed_painting(page, tmp_path
     films = {shot.index: shot.looks[-1][0] for shot in keyed_path(page, tmp_path, keyframes, loop=True)}
     page.locator("#path [data-path=play]").click()
     page.wait_for_function("rcp.path.player.playing?.frame > 12 && rcp.state.keyed !== null", timeout=WAIT_MS)
-    frame, sent = page.evaluate("[rcp.path.player.playing.frame, rcp.sent.filter((m) => m.type === 'paint').at(-1)]")
+    # the frame placed and the painting it keys, read at one moment (the next step may place the next frame)
+    frame, keyed, sent = page.evaluate(
+        "[rcp.path.player.playing.frame, rcp.state.keyed.paint,"
+        " rcp.sent.filter((m) => m.type === 'paint' && m.lambda_p !== null).map((m) => m.lambda_p)]"
+    )
     page.locator("#path [data-path=play]").click()  # stop
     assert 2 < films[frame].lambda_p < 20
-    assert sent["lambda_p"] == pytest.approx(films[frame].lambda_p)
+    assert keyed["lambda_p"] == pytest.approx(films[frame].lambda_p)
+    # and the server was asked for the played frames' paintings (sent with the frame after a step)
+    played = [films[f].lambda_p for f in range(frame + 1)]
+    assert sent and all(any(abs(value - p) < 1e-9 for p in played) for value in sent)
     assert page.evaluate("rcp.state.paint") == {}  # the page's own settings stay its own
