@@ -9,7 +9,7 @@ import numpy as np
 from ..camera.camera import Camera
 from ..engine import kernels
 from ..engine.kernels.embree import Embree, Tracer
-from ..scene.scene import Scene
+from ..scene.scene import Geometry, Scene
 from ..settings.params import PaintParams
 from . import screen
 from .alphamask import step_floor
@@ -55,7 +55,7 @@ class Frame:
             lit=light is not None,
             z_max=float(z_max),
             records=kernels.records(reads),
-            ink=ink(scene, time, camera, width, height),
+            materials=materials(geometry, ink(scene, time, camera, width, height)),
         )
         embree = tracer.embree if tracer is not None else Embree(0, 0, 0)
         cells = (
@@ -65,3 +65,12 @@ class Frame:
         )
         trace = kernels.Trace(embree, geometry.triangles, geometry.masked, step_floor(geometry), cells)
         return cls(trace, shading, tracer, Looks.of(params, geometry.object_names, geometry.material_names))
+
+
+def materials(geometry: Geometry, ink: kernels.Ink) -> kernels.Materials | None:
+    """What shading reads of ``geometry``'s materials beyond plain, with ``ink``; None where it has none (the
+    plain one is the tables' first row)."""
+    if len(geometry.material_unlit) == 1:
+        return None
+    fields = kernels.Materials._fields[:-1]
+    return kernels.Materials(**{name: getattr(geometry, name) for name in fields}, ink=ink)

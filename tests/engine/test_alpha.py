@@ -50,15 +50,10 @@ def test_masked_rays_matches_its_numpy_reference():
     bundle = kernels.Surfaces(
         normals=np.zeros((faces, 3, 3), np.float32),
         colors=np.zeros((faces, 3, 3), np.float32),
-        material_emission=np.zeros((3, 3), np.float32),
-        material_emission_texture=np.full(3, -1, np.int32),
-        material_unlit=np.zeros(3, bool),
         texels=np.zeros((1, 3), np.uint8),
         texture_offset=np.zeros(3, np.int64),
         triangles=np.zeros((faces, 3, 3), np.float32),
         face_object=np.zeros(faces, np.int32),
-        material_bands=np.zeros(3, np.int32),
-        material_outline=np.zeros(3, np.float32),
         **surfaces,
     )
     face = rng.integers(-1, faces, n).astype(np.int32)

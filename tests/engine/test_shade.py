@@ -12,6 +12,8 @@ from rcp_server.engine.kernels.embree import Hits
 from rcp_server.engine.paintstate import CHANNELS, channel_shape
 from rcp_server.painting.outlines import NO_INK
 
+MATERIALS = kernels.Materials._fields[:-1]  # the tables, beside the ink
+
 
 def ref_bilinear(texels, offset, width, height, x, y, wrap_y):
     """Bilinear lookup at texel coordinates (x, y) (texel centres at +0.5): x wraps; y wraps or clamps."""
@@ -257,8 +259,9 @@ def _shade_inputs(seed, n_pix=60, spp=3, env_shape=(6, 10)):
     )
 
 
-def _run_shade(inputs, need=CHANNELS[1:]):
-    """Every channel, those not in ``need`` left at -9."""
+def _run_shade(inputs, need=CHANNELS[1:], plain=False):
+    """Every channel, those not in ``need`` left at -9. ``plain``: shade is told every face is plain (no
+    materials), as a painting of such a scene tells it."""
     n_pix = len(inputs["face"]) // inputs["spp"]
     out = tuple(np.full(channel_shape(name, n_pix), -9.0, np.float32) for name in CHANNELS)
     kernels.shade(
@@ -277,7 +280,7 @@ def _run_shade(inputs, need=CHANNELS[1:]):
         z_max=inputs["z_max"],
         out=kernels.Channels(*out),
         need=kernels.records(need),
-        ink=NO_INK,
+        materials=None if plain else kernels.Materials(**{name: inputs[name] for name in MATERIALS}, ink=NO_INK),
     )
     kernels.record_surfaces(
         origins=inputs["origins"],
@@ -346,6 +349,17 @@ def test_shade_textured_faces_really_are_textured_and_the_sky_really_is_sampled(
         inputs, environment=np.ascontiguousarray(np.broadcast_to(inputs["environment"][:1, :1], (6, 10, 3)))
     )
     assert not np.allclose(_run_shade(inputs)[0], _run_shade(flat_sky)[0], atol=1e-3)
+
+
+@pytest.mark.parametrize("lit", [True, False])
+def test_a_painting_of_plain_faces_shades_the_same_told_there_are_no_materials(lit):
+    """Where every face is plain, shade without the materials (their passes not even compiled) gives the same
+    bits as shade with them, every channel."""
+    inputs = _shade_inputs(5, spp=2)
+    inputs.update(face_material=np.zeros_like(inputs["face_material"]), lit=lit)
+    for told, untold in zip(_run_shade(inputs), _run_shade(inputs, plain=True), strict=True):
+        np.testing.assert_array_equal(told, untold)
+    assert len(kernels.shade.signatures) >= 2  # two compilations: one with the materials' passes, one without
 
 
 def test_shade_constant_environment_and_channels_not_needed_are_not_written():

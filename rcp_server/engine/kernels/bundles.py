@@ -110,12 +110,7 @@ class Surfaces(NamedTuple):
     texture_alpha_offset: np.ndarray  # (K,) int64 where a texture's coverage starts in alpha_texels, -1 none
     face_object: np.ndarray  # (F,) int32 the scene's object (``Geometry.object_names``)
     face_material: np.ndarray  # (F,) int32 row of the material tables; row 0 is plain
-    material_emission: np.ndarray  # (M, 3) float32 display color added after the light
-    material_emission_texture: np.ndarray  # (M,) int32, -1 none
-    material_unlit: np.ndarray  # (M,) bool
     material_alpha_cutoff: np.ndarray  # (M,) float32, 0 opaque (``alpha.py`` reads it)
-    material_bands: np.ndarray  # (M,) int32 toon shading's bands of light, 0: smooth
-    material_outline: np.ndarray  # (M,) float32 how dark its outlines (``outlines.py``), 0: none
 
 
 class Cast(NamedTuple):
@@ -207,6 +202,18 @@ class Ink(NamedTuple):
     distance: np.ndarray  # (H*W,) float32 from the pixel's eye to the surface the ink is on
 
 
+class Materials(NamedTuple):
+    """What shading reads of the materials beyond plain, by row of the material tables (row 0 is plain:
+    ``scene.Geometry`` has the shapes), and the ink of their outlines."""
+
+    material_emission: np.ndarray  # (M, 3) float32 display color added after the light
+    material_emission_texture: np.ndarray  # (M,) int32, -1 none
+    material_unlit: np.ndarray  # (M,) bool
+    material_bands: np.ndarray  # (M,) int32 toon shading's bands of light, 0: smooth
+    material_outline: np.ndarray  # (M,) float32 how dark its outlines (``outlines.py``), 0: none
+    ink: Ink  # outlines
+
+
 class Shading(NamedTuple):
     """What ``shade.shade`` needs of a painting beyond the rays, and the channels it records."""
 
@@ -217,7 +224,9 @@ class Shading(NamedTuple):
     lit: bool
     z_max: float
     records: Records  # the channels beside color to record
-    ink: Ink  # outlines
+    # None where every face is plain (most scenes): shade then compiles without the materials' passes, a third
+    # of its compile time, which a first start waits for
+    materials: Materials | None
 
 
 class Scratch(NamedTuple):

@@ -54,7 +54,7 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
         z_max=shading.z_max,
         out=out,
         need=shading.records,
-        ink=shading.ink,
+        materials=shading.materials,
     )
     beside = compile_beside(shade, shading_arguments)  # the slowest to compile: on a cold cache, on another core
     with watch.stage("camera"):

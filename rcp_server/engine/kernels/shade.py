@@ -219,7 +219,7 @@ def shade(
     z_max,
     out,
     need,
-    ink,
+    materials,
 ):
     """Shade every sample and average the samples of each pixel.
 
@@ -232,9 +232,10 @@ def shade(
     view depth ``(X - eye_ij) . f_ij`` (camera.py; ``z_max`` on a miss); normal (n, 3) world normal (0 on a
     miss); direction (n, 3) ray direction. need : bundles.Records, which of those to write (the other
     channels are :func:`record_surfaces`').
-    A material with bands (``surfaces.material_bands``) is lit in that many flat bands (toon shading); one with
-    an outline (``surfaces.material_outline``) is inked where ``ink`` (a bundles.Ink) has ink at the hit's
-    pixel of the painting seen from the pixel's own eye, on the surface at that distance.
+    materials : bundles.Materials, the materials beyond plain; None where every face is plain, and then their
+    passes are not compiled (numba prunes a branch on an argument that is None). A material with bands is lit
+    in that many flat bands (toon shading); one with an outline is inked where ``materials.ink`` has ink at the
+    hit's pixel of the painting seen from the pixel's own eye, on the surface at that distance.
 
     A block of pixels at a time, in passes (the sky, the surfaces, their light, their textures, the rare
     materials, the means), each a short loop: the CPU overlaps the iterations of a short loop, whose loads wait
@@ -247,10 +248,8 @@ def shade(
     normals, colors, uv, texture_id = surfaces.normals, surfaces.colors, surfaces.uv, surfaces.texture_id
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
-    face_material, material_unlit = surfaces.face_material, surfaces.material_unlit
-    material_bands, material_outline = surfaces.material_bands, surfaces.material_outline
+    face_material = surfaces.face_material
     need_depth, need_normal, need_direction = need.depth, need.normal, need.direction
-    material_emission, material_emission_texture = surfaces.material_emission, surfaces.material_emission_texture
     out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
     n_pix = len(pixels)
     env_h = environment.shape[0]
@@ -267,7 +266,10 @@ def shade(
     ey = eye[1]
     ez = eye[2]
     side = 0
-    per_pixel = (need_depth or ink.any) and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
+    inked = False
+    if materials is not None:
+        inked = materials.ink.any
+    per_pixel = (need_depth or inked) and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
     block = 256  # pixels
     size = block * spp
     # one block's samples, by sample: colour so far (r, g, b) and the light's factor on it; texture coordinates
@@ -415,18 +417,19 @@ def shade(
                 hit_ny[i] = ny
                 hit_nz[i] = nz
                 hit_k[i] = ambient + (1.0 - ambient) * _lambert(nx, ny, nz, hit_dx[i], hit_dy[i], hit_dz[i], lx, ly, lz)
-        for i in range(n_special if lit else 0):
-            h = special[i]
-            mat = face_material[hit_face[h]]
-            if material_unlit[mat]:
-                hit_k[h] = 1.0
-            elif material_bands[mat] > 0:
-                # toon: the lit side in flat bands, the last one full light
-                lambert = _lambert(hit_nx[h], hit_ny[h], hit_nz[h], hit_dx[h], hit_dy[h], hit_dz[h], lx, ly, lz)
-                if lambert > 0.0:
-                    bands = material_bands[mat]
-                    lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
-                hit_k[h] = ambient + (1.0 - ambient) * lambert
+        if materials is not None and lit:
+            for i in range(n_special):
+                h = special[i]
+                mat = face_material[hit_face[h]]
+                if materials.material_unlit[mat]:
+                    hit_k[h] = 1.0
+                elif materials.material_bands[mat] > 0:
+                    # toon: the lit side in flat bands, the last one full light
+                    lambert = _lambert(hit_nx[h], hit_ny[h], hit_nz[h], hit_dx[h], hit_dy[h], hit_dz[h], lx, ly, lz)
+                    if lambert > 0.0:
+                        bands = materials.material_bands[mat]
+                        lambert = min(math.floor(lambert * bands) + 1.0, bands) / bands
+                    hit_k[h] = ambient + (1.0 - ambient) * lambert
         for i in range(n_hit):
             rgbk[hit[i], 3] = hit_k[i] if lit else 1.0  # unlit: the albedo as it is (a product by 1 changes no bit)
         # ---- the textures, times the corners' colour: where each lookup reads, then the reads ----
@@ -453,48 +456,51 @@ def shade(
             rgbk[q, 1] *= tg
             rgbk[q, 2] *= tb
         # ---- emission (glTF's emissiveFactor, times its texture): added after the light; then the ink ----
-        for i in range(n_special):
-            q = hit[special[i]]
-            s = base + q
-            mat = face_material[face[s]]
-            k = rgbk[q, 3]
-            r = rgbk[q, 0] * k
-            g = rgbk[q, 1] * k
-            b = rgbk[q, 2] * k
-            er = material_emission[mat, 0]
-            eg = material_emission[mat, 1]
-            eb = material_emission[mat, 2]
-            etid = material_emission_texture[mat]
-            if etid >= 0:
-                tw = texture_width[etid]
-                th = texture_height[etid]
-                tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, coords[q, 0], coords[q, 1])
-                er *= tr
-                eg *= tg
-                eb *= tb
-            r += er
-            g += eg
-            b += eb
-            if ink.any and material_outline[mat] > 0.0:
-                if per_pixel:
-                    col, row = tile_pixel(plane, pixels[s // spp])
-                    side, col, row = locate(plane, col, row)
-                    rx, ry, rz, _, _, _, _, _, _ = centre_frame(plane, col, row)
-                    ex = eye[0] + side * plane.half_ipd * rx
-                    ey = eye[1] + side * plane.half_ipd * ry
-                    ez = eye[2] + side * plane.half_ipd * rz
-                ts = t[s]
-                hx = origins[s, 0] + ts * directions[s, 0]
-                hy = origins[s, 1] + ts * directions[s, 1]
-                hz = origins[s, 2] + ts * directions[s, 2]
-                inked = 1.0 - material_outline[mat] * _ink_at(ink, plane, side, ex, ey, ez, hx, hy, hz)
-                r *= inked
-                g *= inked
-                b *= inked
-            rgbk[q, 0] = r
-            rgbk[q, 1] = g
-            rgbk[q, 2] = b
-            rgbk[q, 3] = 1.0
+        if materials is not None:  # none in most scenes
+            for i in range(n_special):
+                q = hit[special[i]]
+                s = base + q
+                mat = face_material[face[s]]
+                k = rgbk[q, 3]
+                r = rgbk[q, 0] * k
+                g = rgbk[q, 1] * k
+                b = rgbk[q, 2] * k
+                er = materials.material_emission[mat, 0]
+                eg = materials.material_emission[mat, 1]
+                eb = materials.material_emission[mat, 2]
+                etid = materials.material_emission_texture[mat]
+                if etid >= 0:
+                    tw = texture_width[etid]
+                    th = texture_height[etid]
+                    tr, tg, tb = texel_color(texels, texture_offset[etid], tw, th, coords[q, 0], coords[q, 1])
+                    er *= tr
+                    eg *= tg
+                    eb *= tb
+                r += er
+                g += eg
+                b += eb
+                if inked and materials.material_outline[mat] > 0.0:
+                    if per_pixel:
+                        col, row = tile_pixel(plane, pixels[s // spp])
+                        side, col, row = locate(plane, col, row)
+                        rx, ry, rz, _, _, _, _, _, _ = centre_frame(plane, col, row)
+                        ex = eye[0] + side * plane.half_ipd * rx
+                        ey = eye[1] + side * plane.half_ipd * ry
+                        ez = eye[2] + side * plane.half_ipd * rz
+                    ts = t[s]
+                    hx = origins[s, 0] + ts * directions[s, 0]
+                    hy = origins[s, 1] + ts * directions[s, 1]
+                    hz = origins[s, 2] + ts * directions[s, 2]
+                    ink = 1.0 - materials.material_outline[mat] * _ink_at(
+                        materials.ink, plane, side, ex, ey, ez, hx, hy, hz
+                    )
+                    r *= ink
+                    g *= ink
+                    b *= ink
+                rgbk[q, 0] = r
+                rgbk[q, 1] = g
+                rgbk[q, 2] = b
+                rgbk[q, 3] = 1.0
         # ---- each pixel's mean ----
         for m in range(first, last):
             pix = pixels[m]
