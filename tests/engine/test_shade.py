@@ -277,9 +277,7 @@ def _run_shade(inputs, need=CHANNELS[1:], plain=False):
         lit=inputs["lit"],
         eye=inputs["eye"],
         plane=kernels.ImagePlane.of(inputs["camera"], Region(n_pix, 1)),
-        z_max=inputs["z_max"],
         out=kernels.Channels(*out),
-        need=kernels.records(need),
         materials=None if plain else kernels.Materials(**{name: inputs[name] for name in MATERIALS}, ink=NO_INK),
     )
     kernels.record_surfaces(
@@ -289,6 +287,9 @@ def _run_shade(inputs, need=CHANNELS[1:], plain=False):
         spp=inputs["spp"],
         pixels=np.arange(n_pix),
         surfaces=kernels.Surfaces(**{name: inputs[name] for name in kernels.Surfaces._fields}),
+        eye=inputs["eye"],
+        plane=kernels.ImagePlane.of(inputs["camera"], Region(n_pix, 1)),
+        z_max=inputs["z_max"],
         out=kernels.Channels(*out),
         need=kernels.records(need),
     )

@@ -20,8 +20,6 @@ from .shade import record_surfaces, shade
 from .triangle import place_hits
 from .visibility import find_faces
 
-SURFACE_RECORDS = ("geometric", "object", "material", "albedo", "uv", "position")  # record_surfaces' channels
-
 
 def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch) -> int:
     """``I_n`` of a tile into ``out``, every pixel; returns how many pixels it painted.
@@ -51,9 +49,7 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
         lit=shading.lit,
         eye=cast.eye,
         plane=cast.plane,
-        z_max=shading.z_max,
         out=out,
-        need=shading.records,
         materials=shading.materials,
     )
     beside = compile_beside(shade, shading_arguments)  # the slowest to compile: on a cold cache, on another core
@@ -114,7 +110,7 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
         if beside is not None:
             beside.wait()
         shade(**shading_arguments)
-        if any(getattr(shading.records, name) for name in SURFACE_RECORDS):
+        if any(shading.records):
             record_surfaces(
                 origins=scratch.origins,
                 directions=scratch.directions,
@@ -122,6 +118,9 @@ def paint_iteration(cast, source, out, trace, shading, scratch, watch: Stopwatch
                 spp=spp,
                 pixels=pixels,
                 surfaces=shading.surfaces,
+                eye=cast.eye,
+                plane=cast.plane,
+                z_max=shading.z_max,
                 out=out,
                 need=shading.records,
             )

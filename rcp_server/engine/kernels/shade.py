@@ -169,6 +169,25 @@ def _ink_at(ink, plane, side, ex, ey, ez, x, y, z):
 
 
 @numba.njit(inline="always")
+def _interpolated(normals, f, w0, w1, w2):
+    """Face ``f``'s shading normal at barycentric weights (w0, w1, w2), as its corners' blend (not unit)."""
+    return (
+        w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0],
+        w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1],
+        w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2],
+    )
+
+
+@numba.njit(inline="always")
+def _unit(nx, ny, nz):
+    """(nx, ny, nz) made unit length; as it is where its length is 0."""
+    inv = _inverse_length(nx * nx + ny * ny + nz * nz)
+    if inv > 0.0:
+        return nx * inv, ny * inv, nz * inv
+    return nx, ny, nz
+
+
+@numba.njit(inline="always")
 def _lambert(nx, ny, nz, dx, dy, dz, lx, ly, lz):
     """The light on unit normal n seen along ray direction d from light travelling along l: two-sided, on the
     side the ray sees."""
@@ -216,9 +235,7 @@ def shade(
     lit,
     eye,
     plane,
-    z_max,
     out,
-    need,
     materials,
 ):
     """Shade every sample and average the samples of each pixel.
@@ -227,10 +244,8 @@ def shade(
     b1, b2; face -1 on a miss);  pixels : (m,) int64 the pixel of each group of spp rays, where its mean is
     written (the others are left as they are);  surfaces : a bundles.Surfaces
     environment : (h, w, 3) float32 equirectangular; light_dir : (3,) float64 travel direction
-    eye, plane : the camera's eye (3,) float64 and a bundles.ImagePlane of the tile, for depth
-    out : bundles.Channels of n pixels: color (n, 3) float32 displayed color in [0, 1]; depth (n,) float32
-    view depth ``(X - eye_ij) . f_ij`` (camera.py; ``z_max`` on a miss); normal (n, 3) world normal (0 on a
-    miss); direction (n, 3) ray direction. need : bundles.Records, which of those to write (the other
+    eye, plane : the camera's eye (3,) float64 and a bundles.ImagePlane of the tile, for the ink
+    out : bundles.Channels of n pixels: its color (n, 3) float32, the displayed color in [0, 1] (the other
     channels are :func:`record_surfaces`').
     materials : bundles.Materials, the materials beyond plain; None where every face is plain, and then their
     passes are not compiled (numba prunes a branch on an argument that is None). A material with bands is lit
@@ -249,8 +264,7 @@ def shade(
     texels, texture_offset = surfaces.texels, surfaces.texture_offset
     texture_width, texture_height = surfaces.texture_width, surfaces.texture_height
     face_material = surfaces.face_material
-    need_depth, need_normal, need_direction = need.depth, need.normal, need.direction
-    out_color, out_depth, out_normal, out_direction = out.color, out.depth, out.normal, out.direction
+    out_color = out.color
     n_pix = len(pixels)
     env_h = environment.shape[0]
     env_w = environment.shape[1]
@@ -260,8 +274,6 @@ def shade(
     lx = light_dir[0]
     ly = light_dir[1]
     lz = light_dir[2]
-    # each pixel's eye and f_ij, for depth: one for the whole image on a mono image plane
-    _, _, _, _, _, _, fx, fy, fz = centre_frame(plane, 0, 0)
     ex = eye[0]
     ey = eye[1]
     ez = eye[2]
@@ -269,7 +281,7 @@ def shade(
     inked = False
     if materials is not None:
         inked = materials.ink.any
-    per_pixel = (need_depth or inked) and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
+    per_pixel = inked and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)  # each pixel's own eye
     block = 256  # pixels
     size = block * spp
     # one block's samples, by sample: colour so far (r, g, b) and the light's factor on it; texture coordinates
@@ -301,7 +313,6 @@ def shade(
     sites = np.empty((size, 4), np.int64)
     weights = np.empty((size, 2))
     special = np.empty(size, np.int64)  # the hits (their index among hits) on a material beyond plain
-    normal = np.empty((size, 3)) if need_normal else np.empty((1, 3))  # each hit's unit normal, by sample
     for first in range(0, n_pix, block):
         last = min(first + block, n_pix)
         base = first * spp
@@ -395,24 +406,11 @@ def shade(
             n_hit += 1
         # ---- the light: the normal at each hit, then its length and the light on it (two-sided: on the side
         # the ray sees), vectorized; a material beyond plain may be unlit or toon (below) ----
-        if lit or need_normal:
+        if lit:
             for i in range(n_hit):
-                f = hit_face[i]
-                w0 = hit_w0[i]
-                w1 = hit_w1[i]
-                w2 = hit_w2[i]
-                hit_nx[i] = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
-                hit_ny[i] = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
-                hit_nz[i] = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
+                hit_nx[i], hit_ny[i], hit_nz[i] = _interpolated(normals, hit_face[i], hit_w0[i], hit_w1[i], hit_w2[i])
             for i in range(n_hit):  # vectorized
-                nx = hit_nx[i]
-                ny = hit_ny[i]
-                nz = hit_nz[i]
-                inv = _inverse_length(nx * nx + ny * ny + nz * nz)
-                if inv > 0.0:
-                    nx *= inv
-                    ny *= inv
-                    nz *= inv
+                nx, ny, nz = _unit(hit_nx[i], hit_ny[i], hit_nz[i])
                 hit_nx[i] = nx
                 hit_ny[i] = ny
                 hit_nz[i] = nz
@@ -514,115 +512,74 @@ def shade(
             out_color[pix, 0] = acc_r * inv_spp
             out_color[pix, 1] = acc_g * inv_spp
             out_color[pix, 2] = acc_b * inv_spp
-        if not (need_depth or need_normal or need_direction):
-            continue
-        if need_normal:  # each hit's unit normal, by sample
-            for i in range(n_hit):
-                normal[hit[i], 0] = hit_nx[i]
-                normal[hit[i], 1] = hit_ny[i]
-                normal[hit[i], 2] = hit_nz[i]
-        for m in range(first, last):
-            pix = pixels[m]
-            if per_pixel:
-                col, row = tile_pixel(plane, pix)
-                side, col, row = locate(plane, col, row)
-                rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, col, row)
-                ex = eye[0] + side * plane.half_ipd * rx
-                ey = eye[1] + side * plane.half_ipd * ry
-                ez = eye[2] + side * plane.half_ipd * rz
-            if need_depth:
-                acc_z = 0.0
-                for s in range(m * spp, (m + 1) * spp):
-                    if face[s] < 0:
-                        acc_z += z_max
-                    else:
-                        ts = t[s]
-                        acc_z += (
-                            (origins[s, 0] + ts * directions[s, 0] - ex) * fx
-                            + (origins[s, 1] + ts * directions[s, 1] - ey) * fy
-                            + (origins[s, 2] + ts * directions[s, 2] - ez) * fz
-                        )
-                out_depth[pix] = acc_z * inv_spp
-            if need_normal:  # a miss adds nothing
-                acc_nx = acc_ny = acc_nz = 0.0
-                for s in range(m * spp, (m + 1) * spp):
-                    if face[s] >= 0:
-                        q = s - base
-                        acc_nx += normal[q, 0]
-                        acc_ny += normal[q, 1]
-                        acc_nz += normal[q, 2]
-                out_normal[pix, 0] = acc_nx * inv_spp
-                out_normal[pix, 1] = acc_ny * inv_spp
-                out_normal[pix, 2] = acc_nz * inv_spp
-            if need_direction:
-                acc_dx = acc_dy = acc_dz = 0.0
-                for s in range(m * spp, (m + 1) * spp):
-                    dx = directions[s, 0]
-                    dy = directions[s, 1]
-                    dz = directions[s, 2]
-                    if dx == dx and dy == dy and dz == dz:
-                        acc_dx += dx
-                        acc_dy += dy
-                        acc_dz += dz
-                dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
-                inv = 1.0 / dlen if dlen > 0.0 else 0.0
-                out_direction[pix, 0] = acc_dx * inv
-                out_direction[pix, 1] = acc_dy * inv
-                out_direction[pix, 2] = acc_dz * inv
 
 
 @jit
-def record_surfaces(origins, directions, hits, spp, pixels, surfaces, out, need):
-    """The channels of what the rays hit beyond :func:`shade`'s, a pass of its own that only a painting
-    reading them runs (in ``shade``'s loop they cost every painting a fifth of its shading): per pixel,
-    the mean over its samples of the geometric normal (the triangle's own, on the side of the shading
-    normal), the unlit colour (a miss adds nothing; a pixel all sky has the sky's colour, from ``out.color``,
-    which shade wrote first), the texture coordinates and the world point (NaN if any sample saw the sky);
-    the object and the material of its first sample (-1: the sky). Arguments as :func:`shade`'s; ``need``
-    (bundles.Records) says which of these channels to write.
+def record_surfaces(origins, directions, hits, spp, pixels, surfaces, eye, plane, z_max, out, need):
+    """The channels beside colour, a pass of its own that only a painting reading them runs (in ``shade``'s
+    loop they cost every painting a fifth of its shading, and its compile a sixth): per pixel, the mean over its
+    samples of the view depth ``(X - eye_ij) . f_ij`` (camera.py; ``z_max`` on a miss), the unit shading normal
+    (a miss adds nothing), the unit ray direction (the mean direction made unit; a NaN ray adds nothing), the
+    geometric normal (the triangle's own, on the side of the shading normal), the unlit colour (a miss adds
+    nothing; a pixel all sky has the sky's colour, from ``out.color``, which shade wrote first), the texture
+    coordinates and the world point (NaN if any sample saw the sky); the object and the material of its first
+    sample (-1: the sky). Arguments as :func:`shade`'s, and ``z_max``; ``need`` (bundles.Records) says which of
+    these channels to write.
     """
     face, t, b1, b2 = hits.face, hits.t, hits.b1, hits.b2
     triangles, normals = surfaces.triangles, surfaces.normals
     inv_spp = 1.0 / spp
+    # each pixel's eye and f_ij, for depth: one for the whole image on a mono image plane
+    _, _, _, _, _, _, fx, fy, fz = centre_frame(plane, 0, 0)
+    ex = eye[0]
+    ey = eye[1]
+    ez = eye[2]
+    per_pixel = need.depth and (plane.projection == EQUIRECT or plane.half_ipd != 0.0)
     for m in range(len(pixels)):
         pix = pixels[m]
+        if per_pixel:
+            col, row = tile_pixel(plane, pix)
+            side, col, row = locate(plane, col, row)
+            rx, ry, rz, _, _, _, fx, fy, fz = centre_frame(plane, col, row)
+            ex = eye[0] + side * plane.half_ipd * rx
+            ey = eye[1] + side * plane.half_ipd * ry
+            ez = eye[2] + side * plane.half_ipd * rz
         front = face[m * spp]  # an index does not average: the first sample's
         if need.object:
             out.object[pix] = surfaces.face_object[front] if front >= 0 else -1.0
         if need.material:
             out.material[pix] = surfaces.face_material[front] if front >= 0 else -1.0
+        acc_z = acc_nx = acc_ny = acc_nz = acc_dx = acc_dy = acc_dz = 0.0
         gx = gy = gz = ar = ag = ab = u = v = px = py = pz = 0.0
         misses = 0
         for s in range(m * spp, (m + 1) * spp):
             f = face[s]
+            dx = directions[s, 0]
+            dy = directions[s, 1]
+            dz = directions[s, 2]
+            if need.direction and dx == dx and dy == dy and dz == dz:
+                acc_dx += dx
+                acc_dy += dy
+                acc_dz += dz
             if f < 0:
+                acc_z += z_max
                 misses += 1
                 continue
+            ts = t[s]
+            hx = origins[s, 0] + ts * dx
+            hy = origins[s, 1] + ts * dy
+            hz = origins[s, 2] + ts * dz
+            if need.depth:
+                acc_z += (hx - ex) * fx + (hy - ey) * fy + (hz - ez) * fz
             w1 = b1[s]
             w2 = b2[s]
             w0 = 1.0 - w1 - w2
-            r, g, b, su, sv = _albedo(
-                surfaces.colors,
-                surfaces.uv,
-                surfaces.texture_id,
-                surfaces.texels,
-                surfaces.texture_offset,
-                surfaces.texture_width,
-                surfaces.texture_height,
-                f,
-                w0,
-                w1,
-                w2,
-            )
-            ar += r
-            ag += g
-            ab += b
-            u += su
-            v += sv
-            ts = t[s]
-            px += origins[s, 0] + ts * directions[s, 0]
-            py += origins[s, 1] + ts * directions[s, 1]
-            pz += origins[s, 2] + ts * directions[s, 2]
+            nx, ny, nz = _interpolated(normals, f, w0, w1, w2)
+            if need.normal:
+                ux, uy, uz = _unit(nx, ny, nz)
+                acc_nx += ux
+                acc_ny += uy
+                acc_nz += uz
             if need.geometric:
                 ax = triangles[f, 1, 0] - triangles[f, 0, 0]
                 ay = triangles[f, 1, 1] - triangles[f, 0, 1]
@@ -633,14 +590,45 @@ def record_surfaces(origins, directions, hits, spp, pixels, surfaces, out, need)
                 cx = ay * bz - az * by
                 cy = az * bx - ax * bz
                 cz = ax * by - ay * bx
-                nx = w0 * normals[f, 0, 0] + w1 * normals[f, 1, 0] + w2 * normals[f, 2, 0]
-                ny = w0 * normals[f, 0, 1] + w1 * normals[f, 1, 1] + w2 * normals[f, 2, 1]
-                nz = w0 * normals[f, 0, 2] + w1 * normals[f, 1, 2] + w2 * normals[f, 2, 2]
                 length = math.sqrt(cx * cx + cy * cy + cz * cz)
                 side = 0.0 if length == 0.0 else (-1.0 if cx * nx + cy * ny + cz * nz < 0.0 else 1.0) / length
                 gx += cx * side
                 gy += cy * side
                 gz += cz * side
+            if need.albedo or need.uv:
+                r, g, b, su, sv = _albedo(
+                    surfaces.colors,
+                    surfaces.uv,
+                    surfaces.texture_id,
+                    surfaces.texels,
+                    surfaces.texture_offset,
+                    surfaces.texture_width,
+                    surfaces.texture_height,
+                    f,
+                    w0,
+                    w1,
+                    w2,
+                )
+                ar += r
+                ag += g
+                ab += b
+                u += su
+                v += sv
+            px += hx
+            py += hy
+            pz += hz
+        if need.depth:
+            out.depth[pix] = acc_z * inv_spp
+        if need.normal:
+            out.normal[pix, 0] = acc_nx * inv_spp
+            out.normal[pix, 1] = acc_ny * inv_spp
+            out.normal[pix, 2] = acc_nz * inv_spp
+        if need.direction:
+            dlen = math.sqrt(acc_dx * acc_dx + acc_dy * acc_dy + acc_dz * acc_dz)
+            inv = 1.0 / dlen if dlen > 0.0 else 0.0
+            out.direction[pix, 0] = acc_dx * inv
+            out.direction[pix, 1] = acc_dy * inv
+            out.direction[pix, 2] = acc_dz * inv
         if need.geometric:
             out.geometric[pix, 0] = gx * inv_spp
             out.geometric[pix, 1] = gy * inv_spp
